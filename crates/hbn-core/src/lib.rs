@@ -3,8 +3,19 @@
 //! The `no_std`, allocation-free core of hbn. Everything here works on borrowed slices and
 //! nalgebra fixed-size matrices, so a firmware can hold a trained model in a `static` and run
 //! the estimator step with bounded time and no heap.
+//!
+//! - [`kernel`]: the thesis' covariance functions with input and hyperparameter gradients;
+//! - [`gp`]: GP prediction (mean, variance and their input gradients) from borrowed slices;
+//! - [`rng`]: a small portable random number generator.
 #![cfg_attr(not(feature = "std"), no_std)]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+mod error;
+pub mod gp;
+pub mod kernel;
 pub mod rng;
+
+pub use error::CoreError;
+pub use gp::{GpParts, GpView, Prediction, Want};
+pub use kernel::{Kernel, KernelSpec, MAX_DIM, Metric, Profile};

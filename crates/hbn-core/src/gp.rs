@@ -1,0 +1,570 @@
+//! Allocation-free GP prediction from borrowed slices.
+//!
+//! A trained GP is, for prediction, a handful of arrays (see [`GpView`]): the support points
+//! already mapped to kernel *features* (`u = L phi(x_std)`, see [`crate::kernel`]), the
+//! weights `alpha = (K + s_n^2 I)^{-1} y`, and the lower Cholesky factor of `K + s_n^2 I`
+//! packed row by row. Prediction at one point costs `n` kernel evaluations for the mean and
+//! its gradient, plus one packed forward substitution (`n^2 / 2` multiply-adds) for the
+//! variance and, if asked, one back substitution for the variance gradient.
+//!
+//! Scratch memory is passed in by the caller, sized by [`GpView::predict_scratch`], so the
+//! same code runs in firmware from a `static` buffer.
+//!
+//! **Sparse GPs.** The layout is the one a sparse (inducing-point) GP needs too: for the DTC /
+//! SoR predictor, `features` holds the inducing points, `alpha = Sigma K_mn y` and the variance
+//! reduction `k^T (K_mm^{-1} - Sigma) k` needs one more packed factor; [`GpView`] takes the
+//! exact-GP case, where it is `|L^{-1} k|^2`.
+
+use crate::CoreError;
+use crate::kernel::{Kernel, MAX_DIM, Profile, profile_and_slope};
+
+/// Which outputs of [`GpView::predict`] to compute. The mean is always computed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Want {
+    /// Predictive variance of the latent function (noise excluded).
+    pub variance: bool,
+    /// Gradient of the mean with respect to the raw input.
+    pub grad_mean: bool,
+    /// Gradient of the variance with respect to the raw input (implies `variance`).
+    pub grad_variance: bool,
+}
+
+impl Want {
+    /// Mean, variance and mean gradient: what the EKF step needs.
+    pub const EKF: Want = Want { variance: true, grad_mean: true, grad_variance: false };
+    /// Everything.
+    pub const ALL: Want = Want { variance: true, grad_mean: true, grad_variance: true };
+}
+
+/// GP prediction at one point, in the raw (unstandardised) units of the data.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Prediction {
+    /// Predictive mean.
+    pub mean: f64,
+    /// Predictive variance of the latent function, `>= 0` (0 if not requested).
+    pub variance: f64,
+    /// `d mean / d x` (first `dim` entries; zero if not requested).
+    pub grad_mean: [f64; MAX_DIM],
+    /// `d variance / d x` (first `dim` entries; zero if not requested).
+    pub grad_variance: [f64; MAX_DIM],
+}
+
+/// A trained GP as borrowed slices: what a firmware can keep in a `static`.
+///
+/// All matrices are row-major. `n` support points, `d` inputs.
+#[derive(Clone, Copy, Debug)]
+pub struct GpView<'a> {
+    kernel: Kernel<'a>,
+    input_mean: &'a [f64],
+    input_scale: &'a [f64],
+    output_mean: f64,
+    output_scale: f64,
+    features: &'a [f64],
+    directions: &'a [f64],
+    alpha: &'a [f64],
+    chol_packed: &'a [f64],
+    noise_var: f64,
+}
+
+/// The slices and scalars a [`GpView`] is built from.
+#[derive(Clone, Copy, Debug)]
+pub struct GpParts<'a> {
+    /// The kernel with its hyperparameters (in standardised units).
+    pub kernel: Kernel<'a>,
+    /// Per-input mean subtracted before the kernel (`d`).
+    pub input_mean: &'a [f64],
+    /// Per-input scale divided out before the kernel (`d`, all `> 0`).
+    pub input_scale: &'a [f64],
+    /// Output mean added to the GP mean.
+    pub output_mean: f64,
+    /// Output scale (`> 0`) multiplying the standardised GP output.
+    pub output_scale: f64,
+    /// Support points in feature space, `n x d`.
+    pub features: &'a [f64],
+    /// Direction signs of the support points (`n`), or empty without the direction factor.
+    pub directions: &'a [f64],
+    /// `alpha = (K + s_n^2 I)^{-1} y_std` (`n`).
+    pub alpha: &'a [f64],
+    /// Lower Cholesky factor of `K + s_n^2 I`, rows packed: row `i` holds `i + 1` values
+    /// starting at `i (i + 1) / 2` (`n (n + 1) / 2` in all).
+    pub chol_packed: &'a [f64],
+    /// Learned noise variance `s_n^2` in standardised output units.
+    pub noise_var: f64,
+}
+
+impl<'a> GpView<'a> {
+    /// Checks every length and value once; prediction then needs no checks on the model.
+    pub fn new(parts: GpParts<'a>) -> Result<Self, CoreError> {
+        let spec = *parts.kernel.spec();
+        let d = spec.dim;
+        let n = parts.alpha.len();
+        if n == 0 {
+            return Err(CoreError::Empty);
+        }
+        let expect = |got: usize, expected: usize| {
+            if got == expected { Ok(()) } else { Err(CoreError::DimensionMismatch { expected, got }) }
+        };
+        expect(parts.input_mean.len(), d)?;
+        expect(parts.input_scale.len(), d)?;
+        expect(parts.features.len(), n * d)?;
+        expect(parts.chol_packed.len(), n * (n + 1) / 2)?;
+        if spec.direction.is_some() {
+            expect(parts.directions.len(), n)?;
+        }
+        let finite = |s: &[f64]| s.iter().all(|v| v.is_finite());
+        if !(finite(parts.input_mean)
+            && finite(parts.features)
+            && finite(parts.directions)
+            && finite(parts.alpha)
+            && finite(parts.chol_packed)
+            && parts.output_mean.is_finite()
+            && parts.noise_var.is_finite())
+        {
+            return Err(CoreError::NonFinite);
+        }
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        if !parts.input_scale.iter().all(|&s| positive(s)) || !positive(parts.output_scale) {
+            return Err(CoreError::InvalidSpec("input and output scales must be finite and > 0"));
+        }
+        for i in 0..n {
+            if !(parts.chol_packed[i * (i + 1) / 2 + i] > 0.0) {
+                return Err(CoreError::InvalidSpec("Cholesky diagonal must be > 0"));
+            }
+        }
+        Ok(Self {
+            kernel: parts.kernel,
+            input_mean: parts.input_mean,
+            input_scale: parts.input_scale,
+            output_mean: parts.output_mean,
+            output_scale: parts.output_scale,
+            features: parts.features,
+            directions: parts.directions,
+            alpha: parts.alpha,
+            chol_packed: parts.chol_packed,
+            noise_var: parts.noise_var,
+        })
+    }
+
+    /// Number of support points.
+    pub fn len(&self) -> usize {
+        self.alpha.len()
+    }
+
+    /// Always false: a view has at least one support point.
+    pub fn is_empty(&self) -> bool {
+        self.alpha.is_empty()
+    }
+
+    /// Number of inputs.
+    pub fn dim(&self) -> usize {
+        self.kernel.spec().dim
+    }
+
+    /// The kernel.
+    pub fn kernel(&self) -> &Kernel<'a> {
+        &self.kernel
+    }
+
+    /// The learned noise variance in raw output units.
+    pub fn noise_variance(&self) -> f64 {
+        self.noise_var * self.output_scale * self.output_scale
+    }
+
+    /// Number of `f64` scratch values [`GpView::predict`] needs for `want`.
+    pub fn predict_scratch(&self, want: Want) -> usize {
+        predict_scratch(self.len(), want)
+    }
+
+    /// Predicts at one raw input `x_raw` (`dim` values).
+    ///
+    /// Allocation-free and panic-free; time is `O(n d)` for the mean and its gradient plus
+    /// `O(n^2)` for the variance. `scratch` must hold [`GpView::predict_scratch`] values.
+    pub fn predict(&self, x_raw: &[f64], want: Want, scratch: &mut [f64]) -> Result<Prediction, CoreError> {
+        let d = self.dim();
+        let n = self.len();
+        if x_raw.len() != d {
+            return Err(CoreError::DimensionMismatch { expected: d, got: x_raw.len() });
+        }
+        if !x_raw.iter().all(|v| v.is_finite()) {
+            return Err(CoreError::NonFinite);
+        }
+        let needed = predict_scratch(n, want);
+        if scratch.len() < needed {
+            return Err(CoreError::ScratchTooSmall { needed, got: scratch.len() });
+        }
+        let want_var = want.variance || want.grad_variance;
+
+        let mut z = [0.0; MAX_DIM];
+        for j in 0..d {
+            z[j] = (x_raw[j] - self.input_mean[j]) / self.input_scale[j];
+        }
+        let spec = *self.kernel.spec();
+        let g_star = spec.direction_of(x_raw);
+        let mut u_star = [0.0; MAX_DIM];
+        let mut du_dz = [0.0; MAX_DIM * MAX_DIM];
+        self.kernel.features(&z[..d], &mut u_star, &mut du_dz);
+
+        let (kvec, rest) = scratch.split_at_mut(n);
+        let (cvec, rest) = rest.split_at_mut(if want.grad_variance { n } else { 0 });
+        let vvec = &mut rest[..if want_var { n } else { 0 }];
+
+        let acc = Accum {
+            features: self.features,
+            directions: self.directions,
+            alpha: self.alpha,
+            u_star: &u_star,
+            g_star,
+            sf2: self.kernel.signal_variance(),
+            profile: spec.profile,
+            direction: spec.direction.is_some(),
+        };
+        let mut grad_u = [0.0; MAX_DIM];
+        let cslot = if want.grad_variance { Some(&mut *cvec) } else { None };
+        let mean_std = match d {
+            1 => acc.run::<1>(kvec, cslot, &mut grad_u),
+            2 => acc.run::<2>(kvec, cslot, &mut grad_u),
+            3 => acc.run::<3>(kvec, cslot, &mut grad_u),
+            4 => acc.run::<4>(kvec, cslot, &mut grad_u),
+            5 => acc.run::<5>(kvec, cslot, &mut grad_u),
+            6 => acc.run::<6>(kvec, cslot, &mut grad_u),
+            7 => acc.run::<7>(kvec, cslot, &mut grad_u),
+            _ => acc.run::<8>(kvec, cslot, &mut grad_u),
+        };
+
+        let mut out = Prediction {
+            mean: self.output_mean + self.output_scale * mean_std,
+            variance: 0.0,
+            grad_mean: [0.0; MAX_DIM],
+            grad_variance: [0.0; MAX_DIM],
+        };
+        if want.grad_mean {
+            chain_to_raw(&grad_u, &du_dz, d, self.output_scale, self.input_scale, &mut out.grad_mean);
+        }
+        if want_var {
+            let kss = acc.sf2 * spec.direction_factor(g_star, g_star);
+            forward_substitute_packed(self.chol_packed, kvec, vvec);
+            let var_std = (kss - dot(vvec, vvec)).max(0.0);
+            let s2 = self.output_scale * self.output_scale;
+            out.variance = s2 * var_std;
+            if want.grad_variance {
+                // w = K^{-1} k overwrites v; dvar/du* = -2 sum_i w_i dk_i/du* = 4 sum_i w_i c_i (u_i - u*).
+                back_substitute_packed(self.chol_packed, vvec);
+                let mut gv_u = [0.0; MAX_DIM];
+                for i in 0..n {
+                    let wc = 4.0 * vvec[i] * cvec[i];
+                    let row = &self.features[i * d..i * d + d];
+                    for j in 0..d {
+                        gv_u[j] += wc * (row[j] - u_star[j]);
+                    }
+                }
+                chain_to_raw(&gv_u, &du_dz, d, s2, self.input_scale, &mut out.grad_variance);
+            }
+        }
+        if !(out.mean.is_finite() && out.variance.is_finite()) {
+            return Err(CoreError::NonFinite);
+        }
+        Ok(out)
+    }
+}
+
+/// Number of `f64` scratch values needed to predict with `n` support points.
+pub const fn predict_scratch(n: usize, want: Want) -> usize {
+    let mut s = n;
+    if want.variance || want.grad_variance {
+        s += n;
+    }
+    if want.grad_variance {
+        s += n;
+    }
+    s
+}
+
+/// `grad_raw_j = out_scale * sum_r g_u[r] du_r/dz_j / in_scale_j`.
+fn chain_to_raw(g_u: &[f64; MAX_DIM], du_dz: &[f64; MAX_DIM * MAX_DIM], d: usize, out_scale: f64, in_scale: &[f64], out: &mut [f64; MAX_DIM]) {
+    for j in 0..d {
+        let mut acc = 0.0;
+        for r in 0..d {
+            acc += g_u[r] * du_dz[r * d + j];
+        }
+        out[j] = out_scale * acc / in_scale[j];
+    }
+}
+
+struct Accum<'s> {
+    features: &'s [f64],
+    directions: &'s [f64],
+    alpha: &'s [f64],
+    u_star: &'s [f64; MAX_DIM],
+    g_star: f64,
+    sf2: f64,
+    profile: Profile,
+    direction: bool,
+}
+
+impl Accum<'_> {
+    /// One pass over the support points: `k_i` into `kvec`, `dk_i/dr2` into `cvec`,
+    /// the mean (returned) and its feature-space gradient.
+    #[inline(always)]
+    fn run<const D: usize>(&self, kvec: &mut [f64], mut cvec: Option<&mut [f64]>, grad_u: &mut [f64; MAX_DIM]) -> f64 {
+        let mut us = [0.0; D];
+        us.copy_from_slice(&self.u_star[..D]);
+        let mut mean = 0.0;
+        let mut gsum = [0.0; D];
+        for (i, (row, k_out)) in self.features.chunks_exact(D).zip(kvec.iter_mut()).enumerate() {
+            let mut delta = [0.0; D];
+            let mut r2 = 0.0;
+            for j in 0..D {
+                delta[j] = row[j] - us[j];
+                r2 += delta[j] * delta[j];
+            }
+            let (f, df) = profile_and_slope(self.profile, r2);
+            let dir = if self.direction { 0.5 * (1.0 + self.g_star * self.directions[i]) } else { 1.0 };
+            let k = self.sf2 * f * dir;
+            let c = self.sf2 * dir * df;
+            *k_out = k;
+            if let Some(cv) = cvec.as_deref_mut() {
+                cv[i] = c;
+            }
+            let a = self.alpha[i];
+            mean += k * a;
+            // dk/du* = c * dr2/du* = -2 c (u_i - u*)
+            let w = -2.0 * c * a;
+            for j in 0..D {
+                gsum[j] += w * delta[j];
+            }
+        }
+        grad_u[..D].copy_from_slice(&gsum);
+        mean
+    }
+}
+
+/// Dot product with four accumulators (lets the compiler vectorise).
+#[inline]
+pub fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut s = [0.0; 4];
+    let chunks = n / 4;
+    for c in 0..chunks {
+        let i = 4 * c;
+        s[0] += a[i] * b[i];
+        s[1] += a[i + 1] * b[i + 1];
+        s[2] += a[i + 2] * b[i + 2];
+        s[3] += a[i + 3] * b[i + 3];
+    }
+    let mut t = (s[0] + s[1]) + (s[2] + s[3]);
+    for i in 4 * chunks..n {
+        t += a[i] * b[i];
+    }
+    t
+}
+
+/// Solves `L v = k` for a row-packed lower-triangular `L` (`v` and `k` of length `n`).
+pub fn forward_substitute_packed(l_packed: &[f64], k: &[f64], v: &mut [f64]) {
+    let n = v.len().min(k.len());
+    for i in 0..n {
+        let start = i * (i + 1) / 2;
+        let row = &l_packed[start..start + i + 1];
+        let s = dot(&row[..i], &v[..i]);
+        v[i] = (k[i] - s) / row[i];
+    }
+}
+
+/// Solves `L^T w = v` in place for a row-packed lower-triangular `L`.
+pub fn back_substitute_packed(l_packed: &[f64], v: &mut [f64]) {
+    let n = v.len();
+    for j in (0..n).rev() {
+        let start = j * (j + 1) / 2;
+        let row = &l_packed[start..start + j + 1];
+        let wj = v[j] / row[j];
+        v[j] = wj;
+        // v[0..j] -= wj * L[j, 0..j]
+        for (vi, lji) in v[..j].iter_mut().zip(&row[..j]) {
+            *vi -= wj * lji;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kernel::{KernelSpec, Metric};
+
+    /// Dense reference GP (O(n^3), test only).
+    struct Dense {
+        spec: KernelSpec,
+        theta: [f64; 16],
+        x: [[f64; 3]; 6],
+        y: [f64; 6],
+        noise: f64,
+    }
+
+    fn cholesky(a: &[[f64; 6]; 6]) -> [[f64; 6]; 6] {
+        let mut l = [[0.0; 6]; 6];
+        for i in 0..6 {
+            for j in 0..=i {
+                let mut s = a[i][j];
+                for k in 0..j {
+                    s -= l[i][k] * l[j][k];
+                }
+                l[i][j] = if i == j { s.sqrt() } else { s / l[j][j] };
+            }
+        }
+        l
+    }
+
+    struct Owned {
+        theta: [f64; 16],
+        feats: [f64; 18],
+        dirs: [f64; 6],
+        alpha: [f64; 6],
+        packed: [f64; 21],
+        mean: [f64; 3],
+        scale: [f64; 3],
+    }
+
+    impl Dense {
+        fn build(&self, w: &[f64]) -> Owned {
+            let n_p = self.spec.n_params();
+            let k = Kernel::new(self.spec, &self.theta[..n_p], w).unwrap();
+            let mean = [0.1, -0.2, 0.3];
+            let scale = [1.5, 0.5, 2.0];
+            let std = |x: &[f64; 3]| [(x[0] - mean[0]) / scale[0], (x[1] - mean[1]) / scale[1], (x[2] - mean[2]) / scale[2]];
+            let dirs: [f64; 6] = core::array::from_fn(|i| self.spec.direction_of(&self.x[i]));
+            let mut kk = [[0.0; 6]; 6];
+            for i in 0..6 {
+                for j in 0..6 {
+                    kk[i][j] = k.eval(&std(&self.x[i]), dirs[i], &std(&self.x[j]), dirs[j]);
+                }
+                kk[i][i] += self.noise;
+            }
+            let l = cholesky(&kk);
+            let mut packed = [0.0; 21];
+            for i in 0..6 {
+                for j in 0..=i {
+                    packed[i * (i + 1) / 2 + j] = l[i][j];
+                }
+            }
+            let mut v = [0.0; 6];
+            forward_substitute_packed(&packed, &self.y, &mut v);
+            back_substitute_packed(&packed, &mut v);
+            let mut feats = [0.0; 18];
+            for i in 0..6 {
+                let mut u = [0.0; MAX_DIM];
+                let mut jac = [0.0; MAX_DIM * MAX_DIM];
+                k.features(&std(&self.x[i]), &mut u, &mut jac);
+                feats[i * 3..i * 3 + 3].copy_from_slice(&u[..3]);
+            }
+            Owned { theta: self.theta, feats, dirs, alpha: v, packed, mean, scale }
+        }
+    }
+
+    fn view<'a>(o: &'a Owned, spec: KernelSpec, w: &'a [f64], noise: f64) -> GpView<'a> {
+        GpView::new(GpParts {
+            kernel: Kernel::new(spec, &o.theta[..spec.n_params()], w).unwrap(),
+            input_mean: &o.mean,
+            input_scale: &o.scale,
+            output_mean: 0.0,
+            output_scale: 1.0,
+            features: &o.feats,
+            directions: if spec.direction.is_some() { &o.dirs } else { &[] },
+            alpha: &o.alpha,
+            chol_packed: &o.packed,
+            noise_var: noise,
+        })
+        .unwrap()
+    }
+
+    fn setup(spec: KernelSpec) -> Dense {
+        let mut theta = [0.0; 16];
+        for (i, t) in theta.iter_mut().enumerate().take(spec.n_params()) {
+            *t = 0.2 * libm::cos(0.9 * i as f64);
+        }
+        let x = core::array::from_fn(|i| {
+            let t = i as f64;
+            [libm::sin(t), libm::cos(1.3 * t), 0.3 * t - 0.5]
+        });
+        let y = core::array::from_fn(|i| libm::sin(0.7 * i as f64) + 0.1 * i as f64);
+        Dense { spec, theta, x, y, noise: 0.05 }
+    }
+
+    const W: [f64; 9] = [1.2, 0.0, 0.0, -0.4, 0.9, 0.0, 0.1, 0.3, 1.1];
+
+    fn all_specs() -> [KernelSpec; 4] {
+        [
+            KernelSpec::se_ard(3),
+            KernelSpec { profile: Profile::Matern52, ..KernelSpec::se_ard(3) },
+            KernelSpec { metric: Metric::Mahalanobis, warp_units: 2, direction: Some([2, 0]), ..KernelSpec::se_ard(3) },
+            KernelSpec { metric: Metric::Isotropic, ..KernelSpec::se_ard(3) },
+        ]
+    }
+
+    #[test]
+    fn mean_and_variance_match_dense_formulae() {
+        for spec in all_specs() {
+            let dense = setup(spec);
+            let owned = dense.build(&W);
+            let gp = view(&owned, spec, &W, dense.noise);
+            let k = Kernel::new(spec, &owned.theta[..spec.n_params()], &W).unwrap();
+            let xs = [0.4, 0.1, -0.2];
+            let zs = [(xs[0] - 0.1) / 1.5, (xs[1] + 0.2) / 0.5, (xs[2] - 0.3) / 2.0];
+            let gs = spec.direction_of(&xs);
+            let mut scratch = [0.0; 32];
+            let p = gp.predict(&xs, Want::ALL, &mut scratch).unwrap();
+            // Dense: mean = k^T alpha; var = kss - k^T (K+s I)^{-1} k
+            let mut kv = [0.0; 6];
+            for i in 0..6 {
+                let zi = [(dense.x[i][0] - 0.1) / 1.5, (dense.x[i][1] + 0.2) / 0.5, (dense.x[i][2] - 0.3) / 2.0];
+                kv[i] = k.eval(&zi, owned.dirs[i], &zs, gs);
+            }
+            let mean: f64 = (0..6).map(|i| kv[i] * owned.alpha[i]).sum();
+            let mut w = [0.0; 6];
+            forward_substitute_packed(&owned.packed, &kv, &mut w);
+            back_substitute_packed(&owned.packed, &mut w);
+            let var = k.eval(&zs, gs, &zs, gs) - (0..6).map(|i| kv[i] * w[i]).sum::<f64>();
+            assert!((p.mean - mean).abs() < 1e-12, "{spec:?}");
+            assert!((p.variance - var).abs() < 1e-12, "{spec:?}");
+        }
+    }
+
+    #[test]
+    fn gradients_match_finite_differences() {
+        for spec in all_specs() {
+            let dense = setup(spec);
+            let owned = dense.build(&W);
+            let gp = view(&owned, spec, &W, dense.noise);
+            let mut scratch = [0.0; 32];
+            // Keep x[2] > x[0] across the perturbation so the direction sign is constant.
+            let x0 = [0.4, 0.1, 0.9];
+            let p = gp.predict(&x0, Want::ALL, &mut scratch).unwrap();
+            for j in 0..3 {
+                let h = 1e-6;
+                let (mut a, mut b) = (x0, x0);
+                a[j] += h;
+                b[j] -= h;
+                let pa = gp.predict(&a, Want::ALL, &mut scratch).unwrap();
+                let pb = gp.predict(&b, Want::ALL, &mut scratch).unwrap();
+                let fd_m = (pa.mean - pb.mean) / (2.0 * h);
+                let fd_v = (pa.variance - pb.variance) / (2.0 * h);
+                assert!((fd_m - p.grad_mean[j]).abs() < 1e-7 * (1.0 + fd_m.abs()), "{spec:?} mean j={j}: {fd_m} vs {}", p.grad_mean[j]);
+                assert!((fd_v - p.grad_variance[j]).abs() < 1e-7 * (1.0 + fd_v.abs()), "{spec:?} var j={j}: {fd_v} vs {}", p.grad_variance[j]);
+            }
+        }
+    }
+
+    #[test]
+    fn bad_calls_return_errors() {
+        let spec = KernelSpec::se_ard(3);
+        let dense = setup(spec);
+        let owned = dense.build(&W);
+        let gp = view(&owned, spec, &W, dense.noise);
+        let mut small = [0.0; 3];
+        assert!(matches!(gp.predict(&[0.0; 3], Want::ALL, &mut small), Err(CoreError::ScratchTooSmall { .. })));
+        let mut scratch = [0.0; 32];
+        assert!(matches!(gp.predict(&[0.0; 2], Want::ALL, &mut scratch), Err(CoreError::DimensionMismatch { .. })));
+        assert!(matches!(gp.predict(&[0.0, f64::NAN, 0.0], Want::ALL, &mut scratch), Err(CoreError::NonFinite)));
+        assert_eq!(gp.predict_scratch(Want::default()), 6);
+        assert_eq!(gp.predict_scratch(Want::EKF), 12);
+        assert_eq!(gp.predict_scratch(Want::ALL), 18);
+    }
+}

@@ -1,0 +1,616 @@
+//! Covariance functions of the thesis (Sec. 2.2, 3.3; Eqs. 5, 17, 18, 19) and Matern 5/2.
+//!
+//! A kernel here is a composition, evaluated in this order on a *standardised* input `x`:
+//!
+//! 1. optional **tanh input warping** (Eq. 18), per input `j`:
+//!    `phi_j(x_j) = sum_i b_ji tanh(x_j + a_ji)` (`b_ji > 0`, so `phi_j` is monotone). The
+//!    thesis' additive `c_j` cancels in every stationary kernel (only differences
+//!    `phi(x) - phi(x')` enter), so it is not a hyperparameter: its likelihood gradient is
+//!    identically zero;
+//! 2. a **metric** giving the squared distance `r2 = (p - p')^T M (p - p')`:
+//!    isotropic `M = I / l^2`, ARD `M = diag(1 / l_j^2)`, or Mahalanobis (Eq. 17)
+//!    `M = (c S)^{-1}` with `S` the empirical covariance of the (standardised) training inputs,
+//!    fixed at training time, and `c` a learned scale;
+//! 3. a **profile** `f(r2)`: squared exponential `exp(-r2 / 2)` (Eq. 5) or Matern 5/2;
+//! 4. the signal variance `s_f^2` and, optionally, the **direction-advantage factor** (Eq. 19)
+//!    `1/2 (1 + g g')`, where `g = sgn(x_raw[a] - x_raw[b])` is the direction in which the
+//!    hysteresis input moves at that sample.
+//!
+//! `k(x, x') = s_f^2 * f(r2) * D(g, g')`.
+//!
+//! Hyperparameters live in one slice `theta`, in this order (positive quantities as logs):
+//! `[ln s_f^2, metric..., a_11..a_dm, ln b_11..ln b_dm]` with metric = `[ln l]` (isotropic),
+//! `[ln l_1..ln l_d]` (ARD) or `[ln c]` (Mahalanobis). See [`KernelSpec::n_params`].
+//!
+//! Because `r2 = |L (p - p')|^2` with `M = L^T L`, prediction works on *features*
+//! `u = L phi(x)` computed once per support point ([`Kernel::features`]); training works on
+//! [`Prepared`] points that carry what the hyperparameter gradients need.
+
+use crate::CoreError;
+
+/// Largest number of GP inputs the allocation-free code supports.
+pub const MAX_DIM: usize = 8;
+/// Largest number of tanh units per input in the warping.
+pub const MAX_WARP_UNITS: usize = 4;
+
+const SQRT5: f64 = 2.236_067_977_499_79;
+
+/// The radial profile `f(r2)` of a stationary kernel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Profile {
+    /// Squared exponential, `exp(-r2 / 2)` (thesis Eq. 5).
+    SquaredExponential,
+    /// Matern 5/2, `(1 + sqrt5 r + 5/3 r^2) exp(-sqrt5 r)` with `r = sqrt(r2)`.
+    Matern52,
+}
+
+/// How squared distances are measured.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Metric {
+    /// One length scale for all inputs.
+    Isotropic,
+    /// One length scale per input (automatic relevance determination).
+    Ard,
+    /// `(c S)^{-1}` with `S` the empirical input covariance (thesis Eq. 17) and a learned `c`.
+    Mahalanobis,
+}
+
+/// The structure of a kernel: everything but the hyperparameter values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct KernelSpec {
+    /// Radial profile.
+    pub profile: Profile,
+    /// Distance metric.
+    pub metric: Metric,
+    /// Number of inputs (1..=[`MAX_DIM`]).
+    pub dim: usize,
+    /// tanh units per input in the warping; 0 disables warping (0..=[`MAX_WARP_UNITS`]).
+    pub warp_units: usize,
+    /// Direction-advantage factor: `Some([a, b])` uses `g = sgn(x_raw[a] - x_raw[b])`.
+    pub direction: Option<[usize; 2]>,
+}
+
+impl KernelSpec {
+    /// ARD squared exponential on `dim` inputs, no warping, no direction factor.
+    pub const fn se_ard(dim: usize) -> Self {
+        Self {
+            profile: Profile::SquaredExponential,
+            metric: Metric::Ard,
+            dim,
+            warp_units: 0,
+            direction: None,
+        }
+    }
+
+    /// Checks the structure once, before anything uses it.
+    pub fn validate(&self) -> Result<(), CoreError> {
+        if self.dim == 0 || self.dim > MAX_DIM {
+            return Err(CoreError::InvalidSpec("dim must be in 1..=MAX_DIM (8)"));
+        }
+        if self.warp_units > MAX_WARP_UNITS {
+            return Err(CoreError::InvalidSpec("warp_units must be in 0..=MAX_WARP_UNITS (4)"));
+        }
+        if let Some([a, b]) = self.direction
+            && (a >= self.dim || b >= self.dim || a == b)
+        {
+            return Err(CoreError::InvalidSpec(
+                "direction indices must be two different inputs < dim",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Number of metric hyperparameters.
+    pub const fn n_metric(&self) -> usize {
+        match self.metric {
+            Metric::Isotropic | Metric::Mahalanobis => 1,
+            Metric::Ard => self.dim,
+        }
+    }
+
+    /// Total number of hyperparameters (the length of `theta`).
+    pub const fn n_params(&self) -> usize {
+        1 + self.n_metric() + 2 * self.dim * self.warp_units
+    }
+
+    /// Index of the first warp shift `a_11` in `theta`.
+    pub const fn warp_a_offset(&self) -> usize {
+        1 + self.n_metric()
+    }
+
+    /// Index of the first warp log-gain `ln b_11` in `theta`.
+    pub const fn warp_b_offset(&self) -> usize {
+        self.warp_a_offset() + self.dim * self.warp_units
+    }
+
+    /// Direction sign of a raw input vector: `sgn(x[a] - x[b])`, or 0 without the factor.
+    #[inline]
+    pub fn direction_of(&self, x_raw: &[f64]) -> f64 {
+        match self.direction {
+            Some([a, b]) => match (x_raw.get(a), x_raw.get(b)) {
+                (Some(xa), Some(xb)) => sign(xa - xb),
+                _ => 0.0,
+            },
+            None => 0.0,
+        }
+    }
+
+    /// The direction factor `1/2 (1 + g g')`, or 1 without it.
+    #[inline]
+    pub fn direction_factor(&self, g1: f64, g2: f64) -> f64 {
+        if self.direction.is_some() { 0.5 * (1.0 + g1 * g2) } else { 1.0 }
+    }
+
+    /// A reasonable starting `theta` for standardised data (all length scales 1, unit
+    /// variance, identity-like warping). Writes `n_params()` values.
+    pub fn default_theta(&self, theta: &mut [f64]) -> Result<(), CoreError> {
+        check_len(theta.len(), self.n_params())?;
+        theta.fill(0.0);
+        let m = self.warp_units;
+        if m > 0 {
+            // Units spread over [-1.5, 1.5] with gains summing to ~1.
+            for j in 0..self.dim {
+                for i in 0..m {
+                    let a = if m == 1 { 0.0 } else { -1.5 + 3.0 * i as f64 / (m - 1) as f64 };
+                    theta[self.warp_a_offset() + j * m + i] = a;
+                    theta[self.warp_b_offset() + j * m + i] = libm::log(1.0 / m as f64);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+#[inline]
+fn sign(v: f64) -> f64 {
+    if v > 0.0 {
+        1.0
+    } else if v < 0.0 {
+        -1.0
+    } else {
+        0.0
+    }
+}
+
+#[inline]
+fn check_len(got: usize, expected: usize) -> Result<(), CoreError> {
+    if got == expected { Ok(()) } else { Err(CoreError::DimensionMismatch { expected, got }) }
+}
+
+/// Profile value `f(r2)` and its derivative `df/dr2`.
+#[inline(always)]
+pub fn profile_and_slope(profile: Profile, r2: f64) -> (f64, f64) {
+    match profile {
+        Profile::SquaredExponential => {
+            let f = libm::exp(-0.5 * r2);
+            (f, -0.5 * f)
+        }
+        Profile::Matern52 => {
+            let r = libm::sqrt(r2.max(0.0));
+            let e = libm::exp(-SQRT5 * r);
+            let f = (1.0 + SQRT5 * r + (5.0 / 3.0) * r2) * e;
+            (f, -(5.0 / 6.0) * (1.0 + SQRT5 * r) * e)
+        }
+    }
+}
+
+/// A training point prepared for hyperparameter gradients: the warped input and the
+/// derivatives of the warp with respect to its parameters and its input.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Prepared {
+    /// `phi(x)` (equal to `x` without warping).
+    pub p: [f64; MAX_DIM],
+    /// `d phi_j / d a_ji`.
+    pub dp_da: [[f64; MAX_WARP_UNITS]; MAX_DIM],
+    /// `d phi_j / d ln b_ji`.
+    pub dp_db: [[f64; MAX_WARP_UNITS]; MAX_DIM],
+    /// `d phi_j / d x_j`.
+    pub dp_dx: [f64; MAX_DIM],
+    /// Direction sign `g` of this point.
+    pub g: f64,
+}
+
+/// A kernel: a validated [`KernelSpec`] with borrowed hyperparameters.
+#[derive(Clone, Copy, Debug)]
+pub struct Kernel<'a> {
+    spec: KernelSpec,
+    theta: &'a [f64],
+    /// Row-major `d x d` lower-triangular `W` with `W^T W = S^{-1}` (Mahalanobis only).
+    whiten: &'a [f64],
+}
+
+impl<'a> Kernel<'a> {
+    /// Builds a kernel view, checking the slice lengths against the spec.
+    ///
+    /// `whiten` must hold `dim * dim` values for [`Metric::Mahalanobis`] and may be empty
+    /// otherwise.
+    pub fn new(spec: KernelSpec, theta: &'a [f64], whiten: &'a [f64]) -> Result<Self, CoreError> {
+        spec.validate()?;
+        check_len(theta.len(), spec.n_params())?;
+        if spec.metric == Metric::Mahalanobis {
+            check_len(whiten.len(), spec.dim * spec.dim)?;
+        }
+        if theta.iter().chain(whiten.iter()).any(|v| !v.is_finite()) {
+            return Err(CoreError::NonFinite);
+        }
+        Ok(Self { spec, theta, whiten })
+    }
+
+    /// The structure of this kernel.
+    pub fn spec(&self) -> &KernelSpec {
+        &self.spec
+    }
+
+    /// The hyperparameters (see the module docs for the layout).
+    pub fn theta(&self) -> &'a [f64] {
+        self.theta
+    }
+
+    /// The whitening matrix (Mahalanobis only; empty otherwise).
+    pub fn whiten(&self) -> &'a [f64] {
+        self.whiten
+    }
+
+    /// Signal variance `s_f^2`.
+    #[inline]
+    pub fn signal_variance(&self) -> f64 {
+        libm::exp(self.theta[0])
+    }
+
+    /// Warps one standardised input: `p = phi(x)`, plus parameter and input derivatives.
+    pub fn prepare(&self, x_std: &[f64], g: f64) -> Prepared {
+        let d = self.spec.dim;
+        let m = self.spec.warp_units;
+        let mut out = Prepared {
+            p: [0.0; MAX_DIM],
+            dp_da: [[0.0; MAX_WARP_UNITS]; MAX_DIM],
+            dp_db: [[0.0; MAX_WARP_UNITS]; MAX_DIM],
+            dp_dx: [1.0; MAX_DIM],
+            g,
+        };
+        for j in 0..d.min(x_std.len()) {
+            let x = x_std[j];
+            if m == 0 {
+                out.p[j] = x;
+                continue;
+            }
+            let (mut p, mut dx) = (0.0, 0.0);
+            for i in 0..m {
+                let a = self.theta[self.spec.warp_a_offset() + j * m + i];
+                let b = libm::exp(self.theta[self.spec.warp_b_offset() + j * m + i]);
+                let t = libm::tanh(x + a);
+                let sech2 = 1.0 - t * t;
+                p += b * t;
+                dx += b * sech2;
+                out.dp_da[j][i] = b * sech2;
+                out.dp_db[j][i] = b * t;
+            }
+            out.p[j] = p;
+            out.dp_dx[j] = dx;
+        }
+        out
+    }
+
+    /// Applies the metric factor `L` (with `M = L^T L`) to a warped point: `u = L p`.
+    #[inline]
+    fn apply_metric(&self, p: &[f64; MAX_DIM], u: &mut [f64; MAX_DIM]) {
+        let d = self.spec.dim;
+        match self.spec.metric {
+            Metric::Isotropic => {
+                let s = libm::exp(-self.theta[1]);
+                for j in 0..d {
+                    u[j] = p[j] * s;
+                }
+            }
+            Metric::Ard => {
+                for j in 0..d {
+                    u[j] = p[j] * libm::exp(-self.theta[1 + j]);
+                }
+            }
+            Metric::Mahalanobis => {
+                let s = libm::exp(-0.5 * self.theta[1]);
+                for r in 0..d {
+                    let mut acc = 0.0;
+                    for c in 0..d {
+                        acc += self.whiten[r * d + c] * p[c];
+                    }
+                    u[r] = acc * s;
+                }
+            }
+        }
+    }
+
+    /// `M v` for the metric matrix `M` (used by gradients).
+    #[inline]
+    fn metric_times(&self, v: &[f64; MAX_DIM], out: &mut [f64; MAX_DIM]) {
+        let d = self.spec.dim;
+        match self.spec.metric {
+            Metric::Isotropic => {
+                let s = libm::exp(-2.0 * self.theta[1]);
+                for j in 0..d {
+                    out[j] = v[j] * s;
+                }
+            }
+            Metric::Ard => {
+                for j in 0..d {
+                    out[j] = v[j] * libm::exp(-2.0 * self.theta[1 + j]);
+                }
+            }
+            Metric::Mahalanobis => {
+                // M = W^T W / c
+                let s = libm::exp(-self.theta[1]);
+                let mut wv = [0.0; MAX_DIM];
+                for r in 0..d {
+                    for c in 0..d {
+                        wv[r] += self.whiten[r * d + c] * v[c];
+                    }
+                }
+                for c in 0..d {
+                    let mut acc = 0.0;
+                    for r in 0..d {
+                        acc += self.whiten[r * d + c] * wv[r];
+                    }
+                    out[c] = acc * s;
+                }
+            }
+        }
+    }
+
+    /// Feature vector `u = L phi(x)` of a standardised input, so that `r2 = |u - u'|^2`,
+    /// and the input Jacobian of the features, row-major `d x d` (`du_r / dx_c`).
+    pub fn features(&self, x_std: &[f64], u: &mut [f64; MAX_DIM], du_dx: &mut [f64; MAX_DIM * MAX_DIM]) {
+        let prep = self.prepare(x_std, 0.0);
+        self.apply_metric(&prep.p, u);
+        let d = self.spec.dim;
+        // du/dx = L diag(phi'(x)): column c of L scaled by phi'_c.
+        for c in 0..d {
+            let mut e = [0.0; MAX_DIM];
+            e[c] = prep.dp_dx[c];
+            let mut col = [0.0; MAX_DIM];
+            self.apply_metric(&e, &mut col);
+            for r in 0..d {
+                du_dx[r * d + c] = col[r];
+            }
+        }
+    }
+
+    /// `k(x, x')` for two standardised inputs with direction signs `g`, `g'`.
+    pub fn eval(&self, x1: &[f64], g1: f64, x2: &[f64], g2: f64) -> f64 {
+        let p1 = self.prepare(x1, g1);
+        let p2 = self.prepare(x2, g2);
+        self.eval_prepared(&p1, &p2)
+    }
+
+    /// `k` between two prepared points.
+    #[inline]
+    pub fn eval_prepared(&self, p1: &Prepared, p2: &Prepared) -> f64 {
+        let (r2, _) = self.r2_and_mdelta(p1, p2);
+        let (f, _) = profile_and_slope(self.spec.profile, r2);
+        self.signal_variance() * f * self.spec.direction_factor(p1.g, p2.g)
+    }
+
+    #[inline]
+    fn r2_and_mdelta(&self, p1: &Prepared, p2: &Prepared) -> (f64, [f64; MAX_DIM]) {
+        let d = self.spec.dim;
+        let mut delta = [0.0; MAX_DIM];
+        for j in 0..d {
+            delta[j] = p1.p[j] - p2.p[j];
+        }
+        let mut md = [0.0; MAX_DIM];
+        self.metric_times(&delta, &mut md);
+        let mut r2 = 0.0;
+        for j in 0..d {
+            r2 += delta[j] * md[j];
+        }
+        (r2.max(0.0), md)
+    }
+
+    /// Gradient of `k(x1, x2)` with respect to the first (standardised) input `x1`;
+    /// writes `dim` values into `out` and returns `k`.
+    pub fn grad_x(&self, x1: &[f64], g1: f64, x2: &[f64], g2: f64, out: &mut [f64]) -> f64 {
+        let p1 = self.prepare(x1, g1);
+        let p2 = self.prepare(x2, g2);
+        let (r2, md) = self.r2_and_mdelta(&p1, &p2);
+        let (f, df) = profile_and_slope(self.spec.profile, r2);
+        let scale = self.signal_variance() * self.spec.direction_factor(g1, g2);
+        for j in 0..self.spec.dim.min(out.len()) {
+            // dr2/dx1_j = 2 (M delta)_j phi'_j(x1_j)
+            out[j] = scale * df * 2.0 * md[j] * p1.dp_dx[j];
+        }
+        scale * f
+    }
+
+    /// Gradient of `k(p1, p2)` with respect to every hyperparameter in `theta`
+    /// (`n_params()` values into `out`); returns `k`.
+    pub fn grad_theta(&self, p1: &Prepared, p2: &Prepared, out: &mut [f64]) -> f64 {
+        let spec = &self.spec;
+        let d = spec.dim;
+        let (r2, md) = self.r2_and_mdelta(p1, p2);
+        let (f, df) = profile_and_slope(spec.profile, r2);
+        let sf2 = self.signal_variance();
+        let dir = spec.direction_factor(p1.g, p2.g);
+        let k = sf2 * f * dir;
+        let c = sf2 * dir * df; // dk/dr2
+        out[0] = k;
+        match spec.metric {
+            Metric::Isotropic => out[1] = c * (-2.0 * r2),
+            Metric::Mahalanobis => out[1] = c * (-r2),
+            Metric::Ard => {
+                for j in 0..d {
+                    let delta = p1.p[j] - p2.p[j];
+                    out[1 + j] = c * (-2.0 * delta * delta * libm::exp(-2.0 * self.theta[1 + j]));
+                }
+            }
+        }
+        let m = spec.warp_units;
+        for j in 0..d {
+            for i in 0..m {
+                let dr2_da = 2.0 * md[j] * (p1.dp_da[j][i] - p2.dp_da[j][i]);
+                let dr2_db = 2.0 * md[j] * (p1.dp_db[j][i] - p2.dp_db[j][i]);
+                out[spec.warp_a_offset() + j * m + i] = c * dr2_da;
+                out[spec.warp_b_offset() + j * m + i] = c * dr2_db;
+            }
+        }
+        k
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn specs() -> [KernelSpec; 6] {
+        let d = 3;
+        [
+            KernelSpec { metric: Metric::Isotropic, ..KernelSpec::se_ard(d) },
+            KernelSpec::se_ard(d),
+            KernelSpec { metric: Metric::Mahalanobis, ..KernelSpec::se_ard(d) },
+            KernelSpec { profile: Profile::Matern52, ..KernelSpec::se_ard(d) },
+            KernelSpec { warp_units: 2, metric: Metric::Mahalanobis, direction: Some([2, 0]), ..KernelSpec::se_ard(d) },
+            KernelSpec { warp_units: 1, profile: Profile::Matern52, direction: Some([1, 0]), ..KernelSpec::se_ard(d) },
+        ]
+    }
+
+    fn theta_for(spec: &KernelSpec) -> [f64; 40] {
+        let mut t = [0.0; 40];
+        for (i, v) in t.iter_mut().enumerate().take(spec.n_params()) {
+            *v = 0.3 * libm::sin(1.7 * i as f64 + 0.2);
+        }
+        t
+    }
+
+    const W: [f64; 9] = [1.2, 0.0, 0.0, -0.4, 0.9, 0.0, 0.1, 0.3, 1.1];
+
+    #[test]
+    fn se_matches_closed_form() {
+        let spec = KernelSpec::se_ard(2);
+        let theta = [libm::log(2.0), libm::log(0.5), libm::log(2.0)];
+        let k = Kernel::new(spec, &theta, &[]).unwrap();
+        let v = k.eval(&[0.1, 0.2], 0.0, &[0.4, -0.6], 0.0);
+        let r2 = (0.3f64 / 0.5).powi(2) + (0.8f64 / 2.0).powi(2);
+        assert!((v - 2.0 * (-0.5 * r2).exp()).abs() < 1e-15);
+    }
+
+    #[test]
+    fn matern_matches_closed_form() {
+        let spec = KernelSpec { profile: Profile::Matern52, ..KernelSpec::se_ard(1) };
+        let theta = [0.0, libm::log(0.7)];
+        let k = Kernel::new(spec, &theta, &[]).unwrap();
+        let r = 0.5f64 / 0.7;
+        let want = (1.0 + 5f64.sqrt() * r + 5.0 / 3.0 * r * r) * (-(5f64.sqrt()) * r).exp();
+        assert!((k.eval(&[0.5], 0.0, &[0.0], 0.0) - want).abs() < 1e-15);
+    }
+
+    #[test]
+    fn direction_factor_blocks_opposite_branches() {
+        let spec = KernelSpec { direction: Some([0, 1]), ..KernelSpec::se_ard(2) };
+        let theta = [0.0; 3];
+        let k = Kernel::new(spec, &theta, &[]).unwrap();
+        let x = [0.1, 0.2];
+        assert!((k.eval(&x, 1.0, &x, 1.0) - 1.0).abs() < 1e-15);
+        assert_eq!(k.eval(&x, 1.0, &x, -1.0), 0.0);
+        assert!((k.eval(&x, 0.0, &x, 1.0) - 0.5).abs() < 1e-15);
+        assert_eq!(spec.direction_of(&[2.0, 1.0]), 1.0);
+        assert_eq!(spec.direction_of(&[1.0, 2.0]), -1.0);
+    }
+
+    #[test]
+    fn mahalanobis_uses_whitening() {
+        let spec = KernelSpec { metric: Metric::Mahalanobis, ..KernelSpec::se_ard(2) };
+        let w = [2.0, 0.0, 1.0, 1.0];
+        let theta = [0.0, libm::log(4.0)];
+        let k = Kernel::new(spec, &theta, &w).unwrap();
+        // delta = (1, 1): W delta = (2, 2), r2 = 8 / 4 = 2.
+        let v = k.eval(&[1.0, 1.0], 0.0, &[0.0, 0.0], 0.0);
+        assert!((v - (-1.0f64).exp()).abs() < 1e-15);
+    }
+
+    #[test]
+    fn input_gradient_matches_finite_differences() {
+        for spec in specs() {
+            let theta = theta_for(&spec);
+            let theta = &theta[..spec.n_params()];
+            let k = Kernel::new(spec, theta, &W).unwrap();
+            let x1 = [0.3, -0.7, 1.1];
+            let x2 = [-0.2, 0.4, 0.9];
+            let mut g = [0.0; 3];
+            k.grad_x(&x1, 1.0, &x2, 1.0, &mut g);
+            for j in 0..3 {
+                let h = 1e-6;
+                let (mut a, mut b) = (x1, x1);
+                a[j] += h;
+                b[j] -= h;
+                let fd = (k.eval(&a, 1.0, &x2, 1.0) - k.eval(&b, 1.0, &x2, 1.0)) / (2.0 * h);
+                assert!((fd - g[j]).abs() < 1e-8 * (1.0 + fd.abs()), "{spec:?} j={j} fd={fd} an={}", g[j]);
+            }
+        }
+    }
+
+    #[test]
+    fn hyperparameter_gradient_matches_finite_differences() {
+        for spec in specs() {
+            let base = theta_for(&spec);
+            let n = spec.n_params();
+            let x1 = [0.3, -0.7, 1.1];
+            let x2 = [-0.2, 0.4, 0.9];
+            let k = Kernel::new(spec, &base[..n], &W).unwrap();
+            let mut g = [0.0; 40];
+            let kv = k.grad_theta(&k.prepare(&x1, 1.0), &k.prepare(&x2, 1.0), &mut g[..n]);
+            assert!((kv - k.eval(&x1, 1.0, &x2, 1.0)).abs() < 1e-15);
+            for i in 0..n {
+                let h = 1e-6;
+                let (mut a, mut b) = (base, base);
+                a[i] += h;
+                b[i] -= h;
+                let ka = Kernel::new(spec, &a[..n], &W).unwrap().eval(&x1, 1.0, &x2, 1.0);
+                let kb = Kernel::new(spec, &b[..n], &W).unwrap().eval(&x1, 1.0, &x2, 1.0);
+                let fd = (ka - kb) / (2.0 * h);
+                assert!((fd - g[i]).abs() < 1e-8 * (1.0 + fd.abs()), "{spec:?} i={i} fd={fd} an={}", g[i]);
+            }
+        }
+    }
+
+    #[test]
+    fn features_reproduce_the_kernel() {
+        for spec in specs() {
+            let theta = theta_for(&spec);
+            let k = Kernel::new(spec, &theta[..spec.n_params()], &W).unwrap();
+            let x1 = [0.3, -0.7, 1.1];
+            let x2 = [-0.2, 0.4, 0.9];
+            let (mut u1, mut u2) = ([0.0; MAX_DIM], [0.0; MAX_DIM]);
+            let mut jac = [0.0; MAX_DIM * MAX_DIM];
+            k.features(&x1, &mut u1, &mut jac);
+            k.features(&x2, &mut u2, &mut jac);
+            let r2: f64 = (0..3).map(|j| (u1[j] - u2[j]).powi(2)).sum();
+            let (f, _) = profile_and_slope(spec.profile, r2);
+            let want = k.eval(&x1, 0.0, &x2, 0.0) / spec.direction_factor(0.0, 0.0);
+            assert!((k.signal_variance() * f - want).abs() < 1e-14, "{spec:?}");
+            // Feature Jacobian against finite differences.
+            k.features(&x1, &mut u1, &mut jac);
+            for c in 0..3 {
+                let h = 1e-6;
+                let (mut a, mut b) = (x1, x1);
+                a[c] += h;
+                b[c] -= h;
+                let (mut ua, mut ub) = ([0.0; MAX_DIM], [0.0; MAX_DIM]);
+                let mut tmp = [0.0; MAX_DIM * MAX_DIM];
+                k.features(&a, &mut ua, &mut tmp);
+                k.features(&b, &mut ub, &mut tmp);
+                for r in 0..3 {
+                    let fd = (ua[r] - ub[r]) / (2.0 * h);
+                    assert!((fd - jac[r * 3 + c]).abs() < 1e-8, "{spec:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn invalid_specs_are_rejected() {
+        assert!(KernelSpec::se_ard(0).validate().is_err());
+        assert!(KernelSpec::se_ard(9).validate().is_err());
+        assert!(KernelSpec { direction: Some([0, 0]), ..KernelSpec::se_ard(2) }.validate().is_err());
+        assert!(KernelSpec { warp_units: 5, ..KernelSpec::se_ard(2) }.validate().is_err());
+        assert!(Kernel::new(KernelSpec::se_ard(2), &[0.0; 2], &[]).is_err());
+        assert!(Kernel::new(KernelSpec::se_ard(2), &[0.0, f64::NAN, 0.0], &[]).is_err());
+    }
+}
