@@ -1,1 +1,346 @@
-//! hbn-sim
+//! # hbn-sim: simulators of hysteretic actuator/sensor systems
+//!
+//! Generates `(u, x, y)` logs like those of HBN.md section 9: an input `u` (e.g. valve pressure)
+//! drives a hysteretic actuator `H_a: u -> x` (e.g. finger bend); a soft sensor `H_s: x -> y`
+//! (e.g. strain-sensor voltage), itself mildly hysteretic, of another family, and followed by a
+//! smooth static nonlinearity, reads the state. Everything is deterministic given
+//! `(SimConfig, u)`.
+//!
+//! ## Systems ([`SystemKind`])
+//!
+//! | name | actuator `u -> x` | sensor `x -> y` (before `tanh`) |
+//! |---|---|---|
+//! | `maxwell-slip` | [`MaxwellSlip::default`] | [`Duhem`] `a = 10, b = 0.5, k_lin = 1` |
+//! | `generalized-pi` | [`PrandtlIshlinskii::default`] | [`BoucWen`] `A = 1, beta = 6, gamma = 2, n = 1, k_lin = 1, k_z = 0.4` |
+//! | `bouc-wen` | [`BoucWen::default`] | [`PrandtlIshlinskii`] envelope `2 tanh(x / 2)`, `p0 = 0.3`, radii `0.03, 0.06, 0.09`, weights `0.3` |
+//! | `preisach` | [`Preisach::default`] | [`MaxwellSlip`] `k0 = 0.8`, 4 elements `k = 0.2`, `F = 0.004 i` |
+//! | `duhem` | [`Duhem::default`] | `0.85 x + 0.15 P(x)`, `P` = [`Preisach`] 40 levels on `[-0.05, 1.05]`, width `0.3 +- 0.1`, centre `0.5 +- 0.35` |
+//! | `soft-actuator` | lag (`tau = 0.08 s`) -> [`BoucWen`] `A = 1, beta = 3, gamma = 1, n = 1, k_lin = 1, k_z = -0.5` (lagging, counter-clockwise loop) -> creep | SLS (`tau = 0.25 s`, `rho = 0.4`) -> [`Duhem`] `a = 10, b = 0.5, k_lin = 1` |
+//!
+//! Every sensor ends with the saturating nonlinearity `y = tanh(1.5 h) / tanh(1.5)`, so `y` is
+//! never an affine function of `x`.
+//!
+//! `soft-actuator` is the realistic, rate-dependent scenario (all lags use `dt = 1 / rate_hz`
+//! and the exact zero-order-hold discretisation `s[k] = s[k-1] + (1 - exp(-dt/tau)) (t[k] - s[k-1])`):
+//! - pneumatic lag: pressure `p` follows `u` with `tau = 0.08 s`;
+//! - Bouc-Wen bend `b = H(p)`;
+//! - creep (viscoelastic relaxation): `x_raw = 0.85 b + c`, `c` follows `0.15 b` with
+//!   `tau = 1.5 s`;
+//! - sensor: standard-linear-solid strain response `v = x + 0.4 (x - q)`, `q` follows `x` with
+//!   `tau = 0.25 s` (overshoots under fast motion, relaxes to `x` at rest), then Duhem, then
+//!   the `tanh` saturation.
+//!
+//! The other five systems are rate-independent: their outputs depend on the input sequence
+//! only, not on `rate_hz`.
+//!
+//! ## Calibration and initial state
+//!
+//! Each system is calibrated once, deterministically, by a quasi-static sweep
+//! `u: 0 -> 1 -> 0` (steps of 0.005, lags following their targets exactly): raw outputs are
+//! mapped affinely so that the major loop spans exactly `[0, 1]`, i.e. `x = 0` and `y = 0` at
+//! `u = 0` on the descending branch, `x = 1` and `y = 1` at `u = 1`. A simulation starts from
+//! the *relaxed* state: the virgin (demagnetised) state preconditioned by that one quasi-static
+//! cycle, with every dynamic state (lag, creep, SLS) at rest at `u = 0`. Minor loops stay
+//! inside the major loop, so for inputs in `[0, 1]` both signals stay close to `[0, 1]`
+//! (rate-dependent overshoot aside). Hence the nominal ranges are
+//! [`SystemKind::nominal_range_x`] `= 1` and [`SystemKind::nominal_range_y`] `= 1` for every
+//! system.
+//!
+//! ## Noise model
+//!
+//! The thesis' additive `gain * U[-0.5, 0.5]` noise, scaled to the signal. With
+//! `g = noise_gain` and, at every sample `k`, first `eta_x[k]` then `eta_y[k]` drawn as
+//! `uniform() - 0.5` from one `hbn_core::rng::Rng` seeded with `seed` xor a fixed salt:
+//! - physical disturbance of the state: `x[k] = x_clean[k] + g * 0.02 * range_x * eta_x[k]`,
+//!   where `x_clean` is the actuator output (the disturbance is not fed back into the
+//!   actuator) and `range_x` the fixed nominal range above (the same for every input);
+//! - the sensor reads the disturbed state (the disturbance is real motion) plus measurement
+//!   noise: `y[k] = H_s(x[0..=k])[k] + g * 0.02 * range_y * eta_y[k]`.
+//!
+//! So `g = 0` gives exactly the clean signals, and with `g = 1` the state disturbance stays
+//! within `+-0.01 * range_x` with variance `(0.02 range_x)^2 / 12`.
+//!
+//! ## Building blocks
+//!
+//! The operators ([`PlayOperator`], [`PrandtlIshlinskii`], [`MaxwellSlip`], [`BoucWen`],
+//! [`Preisach`], [`Duhem`]) are public and implement [`Hysteresis`].
+
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+
+mod input;
+mod operators;
+mod systems;
+
+use hbn_core::rng::Rng;
+
+pub use input::{DEFAULT_MAX_INCREMENT, InputKind, generate_input};
+pub use operators::{
+    BoucWen, BoucWenParams, Duhem, Envelope, Hysteresis, MaxwellSlip, PlayOperator,
+    PrandtlIshlinskii, Preisach, PreisachDensity,
+};
+
+/// Admissible input interval of [`simulate`] (inputs are nominally in `[0, 1]`).
+pub const INPUT_RANGE: (f64, f64) = (-0.5, 1.5);
+
+/// Salt mixed into the seed of the noise generator (see the crate docs).
+const NOISE_SALT: u64 = 0x00C0_FFEE_D15E_A5E5;
+
+/// Errors of the simulators.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// A system name that does not exist.
+    #[error("unknown system `{name}`; valid systems: {valid}")]
+    UnknownSystem {
+        /// The name given.
+        name: String,
+        /// Comma-separated list of the valid names.
+        valid: String,
+    },
+    /// A parameter outside its domain.
+    #[error("invalid parameter `{name}` = {value}: {reason}")]
+    InvalidParameter {
+        /// Parameter name.
+        name: &'static str,
+        /// Offending value.
+        value: f64,
+        /// What is required.
+        reason: &'static str,
+    },
+    /// An input sample is NaN or infinite.
+    #[error("input sample {index} is not finite ({value})")]
+    NonFiniteInput {
+        /// Sample index.
+        index: usize,
+        /// Offending value.
+        value: f64,
+    },
+    /// An input sample outside [`INPUT_RANGE`].
+    #[error("input sample {index} = {value} is outside [{lo}, {hi}]")]
+    InputOutOfRange {
+        /// Sample index.
+        index: usize,
+        /// Offending value.
+        value: f64,
+        /// Lower admissible bound.
+        lo: f64,
+        /// Upper admissible bound.
+        hi: f64,
+    },
+}
+
+/// Which simulated system.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+pub enum SystemKind {
+    /// Maxwell-slip actuator, Duhem sensor.
+    MaxwellSlip,
+    /// Generalised Prandtl-Ishlinskii actuator, Bouc-Wen sensor.
+    GeneralizedPi,
+    /// Bouc-Wen actuator, Prandtl-Ishlinskii sensor.
+    BoucWen,
+    /// Preisach actuator, Maxwell-slip sensor.
+    Preisach,
+    /// Duhem (Coleman-Hodgdon) actuator, Preisach sensor.
+    Duhem,
+    /// Rate-dependent pneumatic soft actuator with a viscoelastic hysteretic strain sensor.
+    SoftActuator,
+}
+
+impl SystemKind {
+    /// All systems, in declaration order.
+    pub const ALL: [SystemKind; 6] = [
+        SystemKind::MaxwellSlip,
+        SystemKind::GeneralizedPi,
+        SystemKind::BoucWen,
+        SystemKind::Preisach,
+        SystemKind::Duhem,
+        SystemKind::SoftActuator,
+    ];
+
+    /// Command-line name (kebab case).
+    pub fn name(self) -> &'static str {
+        match self {
+            SystemKind::MaxwellSlip => "maxwell-slip",
+            SystemKind::GeneralizedPi => "generalized-pi",
+            SystemKind::BoucWen => "bouc-wen",
+            SystemKind::Preisach => "preisach",
+            SystemKind::Duhem => "duhem",
+            SystemKind::SoftActuator => "soft-actuator",
+        }
+    }
+
+    /// One-line description (for `--help`).
+    pub fn description(self) -> &'static str {
+        match self {
+            SystemKind::MaxwellSlip => {
+                "Maxwell-slip actuator (8 elasto-slide elements), Duhem sensor; rate-independent"
+            }
+            SystemKind::GeneralizedPi => {
+                "generalised Prandtl-Ishlinskii actuator (tanh envelope), Bouc-Wen sensor; rate-independent"
+            }
+            SystemKind::BoucWen => "Bouc-Wen actuator, Prandtl-Ishlinskii sensor; rate-independent",
+            SystemKind::Preisach => {
+                "Preisach relay actuator, Maxwell-slip sensor; rate-independent"
+            }
+            SystemKind::Duhem => {
+                "Duhem/Coleman-Hodgdon actuator, Preisach sensor; rate-independent"
+            }
+            SystemKind::SoftActuator => {
+                "pneumatic soft finger: lag + Bouc-Wen + creep, viscoelastic Duhem strain sensor; rate-dependent"
+            }
+        }
+    }
+
+    /// Fixed nominal range of `x` used to scale the noise (the calibrated quasi-static major
+    /// loop spans `[0, 1]`, so this is 1 for every system).
+    pub fn nominal_range_x(self) -> f64 {
+        1.0
+    }
+
+    /// Fixed nominal range of `y` used to scale the noise (1 for every system, see
+    /// [`SystemKind::nominal_range_x`]).
+    pub fn nominal_range_y(self) -> f64 {
+        1.0
+    }
+
+    /// Whether the system's response depends on the sampling rate.
+    pub fn is_rate_dependent(self) -> bool {
+        matches!(self, SystemKind::SoftActuator)
+    }
+}
+
+impl core::str::FromStr for SystemKind {
+    type Err = SimError;
+
+    /// Parses a name of [`SystemKind::name`], case-insensitively, `_` accepted for `-`.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let norm = s.trim().to_ascii_lowercase().replace('_', "-");
+        SystemKind::ALL
+            .into_iter()
+            .find(|k| k.name() == norm)
+            .ok_or_else(|| SimError::UnknownSystem {
+                name: s.to_string(),
+                valid: SystemKind::ALL.map(|k| k.name()).join(", "),
+            })
+    }
+}
+
+impl core::fmt::Display for SystemKind {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// One simulated trajectory, aligned samples at the rate `rate_hz`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Trajectory {
+    /// Input.
+    pub u: Vec<f64>,
+    /// State (actuator output plus physical disturbance).
+    pub x: Vec<f64>,
+    /// Sensor output (plus measurement noise).
+    pub y: Vec<f64>,
+    /// Sampling rate in Hz.
+    pub rate_hz: f64,
+}
+
+/// Simulator configuration (checked once by `validate`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SimConfig {
+    /// Which system.
+    pub system: SystemKind,
+    /// Noise gain `g >= 0` (see the crate docs; 0 = clean).
+    pub noise_gain: f64,
+    /// Sampling rate in Hz (> 0).
+    pub rate_hz: f64,
+    /// Seed of the noise generator.
+    pub seed: u64,
+}
+
+impl SimConfig {
+    /// Noise-free configuration at 100 Hz with seed 0.
+    pub fn new(system: SystemKind) -> Self {
+        Self {
+            system,
+            noise_gain: 0.0,
+            rate_hz: 100.0,
+            seed: 0,
+        }
+    }
+
+    /// Checks `noise_gain` (finite, >= 0) and `rate_hz` (finite, > 0).
+    pub fn validate(&self) -> Result<(), SimError> {
+        if !(self.noise_gain.is_finite() && self.noise_gain >= 0.0) {
+            return Err(SimError::InvalidParameter {
+                name: "noise_gain",
+                value: self.noise_gain,
+                reason: "must be finite and >= 0",
+            });
+        }
+        if !(self.rate_hz.is_finite() && self.rate_hz > 0.0) {
+            return Err(SimError::InvalidParameter {
+                name: "rate_hz",
+                value: self.rate_hz,
+                reason: "must be finite and > 0",
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Runs the system on a given input from its initial (demagnetised/relaxed) state.
+///
+/// Rejects an invalid configuration and any input sample that is not finite or lies outside
+/// [`INPUT_RANGE`]. An empty input gives an empty trajectory.
+pub fn simulate(config: &SimConfig, u: &[f64]) -> Result<Trajectory, SimError> {
+    config.validate()?;
+    let (lo, hi) = INPUT_RANGE;
+    for (index, &value) in u.iter().enumerate() {
+        if !value.is_finite() {
+            return Err(SimError::NonFiniteInput { index, value });
+        }
+        if !(lo..=hi).contains(&value) {
+            return Err(SimError::InputOutOfRange {
+                index,
+                value,
+                lo,
+                hi,
+            });
+        }
+    }
+    let mut system = systems::System::new(config.system, 1.0 / config.rate_hz)?;
+    let mut rng = Rng::new(config.seed ^ NOISE_SALT);
+    let sx = config.noise_gain * 0.02 * config.system.nominal_range_x();
+    let sy = config.noise_gain * 0.02 * config.system.nominal_range_y();
+    let mut x = Vec::with_capacity(u.len());
+    let mut y = Vec::with_capacity(u.len());
+    for &uk in u {
+        let eta_x = rng.uniform() - 0.5;
+        let eta_y = rng.uniform() - 0.5;
+        let xk = system.actuate(uk) + sx * eta_x;
+        let yk = system.sense(xk) + sy * eta_y;
+        x.push(xk);
+        y.push(yk);
+    }
+    Ok(Trajectory {
+        u: u.to_vec(),
+        x,
+        y,
+        rate_hz: config.rate_hz,
+    })
+}
+
+/// Convenience: generate_input(RandomRamps, steps, default increment 0.02, seed) then simulate.
+pub fn simulate_random(config: &SimConfig, steps: usize) -> Result<Trajectory, SimError> {
+    config.validate()?;
+    let u = generate_input(
+        InputKind::RandomRamps,
+        steps,
+        DEFAULT_MAX_INCREMENT,
+        config.seed,
+    )?;
+    simulate(config, &u)
+}
+
+#[cfg(test)]
+mod tests;
