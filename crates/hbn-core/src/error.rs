@@ -31,12 +31,18 @@ impl fmt::Display for CoreError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             CoreError::DimensionMismatch { expected, got } => {
-                write!(f, "dimension mismatch: expected {expected} values, got {got}")
+                write!(
+                    f,
+                    "dimension mismatch: expected {expected} values, got {got}"
+                )
             }
             CoreError::NonFinite => write!(f, "a value is NaN or infinite"),
             CoreError::InvalidSpec(why) => write!(f, "invalid specification: {why}"),
             CoreError::ScratchTooSmall { needed, got } => {
-                write!(f, "scratch buffer too small: need {needed} values, got {got}")
+                write!(
+                    f,
+                    "scratch buffer too small: need {needed} values, got {got}"
+                )
             }
             CoreError::Empty => write!(f, "the model has no support points"),
         }

@@ -31,9 +31,17 @@ pub struct Want {
 
 impl Want {
     /// Mean, variance and mean gradient: what the EKF step needs.
-    pub const EKF: Want = Want { variance: true, grad_mean: true, grad_variance: false };
+    pub const EKF: Want = Want {
+        variance: true,
+        grad_mean: true,
+        grad_variance: false,
+    };
     /// Everything.
-    pub const ALL: Want = Want { variance: true, grad_mean: true, grad_variance: true };
+    pub const ALL: Want = Want {
+        variance: true,
+        grad_mean: true,
+        grad_variance: true,
+    };
 }
 
 /// GP prediction at one point, in the raw (unstandardised) units of the data.
@@ -102,7 +110,11 @@ impl<'a> GpView<'a> {
             return Err(CoreError::Empty);
         }
         let expect = |got: usize, expected: usize| {
-            if got == expected { Ok(()) } else { Err(CoreError::DimensionMismatch { expected, got }) }
+            if got == expected {
+                Ok(())
+            } else {
+                Err(CoreError::DimensionMismatch { expected, got })
+            }
         };
         expect(parts.input_mean.len(), d)?;
         expect(parts.input_scale.len(), d)?;
@@ -124,10 +136,14 @@ impl<'a> GpView<'a> {
         }
         let positive = |v: f64| v.is_finite() && v > 0.0;
         if !parts.input_scale.iter().all(|&s| positive(s)) || !positive(parts.output_scale) {
-            return Err(CoreError::InvalidSpec("input and output scales must be finite and > 0"));
+            return Err(CoreError::InvalidSpec(
+                "input and output scales must be finite and > 0",
+            ));
         }
         for i in 0..n {
-            if !(parts.chol_packed[i * (i + 1) / 2 + i] > 0.0) {
+            if parts.chol_packed[i * (i + 1) / 2 + i].partial_cmp(&0.0)
+                != Some(core::cmp::Ordering::Greater)
+            {
                 return Err(CoreError::InvalidSpec("Cholesky diagonal must be > 0"));
             }
         }
@@ -179,18 +195,29 @@ impl<'a> GpView<'a> {
     ///
     /// Allocation-free and panic-free; time is `O(n d)` for the mean and its gradient plus
     /// `O(n^2)` for the variance. `scratch` must hold [`GpView::predict_scratch`] values.
-    pub fn predict(&self, x_raw: &[f64], want: Want, scratch: &mut [f64]) -> Result<Prediction, CoreError> {
+    pub fn predict(
+        &self,
+        x_raw: &[f64],
+        want: Want,
+        scratch: &mut [f64],
+    ) -> Result<Prediction, CoreError> {
         let d = self.dim();
         let n = self.len();
         if x_raw.len() != d {
-            return Err(CoreError::DimensionMismatch { expected: d, got: x_raw.len() });
+            return Err(CoreError::DimensionMismatch {
+                expected: d,
+                got: x_raw.len(),
+            });
         }
         if !x_raw.iter().all(|v| v.is_finite()) {
             return Err(CoreError::NonFinite);
         }
         let needed = predict_scratch(n, want);
         if scratch.len() < needed {
-            return Err(CoreError::ScratchTooSmall { needed, got: scratch.len() });
+            return Err(CoreError::ScratchTooSmall {
+                needed,
+                got: scratch.len(),
+            });
         }
         let want_var = want.variance || want.grad_variance;
 
@@ -219,7 +246,11 @@ impl<'a> GpView<'a> {
             direction: spec.direction.is_some(),
         };
         let mut grad_u = [0.0; MAX_DIM];
-        let cslot = if want.grad_variance { Some(&mut *cvec) } else { None };
+        let cslot = if want.grad_variance {
+            Some(&mut *cvec)
+        } else {
+            None
+        };
         let mean_std = match d {
             1 => acc.run::<1>(kvec, cslot, &mut grad_u),
             2 => acc.run::<2>(kvec, cslot, &mut grad_u),
@@ -238,7 +269,14 @@ impl<'a> GpView<'a> {
             grad_variance: [0.0; MAX_DIM],
         };
         if want.grad_mean {
-            chain_to_raw(&grad_u, &du_dz, d, self.output_scale, self.input_scale, &mut out.grad_mean);
+            chain_to_raw(
+                &grad_u,
+                &du_dz,
+                d,
+                self.output_scale,
+                self.input_scale,
+                &mut out.grad_mean,
+            );
         }
         if want_var {
             let kss = acc.sf2 * spec.direction_factor(g_star, g_star);
@@ -257,7 +295,14 @@ impl<'a> GpView<'a> {
                         gv_u[j] += wc * (row[j] - u_star[j]);
                     }
                 }
-                chain_to_raw(&gv_u, &du_dz, d, s2, self.input_scale, &mut out.grad_variance);
+                chain_to_raw(
+                    &gv_u,
+                    &du_dz,
+                    d,
+                    s2,
+                    self.input_scale,
+                    &mut out.grad_variance,
+                );
             }
         }
         if !(out.mean.is_finite() && out.variance.is_finite()) {
@@ -280,7 +325,14 @@ pub const fn predict_scratch(n: usize, want: Want) -> usize {
 }
 
 /// `grad_raw_j = out_scale * sum_r g_u[r] du_r/dz_j / in_scale_j`.
-fn chain_to_raw(g_u: &[f64; MAX_DIM], du_dz: &[f64; MAX_DIM * MAX_DIM], d: usize, out_scale: f64, in_scale: &[f64], out: &mut [f64; MAX_DIM]) {
+fn chain_to_raw(
+    g_u: &[f64; MAX_DIM],
+    du_dz: &[f64; MAX_DIM * MAX_DIM],
+    d: usize,
+    out_scale: f64,
+    in_scale: &[f64],
+    out: &mut [f64; MAX_DIM],
+) {
     for j in 0..d {
         let mut acc = 0.0;
         for r in 0..d {
@@ -305,12 +357,22 @@ impl Accum<'_> {
     /// One pass over the support points: `k_i` into `kvec`, `dk_i/dr2` into `cvec`,
     /// the mean (returned) and its feature-space gradient.
     #[inline(always)]
-    fn run<const D: usize>(&self, kvec: &mut [f64], mut cvec: Option<&mut [f64]>, grad_u: &mut [f64; MAX_DIM]) -> f64 {
+    fn run<const D: usize>(
+        &self,
+        kvec: &mut [f64],
+        mut cvec: Option<&mut [f64]>,
+        grad_u: &mut [f64; MAX_DIM],
+    ) -> f64 {
         let mut us = [0.0; D];
         us.copy_from_slice(&self.u_star[..D]);
         let mut mean = 0.0;
         let mut gsum = [0.0; D];
-        for (i, (row, k_out)) in self.features.chunks_exact(D).zip(kvec.iter_mut()).enumerate() {
+        for (i, (row, k_out)) in self
+            .features
+            .chunks_exact(D)
+            .zip(kvec.iter_mut())
+            .enumerate()
+        {
             let mut delta = [0.0; D];
             let mut r2 = 0.0;
             for j in 0..D {
@@ -318,7 +380,11 @@ impl Accum<'_> {
                 r2 += delta[j] * delta[j];
             }
             let (f, df) = profile_and_slope(self.profile, r2);
-            let dir = if self.direction { 0.5 * (1.0 + self.g_star * self.directions[i]) } else { 1.0 };
+            let dir = if self.direction {
+                0.5 * (1.0 + self.g_star * self.directions[i])
+            } else {
+                1.0
+            };
             let k = self.sf2 * f * dir;
             let c = self.sf2 * dir * df;
             *k_out = k;
@@ -429,7 +495,13 @@ mod tests {
             let k = Kernel::new(self.spec, &self.theta[..n_p], w).unwrap();
             let mean = [0.1, -0.2, 0.3];
             let scale = [1.5, 0.5, 2.0];
-            let std = |x: &[f64; 3]| [(x[0] - mean[0]) / scale[0], (x[1] - mean[1]) / scale[1], (x[2] - mean[2]) / scale[2]];
+            let std = |x: &[f64; 3]| {
+                [
+                    (x[0] - mean[0]) / scale[0],
+                    (x[1] - mean[1]) / scale[1],
+                    (x[2] - mean[2]) / scale[2],
+                ]
+            };
             let dirs: [f64; 6] = core::array::from_fn(|i| self.spec.direction_of(&self.x[i]));
             let mut kk = [[0.0; 6]; 6];
             for i in 0..6 {
@@ -455,7 +527,15 @@ mod tests {
                 k.features(&std(&self.x[i]), &mut u, &mut jac);
                 feats[i * 3..i * 3 + 3].copy_from_slice(&u[..3]);
             }
-            Owned { theta: self.theta, feats, dirs, alpha: v, packed, mean, scale }
+            Owned {
+                theta: self.theta,
+                feats,
+                dirs,
+                alpha: v,
+                packed,
+                mean,
+                scale,
+            }
         }
     }
 
@@ -467,7 +547,11 @@ mod tests {
             output_mean: 0.0,
             output_scale: 1.0,
             features: &o.feats,
-            directions: if spec.direction.is_some() { &o.dirs } else { &[] },
+            directions: if spec.direction.is_some() {
+                &o.dirs
+            } else {
+                &[]
+            },
             alpha: &o.alpha,
             chol_packed: &o.packed,
             noise_var: noise,
@@ -485,7 +569,13 @@ mod tests {
             [libm::sin(t), libm::cos(1.3 * t), 0.3 * t - 0.5]
         });
         let y = core::array::from_fn(|i| libm::sin(0.7 * i as f64) + 0.1 * i as f64);
-        Dense { spec, theta, x, y, noise: 0.05 }
+        Dense {
+            spec,
+            theta,
+            x,
+            y,
+            noise: 0.05,
+        }
     }
 
     const W: [f64; 9] = [1.2, 0.0, 0.0, -0.4, 0.9, 0.0, 0.1, 0.3, 1.1];
@@ -493,9 +583,20 @@ mod tests {
     fn all_specs() -> [KernelSpec; 4] {
         [
             KernelSpec::se_ard(3),
-            KernelSpec { profile: Profile::Matern52, ..KernelSpec::se_ard(3) },
-            KernelSpec { metric: Metric::Mahalanobis, warp_units: 2, direction: Some([2, 0]), ..KernelSpec::se_ard(3) },
-            KernelSpec { metric: Metric::Isotropic, ..KernelSpec::se_ard(3) },
+            KernelSpec {
+                profile: Profile::Matern52,
+                ..KernelSpec::se_ard(3)
+            },
+            KernelSpec {
+                metric: Metric::Mahalanobis,
+                warp_units: 2,
+                direction: Some([2, 0]),
+                ..KernelSpec::se_ard(3)
+            },
+            KernelSpec {
+                metric: Metric::Isotropic,
+                ..KernelSpec::se_ard(3)
+            },
         ]
     }
 
@@ -507,14 +608,22 @@ mod tests {
             let gp = view(&owned, spec, &W, dense.noise);
             let k = Kernel::new(spec, &owned.theta[..spec.n_params()], &W).unwrap();
             let xs = [0.4, 0.1, -0.2];
-            let zs = [(xs[0] - 0.1) / 1.5, (xs[1] + 0.2) / 0.5, (xs[2] - 0.3) / 2.0];
+            let zs = [
+                (xs[0] - 0.1) / 1.5,
+                (xs[1] + 0.2) / 0.5,
+                (xs[2] - 0.3) / 2.0,
+            ];
             let gs = spec.direction_of(&xs);
             let mut scratch = [0.0; 32];
             let p = gp.predict(&xs, Want::ALL, &mut scratch).unwrap();
             // Dense: mean = k^T alpha; var = kss - k^T (K+s I)^{-1} k
             let mut kv = [0.0; 6];
             for i in 0..6 {
-                let zi = [(dense.x[i][0] - 0.1) / 1.5, (dense.x[i][1] + 0.2) / 0.5, (dense.x[i][2] - 0.3) / 2.0];
+                let zi = [
+                    (dense.x[i][0] - 0.1) / 1.5,
+                    (dense.x[i][1] + 0.2) / 0.5,
+                    (dense.x[i][2] - 0.3) / 2.0,
+                ];
                 kv[i] = k.eval(&zi, owned.dirs[i], &zs, gs);
             }
             let mean: f64 = (0..6).map(|i| kv[i] * owned.alpha[i]).sum();
@@ -546,8 +655,16 @@ mod tests {
                 let pb = gp.predict(&b, Want::ALL, &mut scratch).unwrap();
                 let fd_m = (pa.mean - pb.mean) / (2.0 * h);
                 let fd_v = (pa.variance - pb.variance) / (2.0 * h);
-                assert!((fd_m - p.grad_mean[j]).abs() < 1e-7 * (1.0 + fd_m.abs()), "{spec:?} mean j={j}: {fd_m} vs {}", p.grad_mean[j]);
-                assert!((fd_v - p.grad_variance[j]).abs() < 1e-7 * (1.0 + fd_v.abs()), "{spec:?} var j={j}: {fd_v} vs {}", p.grad_variance[j]);
+                assert!(
+                    (fd_m - p.grad_mean[j]).abs() < 1e-7 * (1.0 + fd_m.abs()),
+                    "{spec:?} mean j={j}: {fd_m} vs {}",
+                    p.grad_mean[j]
+                );
+                assert!(
+                    (fd_v - p.grad_variance[j]).abs() < 1e-7 * (1.0 + fd_v.abs()),
+                    "{spec:?} var j={j}: {fd_v} vs {}",
+                    p.grad_variance[j]
+                );
             }
         }
     }
@@ -559,10 +676,19 @@ mod tests {
         let owned = dense.build(&W);
         let gp = view(&owned, spec, &W, dense.noise);
         let mut small = [0.0; 3];
-        assert!(matches!(gp.predict(&[0.0; 3], Want::ALL, &mut small), Err(CoreError::ScratchTooSmall { .. })));
+        assert!(matches!(
+            gp.predict(&[0.0; 3], Want::ALL, &mut small),
+            Err(CoreError::ScratchTooSmall { .. })
+        ));
         let mut scratch = [0.0; 32];
-        assert!(matches!(gp.predict(&[0.0; 2], Want::ALL, &mut scratch), Err(CoreError::DimensionMismatch { .. })));
-        assert!(matches!(gp.predict(&[0.0, f64::NAN, 0.0], Want::ALL, &mut scratch), Err(CoreError::NonFinite)));
+        assert!(matches!(
+            gp.predict(&[0.0; 2], Want::ALL, &mut scratch),
+            Err(CoreError::DimensionMismatch { .. })
+        ));
+        assert!(matches!(
+            gp.predict(&[0.0, f64::NAN, 0.0], Want::ALL, &mut scratch),
+            Err(CoreError::NonFinite)
+        ));
         assert_eq!(gp.predict_scratch(Want::default()), 6);
         assert_eq!(gp.predict_scratch(Want::EKF), 12);
         assert_eq!(gp.predict_scratch(Want::ALL), 18);

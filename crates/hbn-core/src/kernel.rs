@@ -37,6 +37,8 @@ const SQRT5: f64 = 2.236_067_977_499_79;
 
 /// The radial profile `f(r2)` of a stationary kernel.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "kebab-case"))]
 pub enum Profile {
     /// Squared exponential, `exp(-r2 / 2)` (thesis Eq. 5).
     SquaredExponential,
@@ -46,6 +48,8 @@ pub enum Profile {
 
 /// How squared distances are measured.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "kebab-case"))]
 pub enum Metric {
     /// One length scale for all inputs.
     Isotropic,
@@ -57,6 +61,8 @@ pub enum Metric {
 
 /// The structure of a kernel: everything but the hyperparameter values.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "kebab-case"))]
 pub struct KernelSpec {
     /// Radial profile.
     pub profile: Profile,
@@ -88,7 +94,9 @@ impl KernelSpec {
             return Err(CoreError::InvalidSpec("dim must be in 1..=MAX_DIM (8)"));
         }
         if self.warp_units > MAX_WARP_UNITS {
-            return Err(CoreError::InvalidSpec("warp_units must be in 0..=MAX_WARP_UNITS (4)"));
+            return Err(CoreError::InvalidSpec(
+                "warp_units must be in 0..=MAX_WARP_UNITS (4)",
+            ));
         }
         if let Some([a, b]) = self.direction
             && (a >= self.dim || b >= self.dim || a == b)
@@ -138,7 +146,11 @@ impl KernelSpec {
     /// The direction factor `1/2 (1 + g g')`, or 1 without it.
     #[inline]
     pub fn direction_factor(&self, g1: f64, g2: f64) -> f64 {
-        if self.direction.is_some() { 0.5 * (1.0 + g1 * g2) } else { 1.0 }
+        if self.direction.is_some() {
+            0.5 * (1.0 + g1 * g2)
+        } else {
+            1.0
+        }
     }
 
     /// A reasonable starting `theta` for standardised data (all length scales 1, unit
@@ -151,7 +163,11 @@ impl KernelSpec {
             // Units spread over [-1.5, 1.5] with gains summing to ~1.
             for j in 0..self.dim {
                 for i in 0..m {
-                    let a = if m == 1 { 0.0 } else { -1.5 + 3.0 * i as f64 / (m - 1) as f64 };
+                    let a = if m == 1 {
+                        0.0
+                    } else {
+                        -1.5 + 3.0 * i as f64 / (m - 1) as f64
+                    };
                     theta[self.warp_a_offset() + j * m + i] = a;
                     theta[self.warp_b_offset() + j * m + i] = libm::log(1.0 / m as f64);
                 }
@@ -174,7 +190,11 @@ fn sign(v: f64) -> f64 {
 
 #[inline]
 fn check_len(got: usize, expected: usize) -> Result<(), CoreError> {
-    if got == expected { Ok(()) } else { Err(CoreError::DimensionMismatch { expected, got }) }
+    if got == expected {
+        Ok(())
+    } else {
+        Err(CoreError::DimensionMismatch { expected, got })
+    }
 }
 
 /// Profile value `f(r2)` and its derivative `df/dr2`.
@@ -233,7 +253,11 @@ impl<'a> Kernel<'a> {
         if theta.iter().chain(whiten.iter()).any(|v| !v.is_finite()) {
             return Err(CoreError::NonFinite);
         }
-        Ok(Self { spec, theta, whiten })
+        Ok(Self {
+            spec,
+            theta,
+            whiten,
+        })
     }
 
     /// The structure of this kernel.
@@ -358,7 +382,12 @@ impl<'a> Kernel<'a> {
 
     /// Feature vector `u = L phi(x)` of a standardised input, so that `r2 = |u - u'|^2`,
     /// and the input Jacobian of the features, row-major `d x d` (`du_r / dx_c`).
-    pub fn features(&self, x_std: &[f64], u: &mut [f64; MAX_DIM], du_dx: &mut [f64; MAX_DIM * MAX_DIM]) {
+    pub fn features(
+        &self,
+        x_std: &[f64],
+        u: &mut [f64; MAX_DIM],
+        du_dx: &mut [f64; MAX_DIM * MAX_DIM],
+    ) {
         let prep = self.prepare(x_std, 0.0);
         self.apply_metric(&prep.p, u);
         let d = self.spec.dim;
@@ -462,12 +491,31 @@ mod tests {
     fn specs() -> [KernelSpec; 6] {
         let d = 3;
         [
-            KernelSpec { metric: Metric::Isotropic, ..KernelSpec::se_ard(d) },
+            KernelSpec {
+                metric: Metric::Isotropic,
+                ..KernelSpec::se_ard(d)
+            },
             KernelSpec::se_ard(d),
-            KernelSpec { metric: Metric::Mahalanobis, ..KernelSpec::se_ard(d) },
-            KernelSpec { profile: Profile::Matern52, ..KernelSpec::se_ard(d) },
-            KernelSpec { warp_units: 2, metric: Metric::Mahalanobis, direction: Some([2, 0]), ..KernelSpec::se_ard(d) },
-            KernelSpec { warp_units: 1, profile: Profile::Matern52, direction: Some([1, 0]), ..KernelSpec::se_ard(d) },
+            KernelSpec {
+                metric: Metric::Mahalanobis,
+                ..KernelSpec::se_ard(d)
+            },
+            KernelSpec {
+                profile: Profile::Matern52,
+                ..KernelSpec::se_ard(d)
+            },
+            KernelSpec {
+                warp_units: 2,
+                metric: Metric::Mahalanobis,
+                direction: Some([2, 0]),
+                ..KernelSpec::se_ard(d)
+            },
+            KernelSpec {
+                warp_units: 1,
+                profile: Profile::Matern52,
+                direction: Some([1, 0]),
+                ..KernelSpec::se_ard(d)
+            },
         ]
     }
 
@@ -493,7 +541,10 @@ mod tests {
 
     #[test]
     fn matern_matches_closed_form() {
-        let spec = KernelSpec { profile: Profile::Matern52, ..KernelSpec::se_ard(1) };
+        let spec = KernelSpec {
+            profile: Profile::Matern52,
+            ..KernelSpec::se_ard(1)
+        };
         let theta = [0.0, libm::log(0.7)];
         let k = Kernel::new(spec, &theta, &[]).unwrap();
         let r = 0.5f64 / 0.7;
@@ -503,7 +554,10 @@ mod tests {
 
     #[test]
     fn direction_factor_blocks_opposite_branches() {
-        let spec = KernelSpec { direction: Some([0, 1]), ..KernelSpec::se_ard(2) };
+        let spec = KernelSpec {
+            direction: Some([0, 1]),
+            ..KernelSpec::se_ard(2)
+        };
         let theta = [0.0; 3];
         let k = Kernel::new(spec, &theta, &[]).unwrap();
         let x = [0.1, 0.2];
@@ -516,7 +570,10 @@ mod tests {
 
     #[test]
     fn mahalanobis_uses_whitening() {
-        let spec = KernelSpec { metric: Metric::Mahalanobis, ..KernelSpec::se_ard(2) };
+        let spec = KernelSpec {
+            metric: Metric::Mahalanobis,
+            ..KernelSpec::se_ard(2)
+        };
         let w = [2.0, 0.0, 1.0, 1.0];
         let theta = [0.0, libm::log(4.0)];
         let k = Kernel::new(spec, &theta, &w).unwrap();
@@ -541,7 +598,11 @@ mod tests {
                 a[j] += h;
                 b[j] -= h;
                 let fd = (k.eval(&a, 1.0, &x2, 1.0) - k.eval(&b, 1.0, &x2, 1.0)) / (2.0 * h);
-                assert!((fd - g[j]).abs() < 1e-8 * (1.0 + fd.abs()), "{spec:?} j={j} fd={fd} an={}", g[j]);
+                assert!(
+                    (fd - g[j]).abs() < 1e-8 * (1.0 + fd.abs()),
+                    "{spec:?} j={j} fd={fd} an={}",
+                    g[j]
+                );
             }
         }
     }
@@ -562,10 +623,18 @@ mod tests {
                 let (mut a, mut b) = (base, base);
                 a[i] += h;
                 b[i] -= h;
-                let ka = Kernel::new(spec, &a[..n], &W).unwrap().eval(&x1, 1.0, &x2, 1.0);
-                let kb = Kernel::new(spec, &b[..n], &W).unwrap().eval(&x1, 1.0, &x2, 1.0);
+                let ka = Kernel::new(spec, &a[..n], &W)
+                    .unwrap()
+                    .eval(&x1, 1.0, &x2, 1.0);
+                let kb = Kernel::new(spec, &b[..n], &W)
+                    .unwrap()
+                    .eval(&x1, 1.0, &x2, 1.0);
                 let fd = (ka - kb) / (2.0 * h);
-                assert!((fd - g[i]).abs() < 1e-8 * (1.0 + fd.abs()), "{spec:?} i={i} fd={fd} an={}", g[i]);
+                assert!(
+                    (fd - g[i]).abs() < 1e-8 * (1.0 + fd.abs()),
+                    "{spec:?} i={i} fd={fd} an={}",
+                    g[i]
+                );
             }
         }
     }
@@ -608,8 +677,22 @@ mod tests {
     fn invalid_specs_are_rejected() {
         assert!(KernelSpec::se_ard(0).validate().is_err());
         assert!(KernelSpec::se_ard(9).validate().is_err());
-        assert!(KernelSpec { direction: Some([0, 0]), ..KernelSpec::se_ard(2) }.validate().is_err());
-        assert!(KernelSpec { warp_units: 5, ..KernelSpec::se_ard(2) }.validate().is_err());
+        assert!(
+            KernelSpec {
+                direction: Some([0, 0]),
+                ..KernelSpec::se_ard(2)
+            }
+            .validate()
+            .is_err()
+        );
+        assert!(
+            KernelSpec {
+                warp_units: 5,
+                ..KernelSpec::se_ard(2)
+            }
+            .validate()
+            .is_err()
+        );
         assert!(Kernel::new(KernelSpec::se_ard(2), &[0.0; 2], &[]).is_err());
         assert!(Kernel::new(KernelSpec::se_ard(2), &[0.0, f64::NAN, 0.0], &[]).is_err());
     }

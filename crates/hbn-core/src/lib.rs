@@ -10,6 +10,7 @@
 #![cfg_attr(not(feature = "std"), no_std)]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
+#![allow(clippy::needless_range_loop)] // index loops read like the matrix algebra they implement
 
 mod error;
 pub mod gp;

@@ -1,0 +1,260 @@
+//! The log marginal likelihood (thesis Eq. 7) and its analytic gradient: the *problem*,
+//! kept apart from the optimiser that solves it ([`crate::train`]).
+//!
+//! With `K_y = K + s_n^2 I = L L^T` and `alpha = K_y^{-1} y`:
+//!
+//! `log p(y | X, theta) = -1/2 y^T alpha - sum_i ln L_ii - n/2 ln(2 pi)`
+//!
+//! `d/dtheta_p = 1/2 tr((alpha alpha^T - K_y^{-1}) dK_y/dtheta_p)`.
+//!
+//! The optimised vector is the kernel's `theta` followed by `ln(s_n^2 - floor)`, so the noise
+//! variance never drops below the floor and every parameter is unconstrained.
+
+use crate::GpError;
+use crate::factor::{Factor, factor_with_jitter};
+use faer::Mat;
+use faer::linalg::solvers::Solve;
+use hbn_core::kernel::Prepared;
+use hbn_core::{Kernel, KernelSpec};
+use rayon::prelude::*;
+use std::sync::Mutex;
+
+/// Standardised training data for one GP (row-major inputs).
+#[derive(Clone, Copy, Debug)]
+pub struct LikelihoodData<'a> {
+    /// Kernel structure.
+    pub spec: KernelSpec,
+    /// Whitening matrix for the Mahalanobis metric (empty otherwise).
+    pub whiten: &'a [f64],
+    /// `n x d` standardised inputs.
+    pub x: &'a [f64],
+    /// `n` direction signs (zeros without the direction factor).
+    pub directions: &'a [f64],
+    /// `n` standardised targets.
+    pub y: &'a [f64],
+}
+
+/// Value and gradient of the log marginal likelihood at one parameter vector.
+#[derive(Clone, Debug)]
+pub struct Evaluation {
+    /// Log marginal likelihood.
+    pub lml: f64,
+    /// Gradient with respect to the optimised vector (kernel theta, then the noise parameter).
+    pub grad: Vec<f64>,
+    /// Jitter the factorisation needed (0 if none).
+    pub jitter: f64,
+}
+
+/// Counters of what the likelihood did, for the training report.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct EvalStats {
+    /// Likelihood evaluations.
+    pub evaluations: usize,
+    /// Evaluations that needed jitter.
+    pub jitter_evaluations: usize,
+    /// Largest jitter used.
+    pub max_jitter: f64,
+}
+
+/// The log marginal likelihood as an optimisation problem.
+pub struct Likelihood<'a> {
+    data: LikelihoodData<'a>,
+    noise_floor: f64,
+    max_jitter_retries: usize,
+    cache: Mutex<Option<(Vec<f64>, Evaluation)>>,
+    stats: Mutex<EvalStats>,
+}
+
+/// Everything the final model needs from a factorisation.
+pub struct Solved {
+    /// The factor.
+    pub factor: Factor,
+    /// `K_y^{-1} y`.
+    pub alpha: Vec<f64>,
+    /// Log marginal likelihood.
+    pub lml: f64,
+}
+
+impl<'a> Likelihood<'a> {
+    /// A problem over `data` with the given noise floor and jitter retries.
+    pub fn new(data: LikelihoodData<'a>, noise_floor: f64, max_jitter_retries: usize) -> Self {
+        Self {
+            data,
+            noise_floor,
+            max_jitter_retries,
+            cache: Mutex::new(None),
+            stats: Mutex::new(EvalStats::default()),
+        }
+    }
+
+    /// Number of optimised parameters.
+    pub fn n_params(&self) -> usize {
+        self.data.spec.n_params() + 1
+    }
+
+    /// Noise variance encoded by the last parameter.
+    pub fn noise_of(&self, p_noise: f64) -> f64 {
+        self.noise_floor + p_noise.exp()
+    }
+
+    /// Parameter encoding a noise variance (clamped just above the floor).
+    pub fn param_of_noise(&self, noise: f64) -> f64 {
+        (noise - self.noise_floor).max(self.noise_floor * 1e-3).ln()
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> EvalStats {
+        self.stats.lock().map(|s| *s).unwrap_or_default()
+    }
+
+    fn prepare(&self, kernel: &Kernel<'_>) -> Vec<Prepared> {
+        let d = self.data.spec.dim;
+        self.data
+            .x
+            .chunks_exact(d)
+            .zip(self.data.directions)
+            .map(|(row, &g)| kernel.prepare(row, g))
+            .collect()
+    }
+
+    /// `K` (without noise) as a faer matrix, built in parallel by columns.
+    fn gram(&self, kernel: &Kernel<'_>, prep: &[Prepared]) -> Mat<f64> {
+        let n = prep.len();
+        let mut lower = vec![0.0; n * n];
+        lower.par_chunks_mut(n).enumerate().for_each(|(j, col)| {
+            for i in j..n {
+                col[i] = kernel.eval_prepared(&prep[i], &prep[j]);
+            }
+        });
+        Mat::from_fn(n, n, |i, j| {
+            if i >= j {
+                lower[j * n + i]
+            } else {
+                lower[i * n + j]
+            }
+        })
+    }
+
+    /// Factorises `K + s_n^2 I` at kernel `theta` and noise `noise` (fixed hyperparameters).
+    pub fn solve(&self, theta: &[f64], noise: f64) -> Result<Solved, GpError> {
+        let kernel = Kernel::new(self.data.spec, theta, self.data.whiten)?;
+        let prep = self.prepare(&kernel);
+        let mut k = self.gram(&kernel, &prep);
+        let n = prep.len();
+        for i in 0..n {
+            k[(i, i)] += noise;
+        }
+        let factor = factor_with_jitter(&mut k, self.max_jitter_retries)?;
+        let y = Mat::from_fn(n, 1, |i, _| self.data.y[i]);
+        let alpha_m = factor.llt.solve(&y);
+        let alpha: Vec<f64> = (0..n).map(|i| alpha_m[(i, 0)]).collect();
+        let fit: f64 = alpha.iter().zip(self.data.y).map(|(a, y)| a * y).sum();
+        let lml = -0.5 * fit
+            - 0.5 * factor.log_det()
+            - 0.5 * n as f64 * (2.0 * std::f64::consts::PI).ln();
+        if !lml.is_finite() || !alpha.iter().all(|a| a.is_finite()) {
+            return Err(GpError::NotPositiveDefinite {
+                jitter: factor.jitter,
+                retries: factor.retries,
+            });
+        }
+        Ok(Solved { factor, alpha, lml })
+    }
+
+    /// Log marginal likelihood and its gradient at the optimised vector `p`.
+    pub fn evaluate(&self, p: &[f64]) -> Result<Evaluation, GpError> {
+        if let Ok(cache) = self.cache.lock()
+            && let Some((cp, ev)) = cache.as_ref()
+            && cp.as_slice() == p
+        {
+            return Ok(ev.clone());
+        }
+        let n_k = self.data.spec.n_params();
+        if p.len() != n_k + 1 {
+            return Err(GpError::Shape {
+                what: "optimised parameters",
+                expected: n_k + 1,
+                got: p.len(),
+            });
+        }
+        if !p.iter().all(|v| v.is_finite()) {
+            return Err(GpError::NonFinite {
+                what: "hyperparameters",
+                row: 0,
+            });
+        }
+        let theta = &p[..n_k];
+        let noise = self.noise_of(p[n_k]);
+        let solved = self.solve(theta, noise)?;
+        let kernel = Kernel::new(self.data.spec, theta, self.data.whiten)?;
+        let prep = self.prepare(&kernel);
+        let n = prep.len();
+        let kinv = solved.factor.inverse();
+        let alpha = &solved.alpha;
+        // 1/2 sum_ij W_ij dK_ij/dtheta with W = alpha alpha^T - K^{-1}, over the lower triangle.
+        let partial = (0..n)
+            .into_par_iter()
+            .fold(
+                || (vec![0.0; n_k], vec![0.0; n_k]),
+                |(mut acc, mut g), i| {
+                    for j in 0..=i {
+                        let w = alpha[i] * alpha[j] - kinv[(i, j)];
+                        let w = if i == j { 0.5 * w } else { w };
+                        kernel.grad_theta(&prep[i], &prep[j], &mut g);
+                        for (a, gv) in acc.iter_mut().zip(&g) {
+                            *a += w * gv;
+                        }
+                    }
+                    (acc, g)
+                },
+            )
+            .map(|(acc, _)| acc)
+            .reduce(
+                || vec![0.0; n_k],
+                |mut a, b| {
+                    for (x, y) in a.iter_mut().zip(&b) {
+                        *x += y;
+                    }
+                    a
+                },
+            );
+        let mut grad = partial;
+        let trace_w: f64 = (0..n).map(|i| alpha[i] * alpha[i] - kinv[(i, i)]).sum();
+        grad.push(0.5 * trace_w * p[n_k].exp());
+        let ev = Evaluation {
+            lml: solved.lml,
+            grad,
+            jitter: solved.factor.jitter,
+        };
+        if let Ok(mut s) = self.stats.lock() {
+            s.evaluations += 1;
+            if ev.jitter > 0.0 {
+                s.jitter_evaluations += 1;
+                s.max_jitter = s.max_jitter.max(ev.jitter);
+            }
+        }
+        if let Ok(mut cache) = self.cache.lock() {
+            *cache = Some((p.to_vec(), ev.clone()));
+        }
+        Ok(ev)
+    }
+}
+
+/// argmin adapter: minimise the negative log marginal likelihood.
+pub(crate) struct NegLml<'a, 'b>(pub &'b Likelihood<'a>);
+
+impl argmin::core::CostFunction for NegLml<'_, '_> {
+    type Param = Vec<f64>;
+    type Output = f64;
+    fn cost(&self, p: &Self::Param) -> Result<f64, argmin::core::Error> {
+        Ok(-self.0.evaluate(p)?.lml)
+    }
+}
+
+impl argmin::core::Gradient for NegLml<'_, '_> {
+    type Param = Vec<f64>;
+    type Gradient = Vec<f64>;
+    fn gradient(&self, p: &Self::Param) -> Result<Vec<f64>, argmin::core::Error> {
+        Ok(self.0.evaluate(p)?.grad.iter().map(|g| -g).collect())
+    }
+}

@@ -1,0 +1,278 @@
+//! The trained GP: owned arrays, a borrowed [`GpView`] for allocation-free prediction, and
+//! versioned persistence.
+
+use crate::GpError;
+use crate::params::SubsetPolicy;
+use hbn_core::{CoreError, GpParts, GpView, Kernel, KernelSpec, Prediction, Want};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Format tag of a standalone GP file.
+pub const GP_FORMAT: &str = "hbn-gp";
+/// Current GP file format version.
+pub const GP_FORMAT_VERSION: u32 = 1;
+
+/// One optimiser start.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StartReport {
+    /// Log marginal likelihood at the starting point (`None` if it could not be evaluated).
+    pub initial_lml: Option<f64>,
+    /// Log marginal likelihood reached (`None` if the start failed).
+    pub final_lml: Option<f64>,
+    /// L-BFGS iterations.
+    pub iterations: u64,
+    /// Why the start failed, if it did.
+    pub error: Option<String>,
+}
+
+/// What training did: subset, starts, jitter. Nothing numerical is silent.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TrainingReport {
+    /// Samples given.
+    pub n_samples: usize,
+    /// Support points kept.
+    pub n_support: usize,
+    /// The policy applied when samples exceeded the maximum (`None` = all kept).
+    pub subset_policy: Option<SubsetPolicy>,
+    /// One entry per optimiser start (empty when hyperparameters were fixed).
+    pub starts: Vec<StartReport>,
+    /// Index of the start that won.
+    pub best_start: Option<usize>,
+    /// Likelihood evaluations in all.
+    pub evaluations: usize,
+    /// Evaluations whose Cholesky needed jitter.
+    pub jitter_evaluations: usize,
+    /// Largest jitter used during optimisation.
+    pub max_jitter: f64,
+    /// Jitter in the final factor (added to the noise variance on the diagonal).
+    pub final_jitter: f64,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+}
+
+impl TrainingReport {
+    /// Human-readable warnings (jitter, subset, failed starts); empty when all went cleanly.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut w = Vec::new();
+        if let Some(p) = self.subset_policy {
+            w.push(format!(
+                "{} samples exceed the maximum; kept {} support points by {:?}",
+                self.n_samples, self.n_support, p
+            ));
+        }
+        if self.jitter_evaluations > 0 {
+            w.push(format!(
+                "{} of {} likelihood evaluations needed Cholesky jitter (max {:e})",
+                self.jitter_evaluations, self.evaluations, self.max_jitter
+            ));
+        }
+        if self.final_jitter > 0.0 {
+            w.push(format!(
+                "the final factor needed jitter {:e}",
+                self.final_jitter
+            ));
+        }
+        let failed = self.starts.iter().filter(|s| s.error.is_some()).count();
+        if failed > 0 {
+            w.push(format!(
+                "{failed} of {} optimiser starts failed",
+                self.starts.len()
+            ));
+        }
+        w
+    }
+}
+
+/// A trained exact GP. Construct with [`crate::fit`]; predict with [`GaussianProcess::view`]
+/// (allocation-free) or the convenience [`GaussianProcess::predict`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GaussianProcess {
+    pub(crate) kernel: KernelSpec,
+    pub(crate) theta: Vec<f64>,
+    pub(crate) noise_variance: f64,
+    pub(crate) whiten: Vec<f64>,
+    pub(crate) input_mean: Vec<f64>,
+    pub(crate) input_scale: Vec<f64>,
+    pub(crate) output_mean: f64,
+    pub(crate) output_scale: f64,
+    pub(crate) support_x: Vec<f64>,
+    pub(crate) support_y: Vec<f64>,
+    pub(crate) directions: Vec<f64>,
+    pub(crate) features: Vec<f64>,
+    pub(crate) alpha: Vec<f64>,
+    pub(crate) chol_packed: Vec<f64>,
+    pub(crate) log_marginal_likelihood: f64,
+    pub(crate) report: TrainingReport,
+}
+
+#[derive(Serialize, Deserialize)]
+struct GpFile {
+    format: String,
+    version: u32,
+    gp: GaussianProcess,
+}
+
+impl GaussianProcess {
+    /// The allocation-free predictor over this model's arrays.
+    pub fn view(&self) -> Result<GpView<'_>, CoreError> {
+        GpView::new(GpParts {
+            kernel: Kernel::new(self.kernel, &self.theta, &self.whiten)?,
+            input_mean: &self.input_mean,
+            input_scale: &self.input_scale,
+            output_mean: self.output_mean,
+            output_scale: self.output_scale,
+            features: &self.features,
+            directions: &self.directions,
+            alpha: &self.alpha,
+            chol_packed: &self.chol_packed,
+            noise_var: self.noise_variance,
+        })
+    }
+
+    /// Predicts at one raw input (allocates its scratch; use [`GaussianProcess::view`] in loops).
+    pub fn predict(&self, x: &[f64], want: Want) -> Result<Prediction, GpError> {
+        let view = self.view()?;
+        let mut scratch = vec![0.0; view.predict_scratch(want)];
+        Ok(view.predict(x, want, &mut scratch)?)
+    }
+
+    /// Predicts at many raw inputs (`rows x dim`, row-major) with one scratch buffer.
+    pub fn predict_many(&self, x: &[f64], want: Want) -> Result<Vec<Prediction>, GpError> {
+        let view = self.view()?;
+        let d = view.dim();
+        if x.len() % d != 0 {
+            return Err(GpError::Shape {
+                what: "prediction inputs (rows x dim)",
+                expected: d,
+                got: x.len() % d,
+            });
+        }
+        let mut scratch = vec![0.0; view.predict_scratch(want)];
+        x.chunks_exact(d)
+            .map(|row| Ok(view.predict(row, want, &mut scratch)?))
+            .collect()
+    }
+
+    /// Kernel structure.
+    pub fn kernel(&self) -> &KernelSpec {
+        &self.kernel
+    }
+    /// Kernel hyperparameters (log-parameterised, standardised units).
+    pub fn theta(&self) -> &[f64] {
+        &self.theta
+    }
+    /// Noise variance in standardised output units (jitter excluded).
+    pub fn noise_variance_std(&self) -> f64 {
+        self.noise_variance
+    }
+    /// Noise variance in raw output units.
+    pub fn noise_variance(&self) -> f64 {
+        self.noise_variance * self.output_scale * self.output_scale
+    }
+    /// Signal variance `s_f^2` in raw output units.
+    pub fn signal_variance(&self) -> f64 {
+        self.theta.first().map_or(0.0, |t| t.exp()) * self.output_scale * self.output_scale
+    }
+    /// Length scales in raw input units (ARD: one per input; isotropic: one; Mahalanobis: the
+    /// scale `c` of the covariance). Empty for other metrics.
+    pub fn length_scales(&self) -> Vec<f64> {
+        match self.kernel.metric {
+            hbn_core::Metric::Ard => (0..self.kernel.dim)
+                .map(|j| self.theta[1 + j].exp() * self.input_scale[j])
+                .collect(),
+            hbn_core::Metric::Isotropic => vec![self.theta[1].exp()],
+            hbn_core::Metric::Mahalanobis => vec![self.theta[1].exp()],
+        }
+    }
+    /// Per-input mean and scale used for standardisation.
+    pub fn input_standardisation(&self) -> (&[f64], &[f64]) {
+        (&self.input_mean, &self.input_scale)
+    }
+    /// Output mean and scale used for standardisation.
+    pub fn output_standardisation(&self) -> (f64, f64) {
+        (self.output_mean, self.output_scale)
+    }
+    /// Support inputs (raw units, `n x dim`).
+    pub fn support_inputs(&self) -> &[f64] {
+        &self.support_x
+    }
+    /// Support targets (raw units).
+    pub fn support_targets(&self) -> &[f64] {
+        &self.support_y
+    }
+    /// Number of support points.
+    pub fn n_support(&self) -> usize {
+        self.alpha.len()
+    }
+    /// Log marginal likelihood of the standardised targets at the fitted hyperparameters
+    /// (equal to the raw-target value when `normalize` is off).
+    pub fn log_marginal_likelihood(&self) -> f64 {
+        self.log_marginal_likelihood
+    }
+    /// What training did.
+    pub fn report(&self) -> &TrainingReport {
+        &self.report
+    }
+
+    /// Serialises to JSON (exact float round trip) with a format tag and version.
+    pub fn to_json(&self) -> Result<String, GpError> {
+        let file = GpFile {
+            format: GP_FORMAT.into(),
+            version: GP_FORMAT_VERSION,
+            gp: self.clone(),
+        };
+        serde_json::to_string(&file).map_err(|e| GpError::Format {
+            path: "<memory>".into(),
+            reason: e.to_string(),
+        })
+    }
+
+    /// Parses JSON written by [`GaussianProcess::to_json`], checking format, version and
+    /// every array length. `origin` names the source in errors.
+    pub fn from_json(text: &str, origin: &str) -> Result<Self, GpError> {
+        let value: serde_json::Value = serde_json::from_str(text).map_err(|e| GpError::Format {
+            path: origin.into(),
+            reason: format!("not a JSON GP model file: {e}"),
+        })?;
+        let format = value.get("format").and_then(|f| f.as_str()).unwrap_or("");
+        if format != GP_FORMAT {
+            return Err(GpError::Format {
+                path: origin.into(),
+                reason: format!("not an hbn GP model (format tag {format:?})"),
+            });
+        }
+        let version = value.get("version").and_then(|v| v.as_u64()).unwrap_or(0);
+        if version != u64::from(GP_FORMAT_VERSION) {
+            return Err(GpError::Format {
+                path: origin.into(),
+                reason: format!(
+                    "GP format version {version} is not supported (this build reads {GP_FORMAT_VERSION}); retrain or convert"
+                ),
+            });
+        }
+        let file: GpFile = serde_json::from_value(value).map_err(|e| GpError::Format {
+            path: origin.into(),
+            reason: format!("malformed GP model: {e}"),
+        })?;
+        file.gp.view().map_err(|e| GpError::Format {
+            path: origin.into(),
+            reason: format!("inconsistent GP model: {e}"),
+        })?;
+        Ok(file.gp)
+    }
+
+    /// Writes the model atomically (temporary file in the same directory, then rename).
+    pub fn save(&self, path: &Path) -> Result<(), GpError> {
+        let text = self.to_json()?;
+        crate::write_atomic(path, text.as_bytes())
+    }
+
+    /// Loads a model written by [`GaussianProcess::save`].
+    pub fn load(path: &Path) -> Result<Self, GpError> {
+        let text = std::fs::read_to_string(path).map_err(|source| GpError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::from_json(&text, &path.display().to_string())
+    }
+}

@@ -1,0 +1,116 @@
+//! Checked training parameters (linfa style): validated once, before fitting.
+
+use crate::GpError;
+use hbn_core::KernelSpec;
+use serde::{Deserialize, Serialize};
+
+/// How to reduce the data when there are more samples than `max_points`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SubsetPolicy {
+    /// Greedy farthest-point sampling in standardised input space (deterministic, covers the
+    /// input space evenly). The default.
+    FarthestPoint,
+    /// A uniformly random subset drawn with the training seed.
+    Random,
+}
+
+/// Hyperparameters to start from (standardised units, see [`hbn_core::kernel`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Hyperparameters {
+    /// Kernel hyperparameters in the layout of [`KernelSpec::n_params`].
+    pub theta: Vec<f64>,
+    /// Noise variance `s_n^2` (standardised output units).
+    pub noise_variance: f64,
+}
+
+/// GP training parameters. Build with [`GpParams::new`], adjust fields, then
+/// [`GpParams::validate`] (done by [`crate::fit`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GpParams {
+    /// Kernel structure.
+    pub kernel: KernelSpec,
+    /// Starting (or, with `optimize = false`, fixed) hyperparameters; `None` = defaults.
+    pub init: Option<Hyperparameters>,
+    /// Optimise hyperparameters by maximising the log marginal likelihood.
+    pub optimize: bool,
+    /// Optimiser starts in all (the first from `init`/defaults, the rest random). `>= 1`.
+    pub n_starts: usize,
+    /// L-BFGS iterations per start.
+    pub max_iters: u64,
+    /// Seed of the random starts and of the random subset policy.
+    pub seed: u64,
+    /// Standardise inputs (per column) and outputs before the kernel. On by default.
+    pub normalize: bool,
+    /// Lower bound of the noise variance during optimisation (standardised units, `> 0`).
+    pub noise_floor: f64,
+    /// Most support points kept; more samples are reduced by `subset_policy`.
+    pub max_points: usize,
+    /// Subset policy when the data exceed `max_points`.
+    pub subset_policy: SubsetPolicy,
+    /// Jitter retries when the Cholesky factorisation fails (each multiplies the jitter by 10).
+    pub max_jitter_retries: usize,
+}
+
+impl GpParams {
+    /// Defaults for a kernel: optimise, 3 starts, normalise, noise floor 1e-6, 1000 points.
+    pub fn new(kernel: KernelSpec) -> Self {
+        Self {
+            kernel,
+            init: None,
+            optimize: true,
+            n_starts: 3,
+            max_iters: 200,
+            seed: 0,
+            normalize: true,
+            noise_floor: 1e-6,
+            max_points: 1000,
+            subset_policy: SubsetPolicy::FarthestPoint,
+            max_jitter_retries: 8,
+        }
+    }
+
+    /// Checks every field once; the algorithm then trusts them.
+    pub fn validate(&self) -> Result<(), GpError> {
+        self.kernel.validate()?;
+        let bad =
+            |name: &'static str, reason: String| Err(GpError::InvalidParameter { name, reason });
+        if self.n_starts == 0 {
+            return bad("n_starts", "must be >= 1".into());
+        }
+        if !(self.noise_floor.is_finite() && self.noise_floor > 0.0) {
+            return bad(
+                "noise_floor",
+                format!("must be finite and > 0, got {}", self.noise_floor),
+            );
+        }
+        if self.max_points < 2 {
+            return bad(
+                "max_points",
+                format!("must be >= 2, got {}", self.max_points),
+            );
+        }
+        if let Some(init) = &self.init {
+            if init.theta.len() != self.kernel.n_params() {
+                return bad(
+                    "init.theta",
+                    format!(
+                        "kernel needs {} hyperparameters, got {}",
+                        self.kernel.n_params(),
+                        init.theta.len()
+                    ),
+                );
+            }
+            if !init.theta.iter().all(|v| v.is_finite()) {
+                return bad("init.theta", "must be finite".into());
+            }
+            if !(init.noise_variance.is_finite() && init.noise_variance >= 0.0) {
+                return bad(
+                    "init.noise_variance",
+                    format!("must be finite and >= 0, got {}", init.noise_variance),
+                );
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,270 @@
+//! Fitting: the executor that runs L-BFGS from several starts on the likelihood problem and
+//! keeps the best.
+
+use crate::GpError;
+use crate::data::{check_data, column_stats, select_subset, whitening};
+use crate::likelihood::{Likelihood, LikelihoodData, NegLml};
+use crate::model::{GaussianProcess, StartReport, TrainingReport};
+use crate::params::GpParams;
+use argmin::core::{Executor, State};
+use argmin::solver::linesearch::MoreThuenteLineSearch;
+use argmin::solver::quasinewton::LBFGS;
+use hbn_core::kernel::MAX_DIM;
+use hbn_core::rng::Rng;
+use hbn_core::{Kernel, Metric};
+use std::time::Instant;
+
+/// Progress of a fit, for progress bars.
+#[derive(Clone, Copy, Debug)]
+pub struct FitProgress {
+    /// Start just finished (0-based).
+    pub start: usize,
+    /// Starts in all.
+    pub n_starts: usize,
+    /// Best log marginal likelihood so far.
+    pub best_lml: Option<f64>,
+}
+
+/// Fits a GP to row-major inputs `x` (`n x dim`) and targets `y`.
+pub fn fit(params: &GpParams, x: &[f64], y: &[f64]) -> Result<GaussianProcess, GpError> {
+    fit_observed(params, x, y, &mut |_| {})
+}
+
+/// [`fit`], calling `observe` after each optimiser start.
+pub fn fit_observed(
+    params: &GpParams,
+    x: &[f64],
+    y: &[f64],
+    observe: &mut dyn FnMut(FitProgress),
+) -> Result<GaussianProcess, GpError> {
+    let t0 = Instant::now();
+    params.validate()?;
+    let spec = params.kernel;
+    let d = spec.dim;
+    let n_all = check_data(x, y, d)?;
+
+    // Standardisation (statistics of all samples).
+    let (input_mean, input_scale) = if params.normalize {
+        column_stats(x, d)
+    } else {
+        (vec![0.0; d], vec![1.0; d])
+    };
+    let (output_mean, output_scale) = if params.normalize {
+        let (m, s) = column_stats(y, 1);
+        (m[0], s[0])
+    } else {
+        (0.0, 1.0)
+    };
+    let std_x: Vec<f64> = x
+        .chunks_exact(d)
+        .flat_map(|row| {
+            (0..d)
+                .map(|j| (row[j] - input_mean[j]) / input_scale[j])
+                .collect::<Vec<_>>()
+        })
+        .collect();
+
+    // Subset.
+    let keep = select_subset(
+        &std_x,
+        d,
+        params.max_points,
+        params.subset_policy,
+        params.seed,
+    );
+    let subset_policy = (keep.len() < n_all).then_some(params.subset_policy);
+    let support_x: Vec<f64> = keep
+        .iter()
+        .flat_map(|&i| x[i * d..i * d + d].iter().copied())
+        .collect();
+    let support_y: Vec<f64> = keep.iter().map(|&i| y[i]).collect();
+    let xs: Vec<f64> = keep
+        .iter()
+        .flat_map(|&i| std_x[i * d..i * d + d].iter().copied())
+        .collect();
+    let ys: Vec<f64> = support_y
+        .iter()
+        .map(|v| (v - output_mean) / output_scale)
+        .collect();
+    let directions: Vec<f64> = support_x
+        .chunks_exact(d)
+        .map(|r| spec.direction_of(r))
+        .collect();
+    let whiten = if spec.metric == Metric::Mahalanobis {
+        whitening(&xs, d)
+    } else {
+        Vec::new()
+    };
+
+    let lik = Likelihood::new(
+        LikelihoodData {
+            spec,
+            whiten: &whiten,
+            x: &xs,
+            directions: &directions,
+            y: &ys,
+        },
+        params.noise_floor,
+        params.max_jitter_retries,
+    );
+
+    // Starting point.
+    let mut theta0 = vec![0.0; spec.n_params()];
+    spec.default_theta(&mut theta0)?;
+    let mut noise0 = 0.1;
+    if let Some(init) = &params.init {
+        theta0.clone_from(&init.theta);
+        noise0 = init.noise_variance;
+    }
+
+    let mut report = TrainingReport {
+        n_samples: n_all,
+        n_support: keep.len(),
+        subset_policy,
+        ..Default::default()
+    };
+    let (theta, noise) = if params.optimize {
+        let mut rng = Rng::new(params.seed);
+        let mut best: Option<(f64, Vec<f64>, usize)> = None;
+        let mut last_err = String::new();
+        for start in 0..params.n_starts {
+            let mut p0 = theta0.clone();
+            p0.push(lik.param_of_noise(noise0.max(params.noise_floor * 2.0)));
+            if start > 0 {
+                randomize(&mut p0, &spec, &mut rng);
+            }
+            let initial_lml = lik.evaluate(&p0).ok().map(|e| e.lml);
+            match run_lbfgs(&lik, p0, params.max_iters) {
+                Ok((p, lml, iters)) => {
+                    report.starts.push(StartReport {
+                        initial_lml,
+                        final_lml: Some(lml),
+                        iterations: iters,
+                        error: None,
+                    });
+                    if best.as_ref().is_none_or(|b| lml > b.0) {
+                        best = Some((lml, p, start));
+                    }
+                }
+                Err(e) => {
+                    last_err = e.clone();
+                    report.starts.push(StartReport {
+                        initial_lml,
+                        final_lml: None,
+                        iterations: 0,
+                        error: Some(e),
+                    });
+                }
+            }
+            observe(FitProgress {
+                start,
+                n_starts: params.n_starts,
+                best_lml: best.as_ref().map(|b| b.0),
+            });
+        }
+        let Some((_, p, start)) = best else {
+            return Err(GpError::OptimizationFailed {
+                starts: params.n_starts,
+                last: last_err,
+            });
+        };
+        report.best_start = Some(start);
+        let n_k = spec.n_params();
+        (p[..n_k].to_vec(), lik.noise_of(p[n_k]))
+    } else {
+        (theta0, noise0)
+    };
+    let stats = lik.stats();
+    report.evaluations = stats.evaluations;
+    report.jitter_evaluations = stats.jitter_evaluations;
+    report.max_jitter = stats.max_jitter;
+
+    // Final factorisation at the chosen hyperparameters.
+    let solved = lik.solve(&theta, noise)?;
+    report.final_jitter = solved.factor.jitter;
+    let l = solved.factor.llt.L();
+    let n = keep.len();
+    let mut chol_packed = Vec::with_capacity(n * (n + 1) / 2);
+    for i in 0..n {
+        for j in 0..=i {
+            chol_packed.push(l[(i, j)]);
+        }
+    }
+    let kernel = Kernel::new(spec, &theta, &whiten)?;
+    let mut features = Vec::with_capacity(n * d);
+    let mut u = [0.0; MAX_DIM];
+    let mut jac = [0.0; MAX_DIM * MAX_DIM];
+    for row in xs.chunks_exact(d) {
+        kernel.features(row, &mut u, &mut jac);
+        features.extend_from_slice(&u[..d]);
+    }
+    report.seconds = t0.elapsed().as_secs_f64();
+    Ok(GaussianProcess {
+        kernel: spec,
+        theta,
+        // The jitter is part of the factor's diagonal: keep it in the noise so the model is consistent.
+        noise_variance: noise + solved.factor.jitter,
+        whiten,
+        input_mean,
+        input_scale,
+        output_mean,
+        output_scale,
+        support_x,
+        support_y,
+        directions: if spec.direction.is_some() {
+            directions
+        } else {
+            Vec::new()
+        },
+        features,
+        alpha: solved.alpha,
+        chol_packed,
+        log_marginal_likelihood: solved.lml,
+        report,
+    })
+}
+
+/// Random restart around the defaults, in log space.
+fn randomize(p: &mut [f64], spec: &hbn_core::KernelSpec, rng: &mut Rng) {
+    let ln10 = std::f64::consts::LN_10;
+    p[0] = rng.uniform_in(-ln10, ln10);
+    for j in 0..spec.n_metric() {
+        p[1 + j] = match spec.metric {
+            Metric::Mahalanobis => rng.uniform_in(-ln10, 2.0 * ln10),
+            _ => rng.uniform_in(-ln10, ln10),
+        };
+    }
+    let m = spec.dim * spec.warp_units;
+    for i in 0..m {
+        p[spec.warp_a_offset() + i] = rng.uniform_in(-2.0, 2.0);
+        p[spec.warp_b_offset() + i] = rng.uniform_in(-1.5, 0.5);
+    }
+    let last = p.len() - 1;
+    p[last] = rng.uniform_in(-4.0 * ln10, -0.5);
+}
+
+fn run_lbfgs(
+    lik: &Likelihood<'_>,
+    p0: Vec<f64>,
+    max_iters: u64,
+) -> Result<(Vec<f64>, f64, u64), String> {
+    let linesearch = MoreThuenteLineSearch::new();
+    let solver = LBFGS::new(linesearch, 10)
+        .with_tolerance_grad(1e-5)
+        .and_then(|s| s.with_tolerance_cost(1e-10))
+        .map_err(|e| e.to_string())?;
+    let res = Executor::new(NegLml(lik), solver)
+        .configure(|state| state.param(p0).max_iters(max_iters))
+        .run()
+        .map_err(|e| e.to_string())?;
+    let state = res.state();
+    let p = state
+        .get_best_param()
+        .cloned()
+        .ok_or_else(|| "optimiser returned no parameters".to_string())?;
+    let lml = -state.get_best_cost();
+    if !lml.is_finite() {
+        return Err("optimiser ended at a non-finite likelihood".into());
+    }
+    Ok((p, lml, state.get_iter()))
+}
