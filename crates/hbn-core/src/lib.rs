@@ -6,17 +6,25 @@
 //!
 //! - [`kernel`]: the thesis' covariance functions with input and hyperparameter gradients;
 //! - [`gp`]: GP prediction (mean, variance and their input gradients) from borrowed slices;
+//! - [`ekf`]: the EKF / EKF+BLR step on the augmented HBN state;
+//! - [`blr`]: local Bayesian linear regression with a bounded neighbourhood query;
 //! - [`rng`]: a small portable random number generator.
 #![cfg_attr(not(feature = "std"), no_std)]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 #![allow(clippy::needless_range_loop)] // index loops read like the matrix algebra they implement
 
+pub mod blr;
+pub mod ekf;
 mod error;
 pub mod gp;
 pub mod kernel;
 pub mod rng;
 
+pub use blr::{LocalRegression, Neighbourhood, NeighbourhoodParts, Posterior};
+pub use ekf::{
+    EkfConfig, EkfState, Estimator, Flags, HbnView, Mode, StepOutput, observability_eigenvalues,
+};
 pub use error::CoreError;
 pub use gp::{GpParts, GpView, Prediction, Want};
 pub use kernel::{Kernel, KernelSpec, MAX_DIM, Metric, Profile};

@@ -1,0 +1,698 @@
+//! The HBN extended Kalman filter step (thesis Sec. 4.1, Eqs. 21-24), allocation-free.
+//!
+//! ## Timing (no measurement lag)
+//!
+//! The filter estimates `x_k` from `u_0..u_k` and `y_0..y_k`. Its state after step `k` is
+//!
+//! `z_k = [x_k, x_{k-1}, s_k]`, with `s_k` the noise-free sensor output (`y_k = s_k + v_k`),
+//!
+//! and it remembers the known inputs `u_{k-1}` (and `u_{k-2}`), which play the role of the
+//! thesis' delay state `s1` (a state with zero covariance is just a known input). Step `k >= 1`:
+//!
+//! 1. **predict** with the transition GP and the inputs of the *previous* samples:
+//!    `x_k^- = H_D(x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2})`, then the sensor GP at the new state:
+//!    `s_k^- = H_S(x_{k-1}, s_{k-1}, x_k^-)`;
+//! 2. **update** with `y_k` through `H = [0, 0, 1]`.
+//!
+//! Linearisation (Eq. 23) with `a_i = dH_D/d(input i)` and `c, e, f` the sensor gradients with
+//! respect to `x_{k-1}, s_{k-1}, x_k`, chain rule through `H_D` where the sensor reads the new x:
+//!
+//! ```text
+//!     | a1          a2     0 |            | 1 |
+//! F = | 1           0      0 |,     G  =  | 0 |,   Q = G q_x G^T + diag(0, 0, q_s)
+//!     | c + f a1    f a2   e |            | f |
+//! ```
+//!
+//! `q_x` = transition GP variance + its learned noise (or the BLR noise estimate), `q_s` = sensor
+//! GP variance, `R` = sensor learned noise (or the BLR noise estimate). `u_k` is stored for the
+//! next step; it does not influence `x_k` (the transition only reads inputs up to `k - 1`).
+//!
+//! ## Guards (Assumption 4, Eq. 24)
+//!
+//! Noise floors (`q I <= Q`, `r <= R`), bounded Jacobian entries (`|F_ij| <= f`), a state box
+//! around the training range, a Joseph-form update, symmetrisation, and an eigenvalue clamp
+//! `p1 I <= P <= p2 I`. A (near-)singular innovation skips the update. Invalid inputs or
+//! measurements skip the affected phase. Every guard that fires sets a bit in [`Flags`]; no NaN
+//! leaves the step.
+
+use crate::CoreError;
+use crate::blr::{LocalRegression, Neighbourhood};
+use crate::gp::{GpView, Want};
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+
+/// Guard flags of one step (a bit set).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct Flags(pub u32);
+
+impl Flags {
+    /// The input `u_k` was NaN/Inf; the previous input was held.
+    pub const INPUT_INVALID: u32 = 1 << 0;
+    /// The measurement `y_k` was NaN/Inf; the update was skipped.
+    pub const MEASUREMENT_INVALID: u32 = 1 << 1;
+    /// A GP prediction failed; the prediction fell back to a random walk.
+    pub const MODEL_INVALID: u32 = 1 << 2;
+    /// A Jacobian entry exceeded its bound and was clamped.
+    pub const JACOBIAN_CLAMPED: u32 = 1 << 3;
+    /// A noise variance was raised to its floor.
+    pub const NOISE_FLOOR: u32 = 1 << 4;
+    /// The innovation variance was (near-)singular or non-finite; the update was skipped.
+    pub const INNOVATION_SINGULAR: u32 = 1 << 5;
+    /// The covariance left `[p_min, p_max]` and its eigenvalues were clamped.
+    pub const COVARIANCE_CLAMPED: u32 = 1 << 6;
+    /// The state left its box and was clamped.
+    pub const STATE_CLAMPED: u32 = 1 << 7;
+    /// The innovation exceeded the outlier gate; the update was skipped.
+    pub const OUTLIER_REJECTED: u32 = 1 << 8;
+    /// EKF+BLR: the transition window held no training samples (prior used).
+    pub const BLR_EMPTY_TRANSITION: u32 = 1 << 9;
+    /// EKF+BLR: the sensor window held no training samples (prior used).
+    pub const BLR_EMPTY_SENSOR: u32 = 1 << 10;
+    /// EKF+BLR: more samples than the cap fell in a window; the nearest were kept.
+    pub const BLR_CAPPED: u32 = 1 << 11;
+    /// The first sample: the filter was initialised.
+    pub const INITIALISED: u32 = 1 << 12;
+
+    /// Whether `bit` is set.
+    pub fn has(self, bit: u32) -> bool {
+        self.0 & bit != 0
+    }
+
+    /// Names of the set flags, for logs (`no_std`: yields `&'static str`).
+    pub fn names(self) -> impl Iterator<Item = &'static str> {
+        const NAMES: [&str; 13] = [
+            "input_invalid",
+            "measurement_invalid",
+            "model_invalid",
+            "jacobian_clamped",
+            "noise_floor",
+            "innovation_singular",
+            "covariance_clamped",
+            "state_clamped",
+            "outlier_rejected",
+            "blr_empty_transition",
+            "blr_empty_sensor",
+            "blr_capped",
+            "initialised",
+        ];
+        NAMES
+            .into_iter()
+            .enumerate()
+            .filter(move |(i, _)| self.0 & (1 << i) != 0)
+            .map(|(_, n)| n)
+    }
+}
+
+/// Estimation mode.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "kebab-case"))]
+pub enum Mode {
+    /// Plain EKF: GP mean gradients as Jacobians, GP variances + learned noise as Q and R.
+    Ekf,
+    /// EKF with local Bayesian linear regression for the Jacobians and the noise (Sec. 4.3).
+    EkfBlr,
+}
+
+/// Filter settings, in the raw units of the signals. Checked once by [`Estimator::new`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct EkfConfig {
+    /// Estimation mode.
+    pub mode: Mode,
+    /// Floor of the process noise variances (`q` of Eq. 24).
+    pub q_floor: f64,
+    /// Floor of the measurement noise variance (`r` of Eq. 24).
+    pub r_floor: f64,
+    /// Lower eigenvalue bound of P (`p1`).
+    pub p_min: f64,
+    /// Upper eigenvalue bound of P (`p2`).
+    pub p_max: f64,
+    /// Bound on each Jacobian entry (`f`).
+    pub jac_max: f64,
+    /// Smallest innovation variance accepted for an update.
+    pub innovation_min: f64,
+    /// Outlier gate on the normalised innovation squared; `0` disables it.
+    pub nis_gate: f64,
+    /// State box: `x` and `s` are clamped to `[lo, hi]` (from the training ranges).
+    pub x_bounds: (f64, f64),
+    /// Box of the sensor state `s`.
+    pub y_bounds: (f64, f64),
+    /// Initial mean of `x` (e.g. the training mean).
+    pub x0_mean: f64,
+    /// Initial variance of `x` (e.g. the training variance).
+    pub x0_var: f64,
+}
+
+impl EkfConfig {
+    /// Checks every field once.
+    pub fn validate(&self) -> Result<(), CoreError> {
+        let pos = |v: f64| v.is_finite() && v > 0.0;
+        if !(pos(self.q_floor)
+            && pos(self.r_floor)
+            && pos(self.p_min)
+            && pos(self.p_max)
+            && pos(self.jac_max))
+        {
+            return Err(CoreError::InvalidSpec(
+                "q_floor, r_floor, p_min, p_max and jac_max must be finite and > 0",
+            ));
+        }
+        if self.p_min >= self.p_max {
+            return Err(CoreError::InvalidSpec("p_min must be below p_max"));
+        }
+        if !(pos(self.innovation_min) && self.nis_gate.is_finite() && self.nis_gate >= 0.0) {
+            return Err(CoreError::InvalidSpec(
+                "innovation_min must be > 0 and nis_gate >= 0",
+            ));
+        }
+        let ok_box = |b: (f64, f64)| b.0.is_finite() && b.1.is_finite() && b.0 < b.1;
+        if !(ok_box(self.x_bounds) && ok_box(self.y_bounds)) {
+            return Err(CoreError::InvalidSpec(
+                "state bounds must be finite with lo < hi",
+            ));
+        }
+        if !(self.x0_mean.is_finite() && pos(self.x0_var)) {
+            return Err(CoreError::InvalidSpec(
+                "x0_mean must be finite and x0_var > 0",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The trained HBN as borrowed views: what the step reads. A firmware can build it from
+/// `static` slices.
+#[derive(Clone, Copy, Debug)]
+pub struct HbnView<'a> {
+    /// Transition GP, inputs `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}]`.
+    pub transition: GpView<'a>,
+    /// Sensor GP, inputs `[x_{k-1}, y_{k-1}, x_k]`.
+    pub sensor: GpView<'a>,
+    /// Training samples and index for the transition's local regression (EKF+BLR only).
+    pub transition_local: Option<Neighbourhood<'a>>,
+    /// Training samples and index for the sensor's local regression (EKF+BLR only).
+    pub sensor_local: Option<Neighbourhood<'a>>,
+    /// Local regression settings (EKF+BLR only).
+    pub blr: LocalRegression,
+}
+
+impl HbnView<'_> {
+    /// Checks that the GPs have the HBN's input dimensions.
+    pub fn validate(&self) -> Result<(), CoreError> {
+        if self.transition.dim() != 4 {
+            return Err(CoreError::DimensionMismatch {
+                expected: 4,
+                got: self.transition.dim(),
+            });
+        }
+        if self.sensor.dim() != 3 {
+            return Err(CoreError::DimensionMismatch {
+                expected: 3,
+                got: self.sensor.dim(),
+            });
+        }
+        if let Some(n) = &self.transition_local
+            && n.dim() != 4
+        {
+            return Err(CoreError::DimensionMismatch {
+                expected: 4,
+                got: n.dim(),
+            });
+        }
+        if let Some(n) = &self.sensor_local
+            && n.dim() != 3
+        {
+            return Err(CoreError::DimensionMismatch {
+                expected: 3,
+                got: n.dim(),
+            });
+        }
+        self.blr.validate()
+    }
+}
+
+/// What one step returns.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepOutput {
+    /// Estimate of `x_k`.
+    pub x: f64,
+    /// Its standard deviation.
+    pub x_std: f64,
+    /// Predicted measurement `s_k^-` (before the update with `y_k`).
+    pub y_pred: f64,
+    /// Innovation `y_k - s_k^-` (0 when the update was skipped).
+    pub innovation: f64,
+    /// Innovation variance `S`.
+    pub innovation_var: f64,
+    /// Normalised innovation squared `innovation^2 / S`.
+    pub nis: f64,
+    /// Process noise variance used for `x` (`q_x`).
+    pub q_x: f64,
+    /// Measurement noise variance used (`R`).
+    pub r: f64,
+    /// Linearised state transition `F` of this step (identity on the first step).
+    pub jacobian: Matrix3<f64>,
+    /// Guards that fired.
+    pub flags: Flags,
+}
+
+/// The filter's memory between steps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EkfState {
+    /// `[x_k, x_{k-1}, s_k]`.
+    pub z: Vector3<f64>,
+    /// Covariance of `z`.
+    pub p: Matrix3<f64>,
+    /// `u_k` of the last step (the next step's `u_{k-1}`).
+    pub u_last: f64,
+    /// `u_{k-1}` of the last step.
+    pub u_prev: f64,
+    /// Steps taken.
+    pub steps: u64,
+}
+
+/// One linearised GP: value, input gradient, noise variance.
+#[derive(Clone, Copy, Debug)]
+struct Local {
+    mean: f64,
+    grad: [f64; 4],
+    noise: f64,
+    epistemic: f64,
+}
+
+/// The estimator: a model view, its settings, the state and the caller's scratch memory.
+#[derive(Debug)]
+pub struct Estimator<'m, 's> {
+    model: HbnView<'m>,
+    config: EkfConfig,
+    state: Option<EkfState>,
+    scratch: &'s mut [f64],
+}
+
+impl<'m, 's> Estimator<'m, 's> {
+    /// Scratch values [`Estimator::new`] needs for `model` (faer-style sizing).
+    pub fn scratch_len(model: &HbnView<'_>) -> usize {
+        model
+            .transition
+            .predict_scratch(Want::EKF)
+            .max(model.sensor.predict_scratch(Want::EKF))
+    }
+
+    /// Checks model, settings and scratch size once; the step then cannot fail.
+    pub fn new(
+        model: HbnView<'m>,
+        config: EkfConfig,
+        scratch: &'s mut [f64],
+    ) -> Result<Self, CoreError> {
+        model.validate()?;
+        config.validate()?;
+        if config.mode == Mode::EkfBlr
+            && (model.transition_local.is_none() || model.sensor_local.is_none())
+        {
+            return Err(CoreError::InvalidSpec(
+                "EKF+BLR needs the local training data in the model",
+            ));
+        }
+        let needed = Self::scratch_len(&model);
+        if scratch.len() < needed {
+            return Err(CoreError::ScratchTooSmall {
+                needed,
+                got: scratch.len(),
+            });
+        }
+        Ok(Self {
+            model,
+            config,
+            state: None,
+            scratch,
+        })
+    }
+
+    /// The current state (`None` before the first step).
+    pub fn state(&self) -> Option<&EkfState> {
+        self.state.as_ref()
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &EkfConfig {
+        &self.config
+    }
+
+    /// Forgets the state; the next step initialises again.
+    pub fn reset(&mut self) {
+        self.state = None;
+    }
+
+    /// Processes sample `k`: input `u_k` and measurement `y_k`. Allocation-free, panic-free,
+    /// bounded time.
+    pub fn step(&mut self, u_k: f64, y_k: f64) -> StepOutput {
+        let mut flags = 0u32;
+        let cfg = self.config;
+        let Some(mut st) = self.state else {
+            return self.initialise(u_k, y_k);
+        };
+        let u_k = if u_k.is_finite() {
+            u_k
+        } else {
+            flags |= Flags::INPUT_INVALID;
+            st.u_last
+        };
+
+        // ---- predict ----
+        let (x1, x2, s1) = (st.z[0], st.z[1], st.z[2]);
+        let a_in = [x1, x2, st.u_last, st.u_prev];
+        let tr = self.linearise(true, &a_in, &mut flags);
+        let (f_mat, g_vec, q_x, q_s, s_pred);
+        let mut r = cfg.r_floor.max(self.model.sensor.noise_variance());
+        match tr {
+            Some(t) => {
+                let xk = clamp_flag(t.mean, cfg.x_bounds, &mut flags);
+                let b_in = [x1, s1, xk];
+                match self.linearise(false, &b_in, &mut flags) {
+                    Some(s) => {
+                        let a1 = clamp_jac(t.grad[0], cfg.jac_max, &mut flags);
+                        let a2 = clamp_jac(t.grad[1], cfg.jac_max, &mut flags);
+                        let c = clamp_jac(s.grad[0], cfg.jac_max, &mut flags);
+                        let e = clamp_jac(s.grad[1], cfg.jac_max, &mut flags);
+                        let f = clamp_jac(s.grad[2], cfg.jac_max, &mut flags);
+                        f_mat = Matrix3::new(a1, a2, 0.0, 1.0, 0.0, 0.0, c + f * a1, f * a2, e);
+                        g_vec = Vector3::new(1.0, 0.0, f);
+                        q_x = floor_flag(t.noise + t.epistemic, cfg.q_floor, &mut flags);
+                        q_s = floor_flag(s.epistemic, cfg.q_floor, &mut flags);
+                        s_pred = clamp_flag(s.mean, cfg.y_bounds, &mut flags);
+                        st.z = Vector3::new(xk, x1, s_pred);
+                        r = floor_flag(s.noise, cfg.r_floor, &mut flags);
+                    }
+                    None => {
+                        f_mat =
+                            Matrix3::new(t.grad[0], t.grad[1], 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
+                        g_vec = Vector3::new(1.0, 0.0, 0.0);
+                        q_x = floor_flag(t.noise + t.epistemic, cfg.q_floor, &mut flags);
+                        q_s = cfg.p_max * 0.01;
+                        s_pred = s1;
+                        st.z = Vector3::new(xk, x1, s1);
+                    }
+                }
+            }
+            None => {
+                // Random walk fallback.
+                f_mat = Matrix3::new(1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
+                g_vec = Vector3::new(1.0, 0.0, 0.0);
+                q_x = cfg.p_max * 0.01;
+                q_s = cfg.p_max * 0.01;
+                s_pred = s1;
+                st.z = Vector3::new(x1, x1, s1);
+            }
+        }
+        let q = g_vec * q_x * g_vec.transpose()
+            + Matrix3::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, q_s);
+        st.p = f_mat * st.p * f_mat.transpose() + q;
+        st.p = bound_covariance(st.p, cfg.p_min, cfg.p_max, &mut flags);
+        st.u_prev = st.u_last;
+        st.u_last = u_k;
+
+        // ---- update ----
+        let (innovation, s_var, nis) = update(&mut st, y_k, r, &cfg, &mut flags);
+        st.steps += 1;
+        self.state = Some(st);
+        StepOutput {
+            x: st.z[0],
+            x_std: sqrt(st.p[(0, 0)].max(0.0)),
+            y_pred: s_pred,
+            innovation,
+            innovation_var: s_var,
+            nis,
+            q_x,
+            r,
+            jacobian: f_mat,
+            flags: Flags(flags),
+        }
+    }
+
+    fn initialise(&mut self, u_k: f64, y_k: f64) -> StepOutput {
+        let cfg = self.config;
+        let mut flags = Flags::INITIALISED;
+        let u0 = if u_k.is_finite() {
+            u_k
+        } else {
+            flags |= Flags::INPUT_INVALID;
+            0.0
+        };
+        let r = cfg.r_floor.max(self.model.sensor.noise_variance());
+        let s0 = if y_k.is_finite() {
+            clamp_flag(y_k, cfg.y_bounds, &mut flags)
+        } else {
+            flags |= Flags::MEASUREMENT_INVALID;
+            0.5 * (cfg.y_bounds.0 + cfg.y_bounds.1)
+        };
+        let s_var = if y_k.is_finite() { r } else { cfg.p_max };
+        let p = Matrix3::new(
+            cfg.x0_var, cfg.x0_var, 0.0, cfg.x0_var, cfg.x0_var, 0.0, 0.0, 0.0, s_var,
+        );
+        let mut f = flags;
+        let p = bound_covariance(p, cfg.p_min, cfg.p_max, &mut f);
+        let st = EkfState {
+            z: Vector3::new(cfg.x0_mean, cfg.x0_mean, s0),
+            p,
+            u_last: u0,
+            u_prev: u0,
+            steps: 1,
+        };
+        self.state = Some(st);
+        StepOutput {
+            x: st.z[0],
+            x_std: sqrt(st.p[(0, 0)]),
+            y_pred: s0,
+            innovation: 0.0,
+            innovation_var: s_var,
+            nis: 0.0,
+            q_x: 0.0,
+            r,
+            jacobian: Matrix3::identity(),
+            flags: Flags(f),
+        }
+    }
+}
+
+impl Estimator<'_, '_> {
+    /// Linearises the transition (`true`) or sensor (`false`) at `input` in the configured mode.
+    fn linearise(&mut self, transition: bool, input: &[f64], flags: &mut u32) -> Option<Local> {
+        let gp = if transition {
+            &self.model.transition
+        } else {
+            &self.model.sensor
+        };
+        let d = gp.dim();
+        let p = match gp.predict(&input[..d], Want::EKF, self.scratch) {
+            Ok(p) => p,
+            Err(_) => {
+                *flags |= Flags::MODEL_INVALID;
+                return None;
+            }
+        };
+        let mut out = Local {
+            mean: p.mean,
+            grad: [0.0; 4],
+            noise: gp.noise_variance(),
+            epistemic: p.variance,
+        };
+        out.grad[..d].copy_from_slice(&p.grad_mean[..d]);
+        if self.config.mode == Mode::EkfBlr {
+            let local = if transition {
+                self.model.transition_local
+            } else {
+                self.model.sensor_local
+            };
+            if let Some(nb) = local {
+                let post = self.model.blr.posterior(
+                    &nb,
+                    &input[..d],
+                    p.mean,
+                    &p.grad_mean[..d],
+                    p.variance + out.noise,
+                );
+                if post.n == 0 {
+                    *flags |= if transition {
+                        Flags::BLR_EMPTY_TRANSITION
+                    } else {
+                        Flags::BLR_EMPTY_SENSOR
+                    };
+                }
+                if post.capped {
+                    *flags |= Flags::BLR_CAPPED;
+                }
+                if post.noise.is_finite()
+                    && post.grad[..d].iter().all(|g| g.is_finite())
+                    && post.intercept.is_finite()
+                {
+                    out.mean += post.intercept;
+                    out.grad[..d].copy_from_slice(&post.grad[..d]);
+                    // BLR's expected noise covariance replaces GP variance + learned noise.
+                    out.noise = post.noise;
+                    out.epistemic = 0.0;
+                }
+            }
+        }
+        if !(out.mean.is_finite()
+            && out.noise.is_finite()
+            && out.epistemic.is_finite()
+            && out.grad.iter().all(|g| g.is_finite()))
+        {
+            *flags |= Flags::MODEL_INVALID;
+            return None;
+        }
+        Some(out)
+    }
+}
+
+/// Measurement update with the Joseph form; returns (innovation, S, NIS).
+fn update(
+    st: &mut EkfState,
+    y_k: f64,
+    r: f64,
+    cfg: &EkfConfig,
+    flags: &mut u32,
+) -> (f64, f64, f64) {
+    if !y_k.is_finite() {
+        *flags |= Flags::MEASUREMENT_INVALID;
+        return (0.0, st.p[(2, 2)] + r, 0.0);
+    }
+    let s_var = st.p[(2, 2)] + r;
+    if !(s_var.is_finite() && s_var >= cfg.innovation_min) {
+        *flags |= Flags::INNOVATION_SINGULAR;
+        return (0.0, s_var, 0.0);
+    }
+    let innovation = y_k - st.z[2];
+    let nis = innovation * innovation / s_var;
+    if cfg.nis_gate > 0.0 && nis > cfg.nis_gate {
+        *flags |= Flags::OUTLIER_REJECTED;
+        return (innovation, s_var, nis);
+    }
+    let gain: Vector3<f64> = st.p.column(2) / s_var;
+    let z = st.z + gain * innovation;
+    // Joseph form: P = (I - K H) P (I - K H)^T + K R K^T, H = [0, 0, 1].
+    let mut i_kh: Matrix3<f64> = Matrix3::identity();
+    for i in 0..3 {
+        i_kh[(i, 2)] -= gain[i];
+    }
+    let p: Matrix3<f64> = i_kh * st.p * i_kh.transpose() + gain * r * gain.transpose();
+    if z.iter().all(|v| v.is_finite()) && p.iter().all(|v| v.is_finite()) {
+        st.z = Vector3::new(
+            clamp_flag(z[0], cfg.x_bounds, flags),
+            clamp_flag(z[1], cfg.x_bounds, flags),
+            clamp_flag(z[2], cfg.y_bounds, flags),
+        );
+        st.p = bound_covariance(p, cfg.p_min, cfg.p_max, flags);
+    } else {
+        *flags |= Flags::INNOVATION_SINGULAR;
+    }
+    (innovation, s_var, nis)
+}
+
+/// Symmetrises `p` and clamps its eigenvalues into `[lo, hi]`.
+fn bound_covariance(p: Matrix3<f64>, lo: f64, hi: f64, flags: &mut u32) -> Matrix3<f64> {
+    let sym = (p + p.transpose()) * 0.5;
+    if !sym.iter().all(|v| v.is_finite()) {
+        *flags |= Flags::COVARIANCE_CLAMPED;
+        return Matrix3::identity() * hi;
+    }
+    // Cheap exit: Gershgorin discs inside [lo, hi] mean every eigenvalue is.
+    let mut inside = true;
+    for i in 0..3 {
+        let radius: f64 = (0..3).filter(|&j| j != i).map(|j| sym[(i, j)].abs()).sum();
+        if sym[(i, i)] - radius < lo || sym[(i, i)] + radius > hi {
+            inside = false;
+        }
+    }
+    if inside {
+        return sym;
+    }
+    match SymmetricEigen::try_new(sym, 1e-14, 64) {
+        Some(eig) => {
+            let mut vals = eig.eigenvalues;
+            let mut changed = false;
+            for v in vals.iter_mut() {
+                let c = v.clamp(lo, hi);
+                if c != *v {
+                    changed = true;
+                    *v = c;
+                }
+            }
+            if !changed {
+                return sym;
+            }
+            *flags |= Flags::COVARIANCE_CLAMPED;
+            let q = eig.eigenvectors;
+            let out = q * Matrix3::from_diagonal(&vals) * q.transpose();
+            (out + out.transpose()) * 0.5
+        }
+        None => {
+            *flags |= Flags::COVARIANCE_CLAMPED;
+            Matrix3::identity() * hi
+        }
+    }
+}
+
+fn clamp_flag(v: f64, b: (f64, f64), flags: &mut u32) -> f64 {
+    let c = if v.is_finite() {
+        v.clamp(b.0, b.1)
+    } else {
+        0.5 * (b.0 + b.1)
+    };
+    if c != v {
+        *flags |= Flags::STATE_CLAMPED;
+    }
+    c
+}
+
+fn clamp_jac(v: f64, max: f64, flags: &mut u32) -> f64 {
+    let c = if v.is_finite() {
+        v.clamp(-max, max)
+    } else {
+        0.0
+    };
+    if c != v {
+        *flags |= Flags::JACOBIAN_CLAMPED;
+    }
+    c
+}
+
+fn floor_flag(v: f64, floor: f64, flags: &mut u32) -> f64 {
+    if v.is_finite() && v >= floor {
+        v
+    } else {
+        *flags |= Flags::NOISE_FLOOR;
+        floor
+    }
+}
+
+fn sqrt(v: f64) -> f64 {
+    libm::sqrt(v)
+}
+
+/// Smallest and largest eigenvalue of the observability Gramian over the last `h + 1`
+/// linearisations (thesis Sec. 4.2): `sum_s Phi_s^T H^T R_s^{-1} H Phi_s` with
+/// `Phi_0 = I`, `Phi_{s+1} = F_s Phi_s`, `H = [0, 0, 1]`. `jacobians` and `r` are oldest first.
+pub fn observability_eigenvalues(jacobians: &[Matrix3<f64>], r: &[f64]) -> Option<(f64, f64)> {
+    if jacobians.is_empty() || jacobians.len() != r.len() {
+        return None;
+    }
+    let mut phi = Matrix3::<f64>::identity();
+    let mut gram = Matrix3::<f64>::zeros();
+    for (k, (f, &rk)) in jacobians.iter().zip(r).enumerate() {
+        if k > 0 {
+            phi = f * phi;
+        }
+        let row = phi.row(2);
+        let w = 1.0 / rk.max(f64::MIN_POSITIVE);
+        gram += row.transpose() * row * w;
+    }
+    let eig = SymmetricEigen::try_new(gram, 1e-14, 64)?;
+    let v = eig.eigenvalues;
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for x in v.iter() {
+        lo = lo.min(*x);
+        hi = hi.max(*x);
+    }
+    Some((lo.max(0.0), hi))
+}

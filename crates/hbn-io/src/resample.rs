@@ -1,0 +1,214 @@
+//! Resampling several signals onto one uniform time grid.
+
+use crate::{IoError, RawSignal};
+
+/// Resampling options.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ResampleOptions {
+    /// Grid rate in Hz (finite, > 0).
+    pub rate_hz: f64,
+    /// Largest allowed interval between consecutive samples of a signal inside the grid's span,
+    /// in seconds (finite, > 0). Default 0.5.
+    pub max_gap_s: f64,
+}
+
+impl ResampleOptions {
+    /// Options with the given rate and the default `max_gap_s` of 0.5 s.
+    pub fn new(rate_hz: f64) -> Self {
+        ResampleOptions {
+            rate_hz,
+            max_gap_s: 0.5,
+        }
+    }
+}
+
+impl Default for ResampleOptions {
+    /// 100 Hz, `max_gap_s` 0.5.
+    fn default() -> Self {
+        ResampleOptions::new(100.0)
+    }
+}
+
+/// Signals on one uniform grid.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Aligned {
+    /// The grid rate (Hz).
+    pub rate_hz: f64,
+    /// Absolute time of the first grid point (ns, on the signals' clock).
+    pub t0_ns: u64,
+    /// Grid times, seconds since `t0_ns`: `k / rate_hz`.
+    pub t_s: Vec<f64>,
+    /// One column per signal, in the order given, each `t_s.len()` long.
+    pub columns: Vec<Vec<f64>>,
+}
+
+fn secs(ns: i128) -> f64 {
+    ns as f64 * 1e-9
+}
+
+/// Resamples `signals` onto one uniform grid.
+///
+/// The grid covers the overlap of all signals' time spans (from the latest first sample to the
+/// earliest last sample), starting at the overlap's start, with step `1 / rate_hz`. Values are
+/// interpolated linearly. A gap between consecutive samples of a signal longer than `max_gap_s`
+/// that intersects the overlap is [`IoError::Gap`] naming the path and the time (seconds since
+/// `t0`). Each signal needs at least 2 samples and the grid at least 2 points.
+pub fn resample(signals: &[RawSignal], opts: &ResampleOptions) -> Result<Aligned, IoError> {
+    if !(opts.rate_hz.is_finite() && opts.rate_hz > 0.0) {
+        return Err(IoError::BadOption {
+            name: "rate_hz",
+            value: opts.rate_hz.to_string(),
+            reason: "the resampling rate must be a finite number of Hz > 0".into(),
+        });
+    }
+    if !(opts.max_gap_s.is_finite() && opts.max_gap_s > 0.0) {
+        return Err(IoError::BadOption {
+            name: "max_gap_s",
+            value: opts.max_gap_s.to_string(),
+            reason: "the largest allowed gap must be a finite number of seconds > 0".into(),
+        });
+    }
+    if signals.is_empty() {
+        return Err(IoError::TooFewSamples {
+            what: "resample input (no signals)".into(),
+            n: 0,
+            need: 1,
+        });
+    }
+    for s in signals {
+        let n = s.t_ns.len().min(s.value.len());
+        if n < 2 {
+            return Err(IoError::TooFewSamples {
+                what: s.path.to_string(),
+                n,
+                need: 2,
+            });
+        }
+        for w in s.t_ns.windows(2) {
+            if w[1] < w[0] {
+                return Err(IoError::TimeBackwards {
+                    path: s.path.to_string(),
+                    t_prev: w[0],
+                    t: w[1],
+                });
+            }
+        }
+    }
+    // Overlap [start, end] in ns.
+    let mut start = 0u64;
+    let mut end = u64::MAX;
+    for s in signals {
+        let n = s.t_ns.len().min(s.value.len());
+        start = start.max(s.t_ns[0]);
+        end = end.min(s.t_ns[n - 1]);
+    }
+    if end <= start {
+        let spans = signals
+            .iter()
+            .map(|s| {
+                let n = s.t_ns.len().min(s.value.len());
+                format!(
+                    "{}: {:.3}..{:.3} s",
+                    s.path,
+                    secs(i128::from(s.t_ns[0])),
+                    secs(i128::from(s.t_ns[n - 1]))
+                )
+            })
+            .collect::<Vec<_>>()
+            .join("; ");
+        return Err(IoError::NoOverlap { spans });
+    }
+    let t0 = start;
+    let span_s = secs(i128::from(end - start));
+    let max_gap_ns = opts.max_gap_s * 1e9;
+    for s in signals {
+        let n = s.t_ns.len().min(s.value.len());
+        for k in 1..n {
+            let (a, b) = (s.t_ns[k - 1], s.t_ns[k]);
+            if b > start && a < end && (b - a) as f64 > max_gap_ns {
+                return Err(IoError::Gap {
+                    path: s.path.to_string(),
+                    at_s: secs(i128::from(a) - i128::from(t0)),
+                    gap_s: secs(i128::from(b - a)),
+                    max_gap_s: opts.max_gap_s,
+                });
+            }
+        }
+    }
+    let steps = (span_s * opts.rate_hz * (1.0 + 1e-12)).floor();
+    if !(steps.is_finite() && steps < 1e9) {
+        return Err(IoError::BadOption {
+            name: "rate_hz",
+            value: opts.rate_hz.to_string(),
+            reason: format!("{span_s:.3} s at this rate gives more than 1e9 grid points"),
+        });
+    }
+    let npts = steps as usize + 1;
+    if npts < 2 {
+        return Err(IoError::TooFewSamples {
+            what: format!(
+                "aligned grid ({span_s:.6} s of overlap at {} Hz)",
+                opts.rate_hz
+            ),
+            n: npts,
+            need: 2,
+        });
+    }
+    let t_s: Vec<f64> = (0..npts)
+        .map(|k| (k as f64 / opts.rate_hz).min(span_s))
+        .collect();
+    let columns = signals
+        .iter()
+        .map(|s| {
+            let n = s.t_ns.len().min(s.value.len());
+            // Sample times relative to t0, in seconds.
+            let ts: Vec<f64> = s.t_ns[..n]
+                .iter()
+                .map(|&t| secs(i128::from(t) - i128::from(t0)))
+                .collect();
+            let mut j = 0usize;
+            t_s.iter()
+                .map(|&t| {
+                    while j + 2 < n && ts[j + 1] <= t {
+                        j += 1;
+                    }
+                    let (ta, tb) = (ts[j], ts[j + 1]);
+                    let (va, vb) = (s.value[j], s.value[j + 1]);
+                    if tb > ta {
+                        let w = ((t - ta) / (tb - ta)).clamp(0.0, 1.0);
+                        va + (vb - va) * w
+                    } else {
+                        vb
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    Ok(Aligned {
+        rate_hz: opts.rate_hz,
+        t0_ns: t0,
+        t_s,
+        columns,
+    })
+}
+
+/// Median sample interval of a signal as a rate (Hz); `None` with fewer than 2 samples or a
+/// zero median interval.
+pub fn native_rate_hz(signal: &RawSignal) -> Option<f64> {
+    let mut d: Vec<u64> = signal
+        .t_ns
+        .windows(2)
+        .map(|w| w[1].saturating_sub(w[0]))
+        .collect();
+    if d.is_empty() {
+        return None;
+    }
+    d.sort_unstable();
+    let m = d.len();
+    let med = if m % 2 == 1 {
+        d[m / 2] as f64
+    } else {
+        (d[m / 2 - 1] as f64 + d[m / 2] as f64) / 2.0
+    };
+    (med > 0.0).then(|| 1e9 / med)
+}
