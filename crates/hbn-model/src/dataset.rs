@@ -1,0 +1,188 @@
+//! Training sets of the two GPs (thesis Eq. 16), built from aligned trajectories.
+//!
+//! From each trajectory of samples `(u_k, x_k, y_k)`, `k = 0..N`:
+//! - transition set `D_D`: inputs `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}]`, target `x_k`, `k >= 2`;
+//! - sensor set `D_S`: inputs `[x_{k-1}, y_{k-1}, x_k]`, target `y_k`, `k >= 1`... taken from
+//!   `k >= 2` too, so both sets describe the same samples.
+//!
+//! Rows never straddle two trajectories. The direction signs of the advantage kernel
+//! (Eq. 19) are functions of these inputs: `sgn(u_{k-1} - u_{k-2})` for `D_D` (inputs 2, 3) and
+//! `sgn(x_k - x_{k-1})` for `D_S` (inputs 2, 0); see [`TRANSITION_DIRECTION`] and
+//! [`SENSOR_DIRECTION`].
+
+use crate::ModelError;
+
+/// Inputs of the transition GP.
+pub const TRANSITION_DIM: usize = 4;
+/// Inputs of the sensor GP.
+pub const SENSOR_DIM: usize = 3;
+/// Direction pair of the transition: `sgn(u_{k-1} - u_{k-2})`.
+pub const TRANSITION_DIRECTION: [usize; 2] = [2, 3];
+/// Direction pair of the sensor: `sgn(x_k - x_{k-1})`.
+pub const SENSOR_DIRECTION: [usize; 2] = [2, 0];
+
+/// One trajectory of aligned samples at the model's rate (borrowed).
+#[derive(Clone, Copy, Debug)]
+pub struct Sequence<'a> {
+    /// Input `u`.
+    pub u: &'a [f64],
+    /// State `x`.
+    pub x: &'a [f64],
+    /// Sensor output `y`.
+    pub y: &'a [f64],
+}
+
+impl Sequence<'_> {
+    /// Checks lengths (equal, `>= 3`) and values (finite). `index` names the trajectory.
+    pub fn validate(&self, index: usize) -> Result<(), ModelError> {
+        let n = self.u.len();
+        if self.x.len() != n || self.y.len() != n {
+            return Err(ModelError::Data(format!(
+                "trajectory {index}: u, x and y must have equal lengths (got {}, {}, {})",
+                n,
+                self.x.len(),
+                self.y.len()
+            )));
+        }
+        if n < 3 {
+            return Err(ModelError::Data(format!(
+                "trajectory {index}: needs at least 3 samples, got {n}"
+            )));
+        }
+        for (name, s) in [("u", self.u), ("x", self.x), ("y", self.y)] {
+            if let Some(k) = s.iter().position(|v| !v.is_finite()) {
+                return Err(ModelError::Data(format!(
+                    "trajectory {index}: {name}[{k}] is {}; clean or cut the log",
+                    s[k]
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Row-major inputs and targets of one GP.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Table {
+    /// Input dimension.
+    pub dim: usize,
+    /// `rows x dim` inputs.
+    pub inputs: Vec<f64>,
+    /// `rows` targets.
+    pub targets: Vec<f64>,
+}
+
+impl Table {
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.targets.len()
+    }
+    /// Whether there are no rows.
+    pub fn is_empty(&self) -> bool {
+        self.targets.is_empty()
+    }
+}
+
+/// Both training sets.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Dataset {
+    /// `D_D`.
+    pub transition: Table,
+    /// `D_S`.
+    pub sensor: Table,
+}
+
+/// Builds `D_D` and `D_S` from trajectories, never crossing a boundary.
+pub fn build_dataset(trajectories: &[Sequence<'_>]) -> Result<Dataset, ModelError> {
+    if trajectories.is_empty() {
+        return Err(ModelError::Data("no trajectories given".into()));
+    }
+    let mut tr = Table {
+        dim: TRANSITION_DIM,
+        ..Table::default()
+    };
+    let mut se = Table {
+        dim: SENSOR_DIM,
+        ..Table::default()
+    };
+    for (i, t) in trajectories.iter().enumerate() {
+        t.validate(i)?;
+        for k in 2..t.u.len() {
+            tr.inputs
+                .extend([t.x[k - 1], t.x[k - 2], t.u[k - 1], t.u[k - 2]]);
+            tr.targets.push(t.x[k]);
+            se.inputs.extend([t.x[k - 1], t.y[k - 1], t.x[k]]);
+            se.targets.push(t.y[k]);
+        }
+    }
+    Ok(Dataset {
+        transition: tr,
+        sensor: se,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rows_follow_eq16_and_respect_boundaries() {
+        let u1 = [0.0, 1.0, 2.0, 3.0];
+        let x1 = [10.0, 11.0, 12.0, 13.0];
+        let y1 = [20.0, 21.0, 22.0, 23.0];
+        let u2 = [5.0, 6.0, 7.0];
+        let x2 = [15.0, 16.0, 17.0];
+        let y2 = [25.0, 26.0, 27.0];
+        let d = build_dataset(&[
+            Sequence {
+                u: &u1,
+                x: &x1,
+                y: &y1,
+            },
+            Sequence {
+                u: &u2,
+                x: &x2,
+                y: &y2,
+            },
+        ])
+        .unwrap();
+        assert_eq!(d.transition.len(), 3);
+        assert_eq!(&d.transition.inputs[..4], &[11.0, 10.0, 1.0, 0.0]);
+        assert_eq!(d.transition.targets, vec![12.0, 13.0, 17.0]);
+        // The third row comes from trajectory 2 only.
+        assert_eq!(&d.transition.inputs[8..], &[16.0, 15.0, 6.0, 5.0]);
+        assert_eq!(&d.sensor.inputs[..3], &[11.0, 21.0, 12.0]);
+        assert_eq!(d.sensor.targets, vec![22.0, 23.0, 27.0]);
+    }
+
+    #[test]
+    fn bad_trajectories_are_rejected() {
+        assert!(build_dataset(&[]).is_err());
+        let ok = [0.0, 1.0, 2.0];
+        assert!(
+            build_dataset(&[Sequence {
+                u: &ok,
+                x: &ok[..2],
+                y: &ok
+            }])
+            .is_err()
+        );
+        assert!(
+            build_dataset(&[Sequence {
+                u: &ok[..2],
+                x: &ok[..2],
+                y: &ok[..2]
+            }])
+            .is_err()
+        );
+        let nan = [0.0, f64::NAN, 2.0];
+        let e = build_dataset(&[Sequence {
+            u: &ok,
+            x: &nan,
+            y: &ok,
+        }])
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("x[1]"), "{e}");
+    }
+}

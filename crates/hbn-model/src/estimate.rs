@@ -1,0 +1,189 @@
+//! Estimation drivers over whole sequences: the EKF / EKF+BLR step in a loop, the open-loop
+//! GP simulation baseline, and the observability diagnostic.
+
+use crate::ModelError;
+use crate::model::HbnModel;
+use hbn_core::{EkfConfig, Estimator, Flags, Mode, Want, observability_eigenvalues};
+use nalgebra::Matrix3;
+
+/// Observability window `h` of thesis Sec. 4.2.
+pub const OBSERVABILITY_WINDOW: usize = 3;
+
+/// Per-sample results of an estimation run.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Estimate {
+    /// Estimate of `x_k`.
+    pub x: Vec<f64>,
+    /// Its standard deviation.
+    pub x_std: Vec<f64>,
+    /// Predicted measurement before the update.
+    pub y_pred: Vec<f64>,
+    /// Innovation.
+    pub innovation: Vec<f64>,
+    /// Normalised innovation squared.
+    pub nis: Vec<f64>,
+    /// Process noise variance used for `x`.
+    pub q_x: Vec<f64>,
+    /// Measurement noise variance used.
+    pub r: Vec<f64>,
+    /// Guard flags (bits of [`Flags`]).
+    pub flags: Vec<u32>,
+    /// Smallest eigenvalue of the `h = 3` observability Gramian (NaN for the first samples).
+    pub obs_min: Vec<f64>,
+    /// Largest eigenvalue of the Gramian.
+    pub obs_max: Vec<f64>,
+}
+
+/// Summary of the observability diagnostic.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ObservabilitySummary {
+    /// Smallest `lambda_min` along the trajectory.
+    pub min: f64,
+    /// Median `lambda_min`.
+    pub median: f64,
+    /// Largest `lambda_max`.
+    pub max: f64,
+    /// Fraction of samples whose `lambda_min / lambda_max` fell below [`NEAR_UNOBSERVABLE`].
+    pub near_unobservable: f64,
+}
+
+/// Ratio `lambda_min / lambda_max` below which a sample counts as near-unobservable.
+pub const NEAR_UNOBSERVABLE: f64 = 1e-8;
+
+impl Estimate {
+    /// Counts of each guard flag over the run, by name.
+    pub fn flag_counts(&self) -> Vec<(&'static str, usize)> {
+        let mut counts: Vec<(&'static str, usize)> = Vec::new();
+        for &f in &self.flags {
+            for name in Flags(f).names() {
+                match counts.iter_mut().find(|(n, _)| *n == name) {
+                    Some((_, c)) => *c += 1,
+                    None => counts.push((name, 1)),
+                }
+            }
+        }
+        counts
+    }
+
+    /// Observability summary (`None` if the run was too short).
+    pub fn observability(&self) -> Option<ObservabilitySummary> {
+        let mut mins: Vec<f64> = self
+            .obs_min
+            .iter()
+            .copied()
+            .filter(|v| v.is_finite())
+            .collect();
+        if mins.is_empty() {
+            return None;
+        }
+        mins.sort_by(f64::total_cmp);
+        let max = self
+            .obs_max
+            .iter()
+            .copied()
+            .filter(|v| v.is_finite())
+            .fold(0.0, f64::max);
+        let near = self
+            .obs_min
+            .iter()
+            .zip(&self.obs_max)
+            .filter(|(a, b)| a.is_finite() && b.is_finite())
+            .filter(|(a, b)| **a <= NEAR_UNOBSERVABLE * **b)
+            .count();
+        Some(ObservabilitySummary {
+            min: mins[0],
+            median: mins[mins.len() / 2],
+            max,
+            near_unobservable: near as f64 / mins.len() as f64,
+        })
+    }
+}
+
+impl HbnModel {
+    /// Runs the filter over a sequence with the default settings of `mode`.
+    pub fn estimate(&self, u: &[f64], y: &[f64], mode: Mode) -> Result<Estimate, ModelError> {
+        self.estimate_with(u, y, &self.ekf_config(mode))
+    }
+
+    /// Runs the filter with explicit settings.
+    pub fn estimate_with(
+        &self,
+        u: &[f64],
+        y: &[f64],
+        config: &EkfConfig,
+    ) -> Result<Estimate, ModelError> {
+        if u.len() != y.len() {
+            return Err(ModelError::Data(format!(
+                "u and y must have equal lengths (got {} and {})",
+                u.len(),
+                y.len()
+            )));
+        }
+        let view = self.view()?;
+        let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
+        let mut est = Estimator::new(view, *config, &mut scratch)?;
+        let n = u.len();
+        let mut out = Estimate {
+            x: Vec::with_capacity(n),
+            x_std: Vec::with_capacity(n),
+            y_pred: Vec::with_capacity(n),
+            innovation: Vec::with_capacity(n),
+            nis: Vec::with_capacity(n),
+            q_x: Vec::with_capacity(n),
+            r: Vec::with_capacity(n),
+            flags: Vec::with_capacity(n),
+            obs_min: Vec::with_capacity(n),
+            obs_max: Vec::with_capacity(n),
+        };
+        let h = OBSERVABILITY_WINDOW + 1;
+        let mut jac: Vec<Matrix3<f64>> = Vec::with_capacity(h);
+        let mut rs: Vec<f64> = Vec::with_capacity(h);
+        for k in 0..n {
+            let s = est.step(u[k], y[k]);
+            out.x.push(s.x);
+            out.x_std.push(s.x_std);
+            out.y_pred.push(s.y_pred);
+            out.innovation.push(s.innovation);
+            out.nis.push(s.nis);
+            out.q_x.push(s.q_x);
+            out.r.push(s.r);
+            out.flags.push(s.flags.0);
+            if jac.len() == h {
+                jac.remove(0);
+                rs.remove(0);
+            }
+            jac.push(s.jacobian);
+            rs.push(s.r);
+            let (lo, hi) = if jac.len() == h {
+                observability_eigenvalues(&jac, &rs).unwrap_or((f64::NAN, f64::NAN))
+            } else {
+                (f64::NAN, f64::NAN)
+            };
+            out.obs_min.push(lo);
+            out.obs_max.push(hi);
+        }
+        Ok(out)
+    }
+
+    /// Open-loop GP simulation: `x_k = mean H_D(x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2})` from the
+    /// training mean, without measurements (the baseline the EKF must beat).
+    pub fn simulate_open_loop(&self, u: &[f64]) -> Result<Vec<f64>, ModelError> {
+        let view = self.transition().view()?;
+        let mut scratch = vec![0.0; view.predict_scratch(Want::default())];
+        let cfg = self.ekf_config(Mode::Ekf);
+        let mut x = Vec::with_capacity(u.len());
+        for k in 0..u.len() {
+            if k < 2 {
+                x.push(cfg.x0_mean);
+                continue;
+            }
+            let input = [x[k - 1], x[k - 2], u[k - 1], u[k - 2]];
+            let next = match view.predict(&input, Want::default(), &mut scratch) {
+                Ok(p) => p.mean.clamp(cfg.x_bounds.0, cfg.x_bounds.1),
+                Err(_) => x[k - 1],
+            };
+            x.push(next);
+        }
+        Ok(x)
+    }
+}

@@ -1,0 +1,541 @@
+//! The HBN model: both GPs, their local training data, the signals and the rate.
+
+use crate::ModelError;
+use crate::dataset::{
+    SENSOR_DIM, SENSOR_DIRECTION, Sequence, TRANSITION_DIM, TRANSITION_DIRECTION, build_dataset,
+};
+use crate::local::LocalData;
+use hbn_core::{EkfConfig, HbnView, KernelSpec, LocalRegression, Metric, Mode, Profile};
+use hbn_gp::{GaussianProcess, GpParams, SubsetPolicy};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+use std::str::FromStr;
+use std::time::Instant;
+
+/// Format tag of an HBN model file.
+pub const MODEL_FORMAT: &str = "hbn-model";
+/// Current model file format version.
+pub const MODEL_FORMAT_VERSION: u32 = 1;
+
+/// A kernel family by name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum KernelFamily {
+    /// Isotropic squared exponential (Eq. 5).
+    Se,
+    /// ARD squared exponential.
+    SeArd,
+    /// ARD Matern 5/2.
+    Matern52,
+    /// Mahalanobis SE with the empirical input covariance (Eq. 17).
+    Mahalanobis,
+    /// tanh-warped inputs (Eq. 18) under the Mahalanobis SE.
+    Warped,
+}
+
+/// A kernel choice: family plus the optional direction-advantage factor (Eq. 19).
+///
+/// Parsed from `se`, `se-ard`, `matern52`, `mahalanobis`, `warped`, each optionally with
+/// `+dir`; `thesis` is `warped+dir` (the thesis' Eq. 19 kernel).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct KernelChoice {
+    /// Family.
+    pub family: KernelFamily,
+    /// Multiply by `1/2 (1 + g g')`.
+    pub direction: bool,
+}
+
+impl KernelChoice {
+    /// Names accepted by [`FromStr`].
+    pub const NAMES: &'static str =
+        "se, se-ard, matern52, mahalanobis, warped (each optionally +dir), thesis";
+
+    /// The kernel structure for `dim` inputs with direction pair `dir`.
+    pub fn spec(&self, dim: usize, dir: [usize; 2]) -> KernelSpec {
+        let base = KernelSpec::se_ard(dim);
+        let mut spec = match self.family {
+            KernelFamily::Se => KernelSpec {
+                metric: Metric::Isotropic,
+                ..base
+            },
+            KernelFamily::SeArd => base,
+            KernelFamily::Matern52 => KernelSpec {
+                profile: Profile::Matern52,
+                ..base
+            },
+            KernelFamily::Mahalanobis => KernelSpec {
+                metric: Metric::Mahalanobis,
+                ..base
+            },
+            KernelFamily::Warped => KernelSpec {
+                metric: Metric::Mahalanobis,
+                warp_units: 1,
+                ..base
+            },
+        };
+        if self.direction {
+            spec.direction = Some(dir);
+        }
+        spec
+    }
+}
+
+impl Default for KernelChoice {
+    fn default() -> Self {
+        Self {
+            family: KernelFamily::SeArd,
+            direction: true,
+        }
+    }
+}
+
+impl FromStr for KernelChoice {
+    type Err = ModelError;
+    fn from_str(s: &str) -> Result<Self, ModelError> {
+        let t = s.trim().to_ascii_lowercase();
+        if t == "thesis" {
+            return Ok(Self {
+                family: KernelFamily::Warped,
+                direction: true,
+            });
+        }
+        let (base, direction) = match t.strip_suffix("+dir") {
+            Some(b) => (b, true),
+            None => (t.as_str(), false),
+        };
+        let family = match base {
+            "se" => KernelFamily::Se,
+            "se-ard" | "ard" => KernelFamily::SeArd,
+            "matern52" | "matern" => KernelFamily::Matern52,
+            "mahalanobis" => KernelFamily::Mahalanobis,
+            "warped" => KernelFamily::Warped,
+            _ => {
+                return Err(ModelError::Config(format!(
+                    "unknown kernel {s:?}; choose one of {}",
+                    Self::NAMES
+                )));
+            }
+        };
+        Ok(Self { family, direction })
+    }
+}
+
+impl std::fmt::Display for KernelChoice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let base = match self.family {
+            KernelFamily::Se => "se",
+            KernelFamily::SeArd => "se-ard",
+            KernelFamily::Matern52 => "matern52",
+            KernelFamily::Mahalanobis => "mahalanobis",
+            KernelFamily::Warped => "warped",
+        };
+        write!(f, "{base}{}", if self.direction { "+dir" } else { "" })
+    }
+}
+
+/// Name, log path and unit of one signal.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SignalInfo {
+    /// Short name (`u`, `x`, `y` by default).
+    pub name: String,
+    /// Where it was read from (a Foxglove message path), if from a log.
+    pub path: Option<String>,
+    /// Unit, if known.
+    pub unit: Option<String>,
+}
+
+/// The three signals of the HBN.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Signals {
+    /// Input `u` (e.g. valve pressure).
+    pub input: SignalInfo,
+    /// State `x` (e.g. bend angle; only needed for training and evaluation).
+    pub state: SignalInfo,
+    /// Sensor output `y` (e.g. strain sensor voltage).
+    pub output: SignalInfo,
+}
+
+impl Default for Signals {
+    fn default() -> Self {
+        let s = |n: &str| SignalInfo {
+            name: n.into(),
+            path: None,
+            unit: None,
+        };
+        Self {
+            input: s("u"),
+            state: s("x"),
+            output: s("y"),
+        }
+    }
+}
+
+/// Training parameters of the HBN (checked by [`HbnParams::validate`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HbnParams {
+    /// Sample rate of the trajectories (Hz); estimation must use the same.
+    pub rate_hz: f64,
+    /// Kernel of the transition GP.
+    pub transition_kernel: KernelChoice,
+    /// Kernel of the sensor GP.
+    pub sensor_kernel: KernelChoice,
+    /// Most support points per GP.
+    pub max_points: usize,
+    /// Policy when there are more samples.
+    pub subset_policy: SubsetPolicy,
+    /// Optimiser starts per GP.
+    pub n_starts: usize,
+    /// L-BFGS iterations per start.
+    pub max_iters: u64,
+    /// Seed of random starts and subsets.
+    pub seed: u64,
+    /// Standardise GP inputs and outputs.
+    pub normalize: bool,
+    /// BLR window: `+-` this fraction of each coordinate's range.
+    pub blr_window: f64,
+    /// BLR prior settings.
+    pub blr: LocalRegression,
+    /// Signal names, paths and units.
+    pub signals: Signals,
+}
+
+impl Default for HbnParams {
+    fn default() -> Self {
+        Self {
+            rate_hz: 100.0,
+            transition_kernel: KernelChoice::default(),
+            sensor_kernel: KernelChoice::default(),
+            max_points: 500,
+            subset_policy: SubsetPolicy::FarthestPoint,
+            n_starts: 2,
+            max_iters: 100,
+            seed: 0,
+            normalize: true,
+            blr_window: 0.025,
+            blr: LocalRegression::default(),
+            signals: Signals::default(),
+        }
+    }
+}
+
+impl HbnParams {
+    /// Checks every field once.
+    pub fn validate(&self) -> Result<(), ModelError> {
+        if !(self.rate_hz.is_finite() && self.rate_hz > 0.0) {
+            return Err(ModelError::Config(format!(
+                "rate must be > 0 Hz, got {}",
+                self.rate_hz
+            )));
+        }
+        if !(self.blr_window.is_finite() && self.blr_window > 0.0 && self.blr_window <= 0.5) {
+            return Err(ModelError::Config(format!(
+                "BLR window must be in (0, 0.5], got {}",
+                self.blr_window
+            )));
+        }
+        self.blr.validate()?;
+        self.gp_params(
+            self.transition_kernel
+                .spec(TRANSITION_DIM, TRANSITION_DIRECTION),
+        )
+        .validate()
+        .map_err(|e| ModelError::Gp {
+            which: "transition",
+            source: e,
+        })?;
+        Ok(())
+    }
+
+    fn gp_params(&self, spec: KernelSpec) -> GpParams {
+        let mut p = GpParams::new(spec);
+        p.max_points = self.max_points;
+        p.subset_policy = self.subset_policy;
+        p.n_starts = self.n_starts;
+        p.max_iters = self.max_iters;
+        p.seed = self.seed;
+        p.normalize = self.normalize;
+        p
+    }
+}
+
+/// Range and moments of one training signal.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SignalStats {
+    /// Minimum.
+    pub min: f64,
+    /// Maximum.
+    pub max: f64,
+    /// Mean.
+    pub mean: f64,
+    /// Variance.
+    pub var: f64,
+}
+
+impl SignalStats {
+    fn of<'a>(values: impl Iterator<Item = &'a f64> + Clone) -> Self {
+        let n = values.clone().count().max(1) as f64;
+        let (min, max) = values
+            .clone()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+                (l.min(v), h.max(v))
+            });
+        let mean = values.clone().sum::<f64>() / n;
+        let var = values.map(|v| (v - mean) * (v - mean)).sum::<f64>() / n;
+        Self {
+            min,
+            max,
+            mean,
+            var,
+        }
+    }
+    /// `max - min` (at least a tiny positive number).
+    pub fn span(&self) -> f64 {
+        (self.max - self.min).max(1e-12 * self.max.abs().max(1.0))
+    }
+}
+
+/// What training did.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TrainingSummary {
+    /// Trajectories used.
+    pub trajectories: usize,
+    /// Rows of each training set.
+    pub rows: usize,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+    /// Warnings from both GPs (jitter, subsets, failed starts).
+    pub warnings: Vec<String>,
+}
+
+/// The trained Hysteresis Bayesian Network.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HbnModel {
+    params: HbnParams,
+    transition: GaussianProcess,
+    sensor: GaussianProcess,
+    transition_local: LocalData,
+    sensor_local: LocalData,
+    u_stats: SignalStats,
+    x_stats: SignalStats,
+    y_stats: SignalStats,
+    summary: TrainingSummary,
+}
+
+#[derive(Serialize, Deserialize)]
+struct ModelFile {
+    format: String,
+    version: u32,
+    model: HbnModel,
+}
+
+impl HbnModel {
+    /// Learns both relations from trajectories at `params.rate_hz`.
+    pub fn fit(trajectories: &[Sequence<'_>], params: &HbnParams) -> Result<Self, ModelError> {
+        Self::fit_observed(trajectories, params, &mut |_, _| {})
+    }
+
+    /// [`HbnModel::fit`], reporting progress as `(which GP, progress)`.
+    pub fn fit_observed(
+        trajectories: &[Sequence<'_>],
+        params: &HbnParams,
+        observe: &mut dyn FnMut(&'static str, hbn_gp::FitProgress),
+    ) -> Result<Self, ModelError> {
+        let t0 = Instant::now();
+        params.validate()?;
+        let data = build_dataset(trajectories)?;
+        let tr_spec = params
+            .transition_kernel
+            .spec(TRANSITION_DIM, TRANSITION_DIRECTION);
+        let se_spec = params.sensor_kernel.spec(SENSOR_DIM, SENSOR_DIRECTION);
+        let transition = hbn_gp::fit_observed(
+            &params.gp_params(tr_spec),
+            &data.transition.inputs,
+            &data.transition.targets,
+            &mut |p| observe("transition", p),
+        )
+        .map_err(|e| ModelError::Gp {
+            which: "transition",
+            source: e,
+        })?;
+        let sensor = hbn_gp::fit_observed(
+            &params.gp_params(se_spec),
+            &data.sensor.inputs,
+            &data.sensor.targets,
+            &mut |p| observe("sensor", p),
+        )
+        .map_err(|e| ModelError::Gp {
+            which: "sensor",
+            source: e,
+        })?;
+        let transition_local = LocalData::build(&data.transition, params.blr_window)?;
+        let sensor_local = LocalData::build(&data.sensor, params.blr_window)?;
+        let cat = |f: fn(&Sequence<'_>) -> Vec<f64>| {
+            trajectories.iter().flat_map(f).collect::<Vec<f64>>()
+        };
+        let (u_all, x_all, y_all) = (
+            cat(|t| t.u.to_vec()),
+            cat(|t| t.x.to_vec()),
+            cat(|t| t.y.to_vec()),
+        );
+        let mut warnings = Vec::new();
+        for (name, gp) in [("transition", &transition), ("sensor", &sensor)] {
+            warnings.extend(
+                gp.report()
+                    .warnings()
+                    .into_iter()
+                    .map(|w| format!("{name} GP: {w}")),
+            );
+        }
+        Ok(Self {
+            params: params.clone(),
+            transition,
+            sensor,
+            transition_local,
+            sensor_local,
+            u_stats: SignalStats::of(u_all.iter()),
+            x_stats: SignalStats::of(x_all.iter()),
+            y_stats: SignalStats::of(y_all.iter()),
+            summary: TrainingSummary {
+                trajectories: trajectories.len(),
+                rows: data.transition.len(),
+                seconds: t0.elapsed().as_secs_f64(),
+                warnings,
+            },
+        })
+    }
+
+    /// The borrowed view the allocation-free step reads.
+    pub fn view(&self) -> Result<HbnView<'_>, ModelError> {
+        Ok(HbnView {
+            transition: self.transition.view()?,
+            sensor: self.sensor.view()?,
+            transition_local: Some(self.transition_local.view()?),
+            sensor_local: Some(self.sensor_local.view()?),
+            blr: self.params.blr,
+        })
+    }
+
+    /// Default filter settings from the training ranges (see `docs/ekf.md`).
+    pub fn ekf_config(&self, mode: Mode) -> EkfConfig {
+        let sx = self.x_stats.span();
+        let sy = self.y_stats.span();
+        EkfConfig {
+            mode,
+            q_floor: 1e-10 * sx * sx,
+            r_floor: 1e-10 * sy * sy,
+            p_min: 1e-14 * sx.min(sy).powi(2),
+            p_max: 4.0 * sx.max(sy).powi(2),
+            jac_max: 20.0 * (sy / sx).max(sx / sy).max(1.0),
+            innovation_min: 1e-14 * sy * sy,
+            nis_gate: 0.0,
+            x_bounds: (self.x_stats.min - 0.5 * sx, self.x_stats.max + 0.5 * sx),
+            y_bounds: (self.y_stats.min - 0.5 * sy, self.y_stats.max + 0.5 * sy),
+            x0_mean: self.x_stats.mean,
+            x0_var: self.x_stats.var.max(1e-12 * sx * sx),
+        }
+    }
+
+    /// Training parameters (kernels, rate, signals, BLR settings).
+    pub fn params(&self) -> &HbnParams {
+        &self.params
+    }
+    /// Sample rate (Hz).
+    pub fn rate_hz(&self) -> f64 {
+        self.params.rate_hz
+    }
+    /// Signal names, paths and units.
+    pub fn signals(&self) -> &Signals {
+        &self.params.signals
+    }
+    /// Sets the signal descriptions (e.g. the log paths the CLI read).
+    pub fn set_signals(&mut self, signals: Signals) {
+        self.params.signals = signals;
+    }
+    /// Transition GP.
+    pub fn transition(&self) -> &GaussianProcess {
+        &self.transition
+    }
+    /// Sensor GP.
+    pub fn sensor(&self) -> &GaussianProcess {
+        &self.sensor
+    }
+    /// Local data of the transition (EKF+BLR).
+    pub fn transition_local(&self) -> &LocalData {
+        &self.transition_local
+    }
+    /// Local data of the sensor (EKF+BLR).
+    pub fn sensor_local(&self) -> &LocalData {
+        &self.sensor_local
+    }
+    /// Statistics of `u`, `x`, `y` in training.
+    pub fn stats(&self) -> (SignalStats, SignalStats, SignalStats) {
+        (self.u_stats, self.x_stats, self.y_stats)
+    }
+    /// What training did.
+    pub fn summary(&self) -> &TrainingSummary {
+        &self.summary
+    }
+
+    /// JSON with format tag and version (exact float round trip).
+    pub fn to_json(&self) -> Result<String, ModelError> {
+        serde_json::to_string(&ModelFile {
+            format: MODEL_FORMAT.into(),
+            version: MODEL_FORMAT_VERSION,
+            model: self.clone(),
+        })
+        .map_err(|e| ModelError::Format {
+            path: "<memory>".into(),
+            reason: e.to_string(),
+        })
+    }
+
+    /// Parses [`HbnModel::to_json`] output, checking tag, version and consistency.
+    pub fn from_json(text: &str, origin: &str) -> Result<Self, ModelError> {
+        let fmt_err = |reason: String| ModelError::Format {
+            path: origin.into(),
+            reason,
+        };
+        let value: serde_json::Value = serde_json::from_str(text).map_err(|_| {
+            fmt_err("not an hbn model file (it is not JSON); train one with `hbn train`".into())
+        })?;
+        let tag = value.get("format").and_then(|v| v.as_str()).unwrap_or("");
+        if tag != MODEL_FORMAT {
+            return Err(fmt_err(format!(
+                "not an hbn model file (format tag {tag:?}, expected {MODEL_FORMAT:?})"
+            )));
+        }
+        let version = value.get("version").and_then(|v| v.as_u64()).unwrap_or(0);
+        if version != u64::from(MODEL_FORMAT_VERSION) {
+            return Err(fmt_err(format!(
+                "model format version {version} is not supported by this hbn (reads version {MODEL_FORMAT_VERSION}); retrain with this version"
+            )));
+        }
+        let file: ModelFile =
+            serde_json::from_value(value).map_err(|e| fmt_err(format!("malformed model: {e}")))?;
+        file.model
+            .view()
+            .map_err(|e| fmt_err(format!("inconsistent model: {e}")))?;
+        Ok(file.model)
+    }
+
+    /// Writes the model atomically.
+    pub fn save(&self, path: &Path) -> Result<(), ModelError> {
+        hbn_gp::write_atomic(path, self.to_json()?.as_bytes()).map_err(|e| ModelError::Io {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })
+    }
+
+    /// Loads a model written by [`HbnModel::save`].
+    pub fn load(path: &Path) -> Result<Self, ModelError> {
+        let bytes = std::fs::read(path).map_err(|e| ModelError::Io {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })?;
+        let text = String::from_utf8(bytes).map_err(|_| ModelError::Format {
+            path: path.display().to_string(),
+            reason: "not an hbn model file (binary data); train one with `hbn train`".into(),
+        })?;
+        Self::from_json(&text, &path.display().to_string())
+    }
+}
