@@ -143,12 +143,12 @@ pub fn select_subset(
             let mut dist: Vec<f64> = (0..n).map(|i| d2(row(i), row(first))).collect();
             let mut chosen = vec![first];
             while chosen.len() < m {
-                let (next, _) = dist
-                    .iter()
-                    .enumerate()
-                    .fold((0usize, f64::NEG_INFINITY), |best, (i, &d)| {
-                        if d > best.1 { (i, d) } else { best }
-                    });
+                let (next, _) =
+                    dist.iter()
+                        .enumerate()
+                        .fold((0usize, f64::NEG_INFINITY), |best, (i, &d)| {
+                            if d > best.1 { (i, d) } else { best }
+                        });
                 chosen.push(next);
                 for i in 0..n {
                     let d = d2(row(i), row(next));

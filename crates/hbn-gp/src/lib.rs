@@ -31,7 +31,7 @@ mod train;
 pub use data::{column_stats, select_subset, whitening};
 pub use error::GpError;
 pub use model::{GP_FORMAT, GP_FORMAT_VERSION, GaussianProcess, StartReport, TrainingReport};
-pub use params::{GpParams, Hyperparameters, SubsetPolicy};
+pub use params::{GpParams, Hyperparameters, RawHyperparameters, SubsetPolicy};
 pub use train::{FitProgress, fit, fit_observed};
 
 /// Writes `bytes` to `path` atomically: a temporary file in the same directory, flushed, then

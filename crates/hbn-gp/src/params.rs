@@ -24,6 +24,18 @@ pub struct Hyperparameters {
     pub noise_variance: f64,
 }
 
+/// Starting (or fixed) hyperparameters in the *raw* units of the data; `None` entries keep
+/// their defaults. Converted to the standardised parameterisation once the data are seen.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct RawHyperparameters {
+    /// Length scales: one per input (ARD) or one (isotropic, Mahalanobis scale `c`).
+    pub length_scales: Option<Vec<f64>>,
+    /// Signal variance `s_f^2`.
+    pub signal_variance: Option<f64>,
+    /// Noise variance `s_n^2`.
+    pub noise_variance: Option<f64>,
+}
+
 /// GP training parameters. Build with [`GpParams::new`], adjust fields, then
 /// [`GpParams::validate`] (done by [`crate::fit`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -32,6 +44,8 @@ pub struct GpParams {
     pub kernel: KernelSpec,
     /// Starting (or, with `optimize = false`, fixed) hyperparameters; `None` = defaults.
     pub init: Option<Hyperparameters>,
+    /// Starting (or fixed) hyperparameters in raw data units; applied after `init`.
+    pub raw_init: Option<RawHyperparameters>,
     /// Optimise hyperparameters by maximising the log marginal likelihood.
     pub optimize: bool,
     /// Optimiser starts in all (the first from `init`/defaults, the rest random). `>= 1`.
@@ -58,6 +72,7 @@ impl GpParams {
         Self {
             kernel,
             init: None,
+            raw_init: None,
             optimize: true,
             n_starts: 3,
             max_iters: 200,
@@ -109,6 +124,34 @@ impl GpParams {
                     "init.noise_variance",
                     format!("must be finite and >= 0, got {}", init.noise_variance),
                 );
+            }
+        }
+        if let Some(raw) = &self.raw_init {
+            let positive = |v: f64| v.is_finite() && v > 0.0;
+            if let Some(ls) = &raw.length_scales {
+                let want = if self.kernel.metric == hbn_core::Metric::Ard {
+                    self.kernel.dim
+                } else {
+                    1
+                };
+                if ls.len() != want {
+                    return bad(
+                        "length_scales",
+                        format!("this kernel takes {want} length scale(s), got {}", ls.len()),
+                    );
+                }
+                if !ls.iter().all(|&l| positive(l)) {
+                    return bad("length_scales", "must be finite and > 0".into());
+                }
+            }
+            if raw.signal_variance.is_some_and(|v| !positive(v)) {
+                return bad("signal_variance", "must be finite and > 0".into());
+            }
+            if raw
+                .noise_variance
+                .is_some_and(|v| !(v.is_finite() && v >= 0.0))
+            {
+                return bad("noise_variance", "must be finite and >= 0".into());
             }
         }
         Ok(())

@@ -116,6 +116,24 @@ pub fn fit_observed(
         theta0.clone_from(&init.theta);
         noise0 = init.noise_variance;
     }
+    if let Some(raw) = &params.raw_init {
+        if let Some(ls) = &raw.length_scales {
+            match spec.metric {
+                Metric::Ard => {
+                    for j in 0..d {
+                        theta0[1 + j] = (ls[j] / input_scale[j]).ln();
+                    }
+                }
+                Metric::Isotropic | Metric::Mahalanobis => theta0[1] = ls[0].ln(),
+            }
+        }
+        if let Some(sf2) = raw.signal_variance {
+            theta0[0] = (sf2 / (output_scale * output_scale)).ln();
+        }
+        if let Some(noise) = raw.noise_variance {
+            noise0 = noise / (output_scale * output_scale);
+        }
+    }
 
     let mut report = TrainingReport {
         n_samples: n_all,

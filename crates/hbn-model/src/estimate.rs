@@ -35,7 +35,7 @@ pub struct Estimate {
 }
 
 /// Summary of the observability diagnostic.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ObservabilitySummary {
     /// Smallest `lambda_min` along the trajectory.
     pub min: f64,

@@ -303,8 +303,10 @@ pub struct TrainingSummary {
     pub rows: usize,
     /// Wall-clock seconds.
     pub seconds: f64,
-    /// Warnings from both GPs (jitter, subsets, failed starts).
+    /// Warnings from both GPs (jitter, subsets, failed starts) and the observability check.
     pub warnings: Vec<String>,
+    /// Observability of the linearised filter along the first training trajectory.
+    pub observability: Option<crate::ObservabilitySummary>,
 }
 
 /// The trained Hysteresis Bayesian Network.
@@ -386,7 +388,7 @@ impl HbnModel {
                     .map(|w| format!("{name} GP: {w}")),
             );
         }
-        Ok(Self {
+        let mut model = Self {
             params: params.clone(),
             transition,
             sensor,
@@ -398,10 +400,28 @@ impl HbnModel {
             summary: TrainingSummary {
                 trajectories: trajectories.len(),
                 rows: data.transition.len(),
-                seconds: t0.elapsed().as_secs_f64(),
+                seconds: 0.0,
                 warnings,
+                observability: None,
             },
-        })
+        };
+        // Observability diagnostic (Sec. 4.2) along the first training trajectory.
+        let first = &trajectories[0];
+        let run = model.estimate(first.u, first.y, Mode::Ekf)?;
+        let obs = run.observability();
+        if let Some(o) = obs
+            && o.near_unobservable > 0.05
+        {
+            model.summary.warnings.push(format!(
+                "observability: {:.0}% of training samples are close to unobservable \
+                 (lambda_min/lambda_max < {:e}); the sensor may not distinguish states there",
+                100.0 * o.near_unobservable,
+                crate::NEAR_UNOBSERVABLE
+            ));
+        }
+        model.summary.observability = obs;
+        model.summary.seconds = t0.elapsed().as_secs_f64();
+        Ok(model)
     }
 
     /// The borrowed view the allocation-free step reads.
