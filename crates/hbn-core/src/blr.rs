@@ -6,8 +6,11 @@
 //! `Y_i = t_i - mu_GP(z) = [1, x_i - z] B + e_i`, `e_i ~ N(0, Sigma)` (one output: `m = 1`).
 //!
 //! Conjugate Normal-inverse-Wishart prior from the GP:
-//! `B_bar = [0, grad mu_GP(z)]`, `Lambda0 = kappa * diag(1, S_x)` (`S_x` the empirical input
-//! variance of the training data, so the prior weighs like `kappa` samples spread as the data),
+//! `B_bar = [0, grad mu_GP(z)]`, `Lambda0 = diag(Sigma_hat / s_epi^2, kappa S_x)`: the slopes'
+//! prior weighs like `kappa` samples spread as the data (`S_x` the empirical input variance),
+//! and the intercept's prior variance `Sigma / Lambda0_00` equals the GP's own latent variance
+//! `s_epi^2` at `z` (where the GP is sure of its mean, the neighbours cannot move it; where it
+//! is unsure, they can),
 //! `Sigma ~ IW(nu0, V0)` with `V0 = (nu0 - m - 1) Sigma_hat` and `Sigma_hat` the GP predictive
 //! variance of an observation (latent variance + learned noise). This scaling makes
 //! `E[Sigma] = Sigma_hat` under the prior, so an empty window gives exactly the plain EKF.
@@ -51,7 +54,7 @@ pub struct LocalRegression {
 impl Default for LocalRegression {
     fn default() -> Self {
         Self {
-            nu0: 5.0,
+            nu0: 20.0,
             kappa: 1.0,
             max_neighbours: 32,
         }
@@ -82,7 +85,8 @@ impl LocalRegression {
         z: &[f64],
         gp_mean: f64,
         gp_grad: &[f64],
-        gp_var: f64,
+        gp_latent_var: f64,
+        gp_noise_var: f64,
     ) -> Posterior {
         let d = nb.dim.min(z.len()).min(gp_grad.len());
         let mut idx = [0u32; BLR_MAX_NEIGHBOURS];
@@ -91,19 +95,22 @@ impl LocalRegression {
         // Prior.
         let mut b_bar = [0.0; P];
         b_bar[1..=d].copy_from_slice(&gp_grad[..d]);
+        let sigma_hat = gp_latent_var.max(0.0) + gp_noise_var.max(0.0);
+        let sigma_hat = if sigma_hat.is_finite() && sigma_hat > 0.0 {
+            sigma_hat
+        } else {
+            f64::MIN_POSITIVE
+        };
         let mut lambda0 = [0.0; P];
-        lambda0[0] = self.kappa;
+        // Intercept prior variance Sigma / Lambda0_00 = the GP's own uncertainty about its mean.
+        let latent = gp_latent_var.max(sigma_hat * 1e-12);
+        lambda0[0] = (sigma_hat / latent).clamp(self.kappa, 1e12);
         for j in 0..d {
             lambda0[1 + j] = self.kappa * nb.input_var[j];
         }
         for l in lambda0.iter_mut().skip(1 + d) {
             *l = 1.0; // padding: unused regressors stay at their zero prior
         }
-        let sigma_hat = if gp_var.is_finite() && gp_var > 0.0 {
-            gp_var
-        } else {
-            f64::MIN_POSITIVE
-        };
         let v0 = (self.nu0 - m_out - 1.0) * sigma_hat;
 
         // Sufficient statistics: X^T X, X^T Y, Y^T Y.
@@ -514,12 +521,13 @@ mod tests {
         mu: f64,
         grad: [f64; 2],
         var: f64,
+        l00: f64,
         s: [f64; 2],
         cfg: &LocalRegression,
     ) -> (f64, [f64; 2], f64) {
         let p = 3;
         let mut l0 = [[0.0; 3]; 3];
-        l0[0][0] = cfg.kappa;
+        l0[0][0] = l00;
         l0[1][1] = cfg.kappa * s[0];
         l0[2][2] = cfg.kappa * s[1];
         let bbar = [0.0, grad[0], grad[1]];
@@ -592,8 +600,8 @@ mod tests {
         let nb = view(&o, 2);
         let cfg = LocalRegression::default();
         let z = [0.505, 0.2];
-        let post = cfg.posterior(&nb, &z, 1.02, &[2.0, 1.0], 0.01);
-        let (b0, b, noise) = closed_form(&x, &y, z, 1.02, [2.0, 1.0], 0.01, s, &cfg);
+        let post = cfg.posterior(&nb, &z, 1.02, &[2.0, 1.0], 0.004, 0.006);
+        let (b0, b, noise) = closed_form(&x, &y, z, 1.02, [2.0, 1.0], 0.01, 0.01 / 0.004, s, &cfg);
         assert_eq!(post.n, 6);
         assert!(
             (post.intercept - b0).abs() < 1e-12,
@@ -617,7 +625,7 @@ mod tests {
         let o = build(2, &x, &y, &[0.01, 0.01], &[0.25, 0.25]);
         let nb = view(&o, 2);
         let cfg = LocalRegression::default();
-        let post = cfg.posterior(&nb, &[0.5, 0.5], 0.3, &[0.7, -0.2], 0.04);
+        let post = cfg.posterior(&nb, &[0.5, 0.5], 0.3, &[0.7, -0.2], 0.01, 0.03);
         assert_eq!(post.n, 0);
         assert_eq!(post.intercept, 0.0);
         assert!((post.grad[0] - 0.7).abs() < 1e-15 && (post.grad[1] + 0.2).abs() < 1e-15);
@@ -643,7 +651,9 @@ mod tests {
         }
         let o = build(2, &x, &y, &[0.05, 0.05], &[0.1, 0.1]);
         let nb = view(&o, 2);
+        // A weak noise prior (nu0 = 3) so that the 48 neighbours dominate it.
         let cfg = LocalRegression {
+            nu0: 3.0,
             max_neighbours: BLR_MAX_NEIGHBOURS,
             ..LocalRegression::default()
         };
@@ -652,11 +662,11 @@ mod tests {
         let probes = 200;
         for k in 0..probes {
             let z = [0.47 + 0.06 * (k as f64 / probes as f64), 0.2];
-            let post = cfg.posterior(&nb, &z, 2.0 * z[0] - z[1], &[2.0, -1.0], 1e-6);
+            let post = cfg.posterior(&nb, &z, 2.0 * z[0] - z[1], &[2.0, -1.0], 1e-6, 0.0);
             assert!(post.capped && post.n == BLR_MAX_NEIGHBOURS);
             est += post.noise / probes as f64;
         }
-        // nu0 = 5 prior pseudo-samples at 1e-6 vs 48 samples at 0.01: expect ~0.01 * 46/51.
+        // nu0 = 3 prior pseudo-samples at 1e-6 vs 48 samples at 0.01: expect ~0.01 * 46/49.
         assert!(
             (est.sqrt() - 0.1).abs() < 0.015,
             "estimated sd {}",

@@ -23,8 +23,9 @@
 //!     | c + f a1    f a2   e |            | f |
 //! ```
 //!
-//! `q_x` = transition GP variance + its learned noise (or the BLR noise estimate), `q_s` = sensor
-//! GP variance, `R` = sensor learned noise (or the BLR noise estimate). `u_k` is stored for the
+//! `q_x` = transition GP variance + its learned noise (EKF+BLR: + the BLR noise estimate instead
+//! of the learned noise), `q_s` = sensor GP variance, `R` = sensor learned noise (EKF+BLR: the
+//! BLR noise estimate). `u_k` is stored for the
 //! next step; it does not influence `x_k` (the transition only reads inputs up to `k - 1`).
 //!
 //! ## Guards (Assumption 4, Eq. 24)
@@ -509,7 +510,8 @@ impl Estimator<'_, '_> {
                     &input[..d],
                     p.mean,
                     &p.grad_mean[..d],
-                    p.variance + out.noise,
+                    p.variance,
+                    out.noise,
                 );
                 if post.n == 0 {
                     *flags |= if transition {
@@ -527,9 +529,9 @@ impl Estimator<'_, '_> {
                 {
                     out.mean += post.intercept;
                     out.grad[..d].copy_from_slice(&post.grad[..d]);
-                    // BLR's expected noise covariance replaces GP variance + learned noise.
+                    // BLR's expected noise covariance replaces the GP's learned (homoscedastic)
+                    // noise; the GP's epistemic variance still applies.
                     out.noise = post.noise;
-                    out.epistemic = 0.0;
                 }
             }
         }

@@ -11,7 +11,10 @@ fn main() {
         noise_gains: vec![gain],
         ..ExperimentConfig::default()
     };
-    if let Some(k) = args.get(2) {
+    if let Some(nu) = args.get(3).and_then(|s| s.parse().ok()) {
+        cfg.params.blr.nu0 = nu;
+    }
+    if let Some(k) = args.get(2).filter(|k| *k != "-") {
         let k = k.parse().expect("kernel");
         cfg.params.transition_kernel = k;
         cfg.params.sensor_kernel = k;
