@@ -1,1 +1,74 @@
-fn main() {}
+//! One estimator step with 500 support points in each GP, variances included, in both modes.
+//!
+//! `cargo bench --bench ekf`. The numpy comparison is `python3 benches/numpy_filter.py`.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use hbn::core::{Estimator, Mode};
+use hbn::model::{HbnModel, HbnParams, Sequence};
+use hbn::sim::{InputKind, SimConfig, SystemKind, generate_input, simulate};
+use std::hint::black_box;
+
+fn bench_step(c: &mut Criterion) {
+    let system = SystemKind::BoucWen;
+    let u = generate_input(InputKind::RandomRamps, 1000, 0.02, 1).unwrap();
+    let runs: Vec<_> = (0..3)
+        .map(|r| {
+            simulate(
+                &SimConfig {
+                    system,
+                    noise_gain: 1.0,
+                    rate_hz: 100.0,
+                    seed: r,
+                },
+                &u,
+            )
+            .unwrap()
+        })
+        .collect();
+    let seqs: Vec<Sequence<'_>> = runs
+        .iter()
+        .map(|t| Sequence {
+            u: &t.u,
+            x: &t.x,
+            y: &t.y,
+        })
+        .collect();
+    let params = HbnParams {
+        max_points: 500,
+        n_starts: 1,
+        max_iters: 50,
+        ..HbnParams::default()
+    };
+    let model = HbnModel::fit(&seqs, &params).unwrap();
+    assert_eq!(model.transition().n_support(), 500);
+    assert_eq!(model.sensor().n_support(), 500);
+    let test_u = generate_input(InputKind::RandomRamps, 5000, 0.02, 9).unwrap();
+    let test = simulate(
+        &SimConfig {
+            system,
+            noise_gain: 1.0,
+            rate_hz: 100.0,
+            seed: 99,
+        },
+        &test_u,
+    )
+    .unwrap();
+    let view = model.view().unwrap();
+    let mut g = c.benchmark_group("ekf_step_n500");
+    for (name, mode) in [("ekf", Mode::Ekf), ("ekf_blr", Mode::EkfBlr)] {
+        let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
+        let mut est = Estimator::new(view, model.ekf_config(mode), &mut scratch).unwrap();
+        let mut k = 0usize;
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                let out = est.step(black_box(test.u[k]), black_box(test.y[k]));
+                k = (k + 1) % test.u.len();
+                out
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench_step);
+criterion_main!(benches);

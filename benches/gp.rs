@@ -1,1 +1,78 @@
-fn main() {}
+//! GP engine benchmarks: fitting (n = 1000, 2000; 4 inputs; ARD SE + noise; one optimiser
+//! start) and prediction with 500 support points (mean + variance + mean gradient).
+//!
+//! `cargo bench --bench gp`. The scikit-learn comparison on the same data in the same run is
+//! `python3 benches/compare_sklearn.py` (see docs/benchmarks.md).
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use hbn::core::rng::Rng;
+use hbn::core::{KernelSpec, Want};
+use hbn::gp::{GpParams, fit};
+use std::hint::black_box;
+
+fn data(n: usize, d: usize, seed: u64) -> (Vec<f64>, Vec<f64>) {
+    let mut rng = Rng::new(seed);
+    let x: Vec<f64> = (0..n * d).map(|_| rng.uniform_in(-2.0, 2.0)).collect();
+    let y = x
+        .chunks_exact(d)
+        .map(|r| {
+            r.iter()
+                .enumerate()
+                .map(|(j, v)| (v * (0.5 + 0.4 * j as f64)).sin())
+                .sum::<f64>()
+                + 0.1 * rng.normal()
+        })
+        .collect();
+    (x, y)
+}
+
+fn params(n: usize) -> GpParams {
+    let mut p = GpParams::new(KernelSpec::se_ard(4));
+    p.n_starts = 1;
+    p.max_points = n;
+    p
+}
+
+fn bench_fit(c: &mut Criterion) {
+    let mut g = c.benchmark_group("gp_fit_ard4");
+    g.sample_size(10);
+    for n in [1000usize, 2000] {
+        let (x, y) = data(n, 4, 1);
+        let p = params(n);
+        g.bench_function(format!("n{n}"), |b| {
+            b.iter(|| fit(black_box(&p), &x, &y).unwrap())
+        });
+    }
+    g.finish();
+}
+
+fn bench_predict(c: &mut Criterion) {
+    let (x, y) = data(500, 4, 2);
+    let gp = fit(&params(500), &x, &y).unwrap();
+    let view = gp.view().unwrap();
+    let mut scratch = vec![0.0; view.predict_scratch(Want::ALL)];
+    let probe = [0.3, -0.5, 1.1, 0.2];
+    let mut g = c.benchmark_group("gp_predict_n500_d4");
+    g.bench_function("mean", |b| {
+        b.iter(|| {
+            view.predict(black_box(&probe), Want::default(), &mut scratch)
+                .unwrap()
+        })
+    });
+    g.bench_function("mean_var_grad", |b| {
+        b.iter(|| {
+            view.predict(black_box(&probe), Want::EKF, &mut scratch)
+                .unwrap()
+        })
+    });
+    g.bench_function("all_incl_var_grad", |b| {
+        b.iter(|| {
+            view.predict(black_box(&probe), Want::ALL, &mut scratch)
+                .unwrap()
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench_predict, bench_fit);
+criterion_main!(benches);

@@ -1,0 +1,67 @@
+//! A million steps with a noisy input and outliers in y: no NaN ever leaves the filter, and
+//! P stays within its bounds (eigenvalues in [p_min, p_max]) in both modes.
+
+mod common;
+
+use hbn::core::rng::Rng;
+use hbn::core::{Estimator, Flags, Mode};
+use hbn::sim::SystemKind;
+use nalgebra::SymmetricEigen;
+
+#[test]
+fn a_million_noisy_steps_stay_finite_and_bounded() {
+    let (model, _) = common::train_model(SystemKind::GeneralizedPi, 2.0, 80, 5);
+    let test = common::test_run(SystemKind::GeneralizedPi, 2.0, 10_000, 5);
+    let view = model.view().unwrap();
+    let (_, _, y_stats) = model.stats();
+    for mode in [Mode::Ekf, Mode::EkfBlr] {
+        let cfg = model.ekf_config(mode);
+        let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
+        let mut est = Estimator::new(view, cfg, &mut scratch).unwrap();
+        let mut rng = Rng::new(11);
+        let mut outliers_seen = 0usize;
+        let steps = 1_000_000;
+        for k in 0..steps {
+            let i = k % test.u.len();
+            // Input noise beyond anything seen in training.
+            let u = test.u[i] + 0.05 * (rng.uniform() - 0.5);
+            let mut y = test.y[i];
+            if k % 997 == 0 {
+                y += 50.0 * y_stats.span() * (rng.uniform() - 0.3);
+            }
+            if k % 100_003 == 0 {
+                y = f64::INFINITY;
+            }
+            let out = est.step(u, y);
+            assert!(
+                out.x.is_finite() && out.x_std.is_finite() && out.y_pred.is_finite(),
+                "{mode:?} step {k}: {out:?}"
+            );
+            assert!(
+                out.nis.is_finite()
+                    && out.innovation.is_finite()
+                    && out.q_x.is_finite()
+                    && out.r.is_finite()
+            );
+            if out.flags.has(Flags::STATE_CLAMPED) {
+                outliers_seen += 1;
+            }
+            if k % 1000 == 0 {
+                let p = est.state().unwrap().p;
+                assert!((p - p.transpose()).abs().max() <= 1e-12 * p.abs().max());
+                let eig = SymmetricEigen::new(p).eigenvalues;
+                for &e in eig.iter() {
+                    assert!(
+                        e >= cfg.p_min * (1.0 - 1e-9) && e <= cfg.p_max * (1.0 + 1e-9),
+                        "{mode:?} step {k}: eigenvalue {e}"
+                    );
+                }
+            }
+        }
+        // The outliers really were extreme enough to reach the guards.
+        assert!(
+            outliers_seen > 0,
+            "{mode:?}: no outlier reached the state box"
+        );
+    }
+}
