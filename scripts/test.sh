@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# Runs every test of hbn: Rust (unit, end-to-end, CLI) and Python (the wheel), on a fresh
+# machine with only Rust, Python 3 and pip. Usage: ./scripts/test.sh
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$(pwd)
+
+echo "== hbn-core builds without std and without alloc"
+cargo build -p hbn-core --no-default-features
+
+echo "== Rust tests (release: the end-to-end tests train GPs; also builds target/release/hbn)"
+cargo test --release --workspace --exclude hbn-py
+
+echo "== Python: build and install the wheel into a private virtual environment"
+VENV="$ROOT/target/py-test-venv"
+if [ ! -x "$VENV/bin/python" ]; then
+  python3 -m venv "$VENV"
+fi
+"$VENV/bin/python" -m pip install --quiet --upgrade pip
+"$VENV/bin/python" -m pip install --quiet numpy scikit-learn matplotlib pytest
+"$VENV/bin/python" -m pip install --quiet --force-reinstall --no-deps ./hbn-py
+
+echo "== Python tests"
+HBN_BIN="$ROOT/target/release/hbn" "$VENV/bin/python" -m pytest -q hbn-py/tests
