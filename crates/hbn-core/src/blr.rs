@@ -415,7 +415,7 @@ fn solve_spd(a: &[[f64; P]; P], b: &[f64; P]) -> Option<[f64; P]> {
                 s -= l[i][k] * l[j][k];
             }
             if i == j {
-                if !(s > 0.0) || !s.is_finite() {
+                if s.is_nan() || s <= 0.0 || !s.is_finite() {
                     return None;
                 }
                 l[i][i] = libm::sqrt(s);
@@ -514,6 +514,7 @@ mod tests {
     }
 
     /// Dense closed form of the posterior (m = 1) for comparison.
+    #[allow(clippy::too_many_arguments)]
     fn closed_form(
         x: &[[f64; 2]],
         y: &[f64],

@@ -123,7 +123,7 @@ pub fn select_subset(
     let mut chosen = match policy {
         SubsetPolicy::Random => {
             let mut idx: Vec<usize> = (0..n).collect();
-            let mut rng = Rng::new(seed ^ 0x5AB5_E7);
+            let mut rng = Rng::new(seed ^ 0x005A_B5E7);
             for i in 0..m {
                 let j = i + rng.below(n - i);
                 idx.swap(i, j);

@@ -140,7 +140,7 @@ impl GaussianProcess {
     pub fn predict_many(&self, x: &[f64], want: Want) -> Result<Vec<Prediction>, GpError> {
         let view = self.view()?;
         let d = view.dim();
-        if x.len() % d != 0 {
+        if !x.len().is_multiple_of(d) {
             return Err(GpError::Shape {
                 what: "prediction inputs (rows x dim)",
                 expected: d,
