@@ -1,0 +1,684 @@
+"""hbn: Gaussian-process models of hysteretic soft-robot systems and a real-time EKF.
+
+The same Rust engine as the ``hbn`` command-line tool, with a scikit-learn feel:
+
+* :class:`GaussianProcess` -- an exact GP regressor (``fit`` / ``predict``) with the kernels of
+  the Hysteresis Bayesian Network, input gradients of the mean, and JSON persistence;
+* :class:`HysteresisModel` -- the HBN (actuator ``u -> x``, soft sensor ``x -> y``) learned from
+  logged ``(u, x, y)`` trajectories, whose EKF estimates ``x`` from ``u`` and ``y`` alone; its
+  files are the CLI's ``hbn train --out model.hbn`` files;
+* :func:`simulate` -- the hysteretic test systems of ``hbn simulate``;
+* :func:`read_mcap` -- numeric signals from MCAP robot logs (ROS 2 or Foxglove), resampled on one
+  grid.
+
+Example
+-------
+>>> import hbn
+>>> train = hbn.simulate("duhem", 600, seed=1, noise_gain=1.0)
+>>> model = hbn.HysteresisModel.fit(train["u"], train["x"], train["y"], max_points=200)
+>>> test = hbn.simulate("duhem", 400, seed=2, noise_gain=1.0)
+>>> x_hat, x_std = model.estimate(test["u"], test["y"])
+>>> x_hat.shape
+(400,)
+
+Errors: bad data or settings raise ``ValueError``; missing or unreadable files raise ``OSError``
+(``FileNotFoundError`` for a missing file); a file that is not an hbn model (or of another format
+version) raises ``ValueError``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from . import _hbn
+
+__all__ = [
+    "GaussianProcess",
+    "HysteresisModel",
+    "Estimate",
+    "simulate",
+    "read_mcap",
+    "list_topics",
+    "SYSTEMS",
+    "KERNELS",
+    "__version__",
+]
+
+__version__: str = _hbn.__version__
+
+#: Names accepted by ``simulate(system=...)``.
+SYSTEMS: Tuple[str, ...] = tuple(_hbn.systems())
+#: Kernel names accepted by ``kernel=`` (each of the first five optionally with ``+dir``).
+KERNELS: str = _hbn.kernel_names()
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+def _vector(a: Any, name: str) -> np.ndarray:
+    """A contiguous float64 1-D copy-if-needed of ``a``; ValueError otherwise."""
+    try:
+        v = np.ascontiguousarray(np.asarray(a, dtype=np.float64))
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{name} must be numeric: {e}") from None
+    if v.ndim == 0:
+        v = v.reshape(1)
+    if v.ndim != 1:
+        raise ValueError(f"{name} must be 1-D, got shape {v.shape}")
+    return v
+
+
+def _matrix(a: Any, name: str, dim: Optional[int] = None) -> np.ndarray:
+    """A contiguous float64 2-D array (a 1-D input is one feature per row)."""
+    try:
+        m = np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{name} must be numeric: {e}") from None
+    if m.ndim == 0:
+        m = m.reshape(1, 1)
+    elif m.ndim == 1:
+        m = m.reshape(-1, 1) if dim in (None, 1) else m.reshape(1, -1)
+    if m.ndim != 2:
+        raise ValueError(f"{name} must be 1-D or 2-D, got shape {m.shape}")
+    if dim is not None and m.shape[1] != dim:
+        raise ValueError(f"{name} has {m.shape[1]} features, but the model was fitted with {dim}")
+    return np.ascontiguousarray(m)
+
+
+def _fspath(path: PathLike) -> str:
+    return os.fspath(path)
+
+
+# ------------------------------------------------------------------------------------------------
+# GaussianProcess
+# ------------------------------------------------------------------------------------------------
+
+
+class GaussianProcess:
+    """Exact Gaussian-process regression (the engine of the HBN's two GPs).
+
+    Parameters
+    ----------
+    kernel : str, default "se-ard"
+        ``"se"`` (isotropic squared exponential), ``"se-ard"`` (one length scale per input),
+        ``"matern52"`` (ARD Matern 5/2), ``"mahalanobis"`` (SE with the empirical input
+        covariance, one scale), ``"warped"`` (tanh-warped inputs under the Mahalanobis SE), each
+        optionally with ``"+dir"``, and ``"thesis"`` (= ``"warped+dir"``). ``"+dir"`` multiplies the
+        kernel by the direction-advantage factor ``(1 + g g') / 2`` with ``g = sign(X[:, 0] -
+        X[:, 1])`` (so it needs at least two features).
+    lengthscales, signal_variance, noise_variance : optional
+        Hyperparameters in the raw units of the data (``lengthscales``: one per feature for the
+        ARD kernels, one value otherwise). With ``optimize=False`` they are used exactly as given
+        (missing ones take the defaults: unit variance and length scales in standardised units);
+        with ``optimize=True`` they are the first optimiser start.
+    optimize : bool, default True
+        Maximise the log marginal likelihood (multi-start L-BFGS on log-parameters).
+    normalize : bool, default True
+        Standardise inputs (per feature) and targets before the kernel.
+    n_restarts : int, default 2
+        Optimiser starts *in all* (the first from the given/default hyperparameters, the rest
+        random); the CLI's ``--starts``. Must be >= 1.
+    max_iter : int, default 200
+        L-BFGS iterations per start.
+    max_points : int, default 1000
+        Most support points kept; larger data sets are reduced by farthest-point sampling (the
+        fit reports it in :attr:`warnings_`).
+    seed : int, default 0
+        Seed of the random starts.
+
+    Examples
+    --------
+    >>> import numpy as np, hbn
+    >>> X = np.linspace(0, 5, 40)
+    >>> gp = hbn.GaussianProcess().fit(X, np.sin(X))
+    >>> mean, std = gp.predict([[1.0], [2.0]], return_std=True)
+    >>> bool(abs(mean[0] - np.sin(1.0)) < 1e-2)
+    True
+    """
+
+    def __init__(
+        self,
+        kernel: str = "se-ard",
+        lengthscales: Optional[Union[float, Sequence[float], np.ndarray]] = None,
+        signal_variance: Optional[float] = None,
+        noise_variance: Optional[float] = None,
+        optimize: bool = True,
+        normalize: bool = True,
+        n_restarts: int = 2,
+        max_iter: int = 200,
+        max_points: int = 1000,
+        seed: int = 0,
+    ) -> None:
+        self.kernel = kernel
+        self.lengthscales = lengthscales
+        self.signal_variance = signal_variance
+        self.noise_variance = noise_variance
+        self.optimize = optimize
+        self.normalize = normalize
+        self.n_restarts = n_restarts
+        self.max_iter = max_iter
+        self.max_points = max_points
+        self.seed = seed
+        self._core: Optional[_hbn.GaussianProcessCore] = None
+
+    def __repr__(self) -> str:
+        state = f"fitted, n_support={self._core.n_support}" if self._core else "not fitted"
+        return f"GaussianProcess(kernel={self.kernel!r}, {state})"
+
+    def _fitted(self) -> _hbn.GaussianProcessCore:
+        if self._core is None:
+            raise ValueError("this GaussianProcess is not fitted yet; call fit(X, y) first")
+        return self._core
+
+    @staticmethod
+    def _count(value: Any, name: str) -> int:
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+            raise ValueError(f"{name} must be an integer, got {value!r}")
+        if value < 0:
+            raise ValueError(f"{name} must be >= 0, got {value}")
+        return int(value)
+
+    def fit(self, X: Any, y: Any) -> "GaussianProcess":
+        """Fits the GP to inputs ``X`` (``n x d``, or 1-D for one feature) and targets ``y`` (``n``).
+
+        Returns ``self``. Raises ``ValueError`` for NaN/Inf values, mismatched lengths, constant
+        targets, an unknown kernel or invalid hyperparameters.
+
+        >>> import hbn
+        >>> gp = hbn.GaussianProcess(optimize=False).fit([0.0, 1.0, 2.0], [0.0, 1.0, 0.5])
+        >>> gp.n_support
+        3
+        """
+        Xm = _matrix(X, "X")
+        yv = _vector(y, "y")
+        if Xm.shape[0] != yv.shape[0]:
+            raise ValueError(
+                f"X and y must have the same number of samples (got {Xm.shape[0]} and {yv.shape[0]})"
+            )
+        ls = self.lengthscales
+        if ls is not None:
+            ls = [float(v) for v in np.atleast_1d(np.asarray(ls, dtype=np.float64))]
+        self._core = _hbn.GaussianProcessCore.fit(
+            Xm.ravel(),
+            Xm.shape[1],
+            yv,
+            str(self.kernel),
+            ls,
+            None if self.signal_variance is None else float(self.signal_variance),
+            None if self.noise_variance is None else float(self.noise_variance),
+            bool(self.optimize),
+            bool(self.normalize),
+            self._count(self.n_restarts, "n_restarts"),
+            self._count(self.max_iter, "max_iter"),
+            self._count(self.max_points, "max_points"),
+            self._count(self.seed, "seed"),
+        )
+        return self
+
+    def predict(
+        self, X: Any, return_std: bool = False, return_grad: bool = False
+    ) -> Union[np.ndarray, Tuple[np.ndarray, ...]]:
+        """Predictive mean at ``X``; optionally its standard deviation and input gradient.
+
+        Returns ``mean`` (``n``), or a tuple ``(mean, std)``, ``(mean, grad)`` or
+        ``(mean, std, grad)``. ``std`` is the latent function's (noise excluded, as in
+        scikit-learn); ``grad`` has shape ``(n, d)``: ``d mean / d X``.
+
+        >>> import numpy as np, hbn
+        >>> gp = hbn.GaussianProcess().fit(np.linspace(0, 3, 30), np.linspace(0, 3, 30) ** 2)
+        >>> mean, grad = gp.predict([1.5], return_grad=True)
+        >>> grad.shape
+        (1, 1)
+        """
+        core = self._fitted()
+        Xm = _matrix(X, "X", core.dim)
+        mean, var, grad = core.predict(Xm.ravel(), bool(return_std), bool(return_grad))
+        out: List[np.ndarray] = [mean]
+        if return_std:
+            out.append(np.sqrt(np.maximum(var, 0.0)))
+        if return_grad:
+            out.append(grad.reshape(Xm.shape[0], core.dim))
+        return out[0] if len(out) == 1 else tuple(out)
+
+    def log_marginal_likelihood(self) -> float:
+        """Log marginal likelihood at the fitted hyperparameters.
+
+        Of the standardised targets when ``normalize=True`` (of the raw targets otherwise, equal to
+        scikit-learn's ``log_marginal_likelihood_value_``).
+
+        >>> import hbn
+        >>> gp = hbn.GaussianProcess(optimize=False, normalize=False).fit([0.0, 1.0], [0.0, 1.0])
+        >>> isinstance(gp.log_marginal_likelihood(), float)
+        True
+        """
+        return self._fitted().log_marginal_likelihood()
+
+    @property
+    def hyperparameters(self) -> Dict[str, Any]:
+        """Fitted hyperparameters: ``signal_variance``, ``lengthscales`` (array), ``noise_variance``
+        (raw units) and ``theta`` (the log-parameterised vector in standardised units).
+
+        >>> import hbn
+        >>> gp = hbn.GaussianProcess(signal_variance=2.0, optimize=False, normalize=False)
+        >>> round(gp.fit([0.0, 1.0], [0.0, 1.0]).hyperparameters["signal_variance"], 12)
+        2.0
+        """
+        core = self._fitted()
+        return {
+            "signal_variance": core.signal_variance,
+            "lengthscales": np.asarray(core.length_scales, dtype=np.float64),
+            "noise_variance": core.noise_variance,
+            "theta": np.asarray(core.theta, dtype=np.float64),
+        }
+
+    @property
+    def n_support(self) -> int:
+        """Number of support points kept.
+
+        >>> import hbn
+        >>> hbn.GaussianProcess(optimize=False).fit([0.0, 1.0, 2.0], [1.0, 0.0, 1.0]).n_support
+        3
+        """
+        return self._fitted().n_support
+
+    @property
+    def n_features_in_(self) -> int:
+        """Number of input features seen in ``fit``."""
+        return self._fitted().dim
+
+    @property
+    def warnings_(self) -> List[str]:
+        """Training warnings (subset, Cholesky jitter, failed optimiser starts); empty if clean."""
+        return list(self._fitted().warnings())
+
+    @property
+    def report_(self) -> Dict[str, Any]:
+        """The training report (starts, evaluations, jitter, seconds) as a dict."""
+        return json.loads(self._fitted().report_json())
+
+    def save(self, path: PathLike) -> None:
+        """Writes the fitted GP to a JSON file (atomically).
+
+        >>> import hbn, tempfile, os
+        >>> gp = hbn.GaussianProcess(optimize=False).fit([0.0, 1.0, 2.0], [1.0, 0.0, 1.0])
+        >>> p = os.path.join(tempfile.mkdtemp(), "gp.json"); gp.save(p)
+        >>> hbn.GaussianProcess.load(p).n_support
+        3
+        """
+        self._fitted().save(_fspath(path))
+
+    @classmethod
+    def load(cls, path: PathLike) -> "GaussianProcess":
+        """Loads a GP written by :meth:`save` (``FileNotFoundError`` if missing, ``ValueError`` if
+        the file is not an hbn GP of a supported version)."""
+        core = _hbn.GaussianProcessCore.load(_fspath(path))
+        gp = cls(kernel=core.kernel)
+        gp._core = core
+        return gp
+
+    @classmethod
+    def _from_core(cls, core: _hbn.GaussianProcessCore) -> "GaussianProcess":
+        gp = cls(kernel=core.kernel)
+        gp._core = core
+        return gp
+
+
+# ------------------------------------------------------------------------------------------------
+# HysteresisModel
+# ------------------------------------------------------------------------------------------------
+
+
+class Estimate:
+    """Per-sample results of :meth:`HysteresisModel.estimate`.
+
+    Attributes: ``x`` (estimate of the state), ``x_std`` (its standard deviation), ``y_pred``
+    (predicted measurement before the update), ``innovation``, ``nis`` (normalised innovation
+    squared), ``q_x`` (process noise variance used), ``r`` (measurement noise variance used),
+    ``flags`` (guard bits, ``uint32``; see :meth:`flag_names`), ``obs_min`` / ``obs_max``
+    (eigenvalues of the observability Gramian, NaN for the first samples), ``mode``.
+
+    Unpacks as ``x, x_std = model.estimate(u, y)``.
+
+    >>> import hbn
+    >>> tr = hbn.simulate("duhem", 300, seed=1)
+    >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_restarts=1)
+    >>> est = m.estimate(tr["u"], tr["y"])
+    >>> x_hat, x_std = est
+    >>> est.flags.dtype.name
+    'uint32'
+    """
+
+    FLAG_NAMES: Tuple[str, ...] = (
+        "input_invalid",
+        "measurement_invalid",
+        "model_invalid",
+        "jacobian_clamped",
+        "noise_floor",
+        "innovation_singular",
+        "covariance_clamped",
+        "state_clamped",
+        "outlier_rejected",
+        "blr_empty_transition",
+        "blr_empty_sensor",
+        "blr_capped",
+        "initialised",
+    )
+
+    __slots__ = (
+        "x",
+        "x_std",
+        "y_pred",
+        "innovation",
+        "nis",
+        "q_x",
+        "r",
+        "flags",
+        "obs_min",
+        "obs_max",
+        "mode",
+    )
+
+    def __init__(self, fields: Mapping[str, np.ndarray], mode: str) -> None:
+        self.x: np.ndarray = fields["x"]
+        self.x_std: np.ndarray = fields["x_std"]
+        self.y_pred: np.ndarray = fields["y_pred"]
+        self.innovation: np.ndarray = fields["innovation"]
+        self.nis: np.ndarray = fields["nis"]
+        self.q_x: np.ndarray = fields["q_x"]
+        self.r: np.ndarray = fields["r"]
+        self.flags: np.ndarray = fields["flags"]
+        self.obs_min: np.ndarray = fields["obs_min"]
+        self.obs_max: np.ndarray = fields["obs_max"]
+        self.mode: str = mode
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        yield self.x
+        yield self.x_std
+
+    def __len__(self) -> int:
+        return len(self.x)
+
+    def __repr__(self) -> str:
+        return f"Estimate(mode={self.mode!r}, n={len(self.x)})"
+
+    def flag_names(self, k: int) -> List[str]:
+        """Names of the guard flags set at sample ``k``."""
+        f = int(self.flags[k])
+        return [n for i, n in enumerate(self.FLAG_NAMES) if f & (1 << i)]
+
+    def flag_counts(self) -> Dict[str, int]:
+        """How many samples had each guard flag set."""
+        out: Dict[str, int] = {}
+        for i, n in enumerate(self.FLAG_NAMES):
+            c = int(np.count_nonzero(self.flags & np.uint32(1 << i)))
+            if c:
+                out[n] = c
+        return out
+
+    def to_dict(self) -> Dict[str, np.ndarray]:
+        """All per-sample arrays by name."""
+        return {k: getattr(self, k) for k in self.__slots__ if k != "mode"}
+
+
+def _trajectories(a: Any, name: str) -> List[np.ndarray]:
+    if isinstance(a, (list, tuple)) and len(a) > 0 and np.ndim(a[0]) >= 1:
+        return [_vector(t, f"{name}[{i}]") for i, t in enumerate(a)]
+    return [_vector(a, name)]
+
+
+def _signals_json(signals: Optional[Mapping[str, Any]]) -> Optional[str]:
+    if signals is None:
+        return None
+    if not isinstance(signals, Mapping):
+        raise ValueError('signals must be a dict like {"u": "/topic.field", "x": ..., "y": ...}')
+    unknown = set(signals) - {"u", "x", "y"}
+    if unknown:
+        raise ValueError(f"signals: unknown keys {sorted(unknown)}; use u, x and y")
+    out: Dict[str, Dict[str, Optional[str]]] = {}
+    for key, role in (("u", "input"), ("x", "state"), ("y", "output")):
+        v = signals.get(key)
+        if v is None:
+            info: Dict[str, Optional[str]] = {"name": key, "path": None, "unit": None}
+        elif isinstance(v, str):
+            info = {"name": key, "path": v, "unit": None}
+        elif isinstance(v, Mapping):
+            info = {"name": str(v.get("name", key)), "path": v.get("path"), "unit": v.get("unit")}
+        else:
+            raise ValueError(f"signals[{key!r}] must be a message path string or a dict")
+        out[role] = info
+    return json.dumps(out)
+
+
+class HysteresisModel:
+    """The Hysteresis Bayesian Network: a transition GP ``x_k = H_D(x_{k-1}, x_{k-2}, u_{k-1},
+    u_{k-2})`` and a sensor GP ``y_k = H_S(x_{k-1}, y_{k-1}, x_k)``, with an EKF (optionally with
+    local Bayesian linear regression) that estimates ``x`` from ``u`` and ``y`` alone.
+
+    Build one with :meth:`fit` or :meth:`load` (files of the CLI's ``hbn train --out``).
+
+    >>> import hbn
+    >>> tr = hbn.simulate("maxwell-slip", 500, seed=1, noise_gain=1.0)
+    >>> model = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=150)
+    >>> te = hbn.simulate("maxwell-slip", 300, seed=2, noise_gain=1.0)
+    >>> x_hat, x_std = model.estimate(te["u"], te["y"])
+    >>> model.rate
+    100.0
+    """
+
+    def __init__(self, core: _hbn.HysteresisModelCore) -> None:
+        if not isinstance(core, _hbn.HysteresisModelCore):
+            raise TypeError("use HysteresisModel.fit(...) or HysteresisModel.load(path)")
+        self._core = core
+
+    def __repr__(self) -> str:
+        p = self.params
+        return (
+            f"HysteresisModel(rate={self.rate}, kernel={p['transition_kernel']}, "
+            f"max_points={p['max_points']})"
+        )
+
+    @classmethod
+    def fit(
+        cls,
+        u: Any,
+        x: Any,
+        y: Any,
+        rate: float = 100.0,
+        kernel: str = "se-ard+dir",
+        max_points: int = 500,
+        n_restarts: int = 2,
+        seed: int = 0,
+        blr_window: float = 0.025,
+        max_iter: int = 100,
+        signals: Optional[Mapping[str, Any]] = None,
+    ) -> "HysteresisModel":
+        """Learns both GPs from logged trajectories sampled at ``rate`` Hz.
+
+        ``u``, ``x``, ``y``: one trajectory (1-D arrays of equal length, at least 3 samples) or
+        lists of trajectories (rows never straddle two trajectories). ``kernel`` is used for both
+        GPs (see :class:`GaussianProcess`; ``+dir`` uses the direction of ``u`` for the transition
+        and of ``x`` for the sensor). ``n_restarts``: optimiser starts in all per GP;
+        ``max_iter``: L-BFGS iterations per start; ``blr_window``: half-width of the EKF+BLR
+        window as a fraction of each coordinate's range. Same defaults as ``hbn train``.
+        ``signals`` (optional) records where the signals come from, in the form of
+        :func:`read_mcap`'s dict, ``{"u": "/valve.pressure", "x": ..., "y": ...}`` (or with
+        ``{"name", "path", "unit"}`` dicts as values): ``hbn estimate --model`` then reads ``u``
+        and ``y`` from those message paths.
+
+        >>> import hbn
+        >>> runs = [hbn.simulate("duhem", 200, seed=s, noise_gain=1.0) for s in (1, 2)]
+        >>> m = hbn.HysteresisModel.fit([r["u"] for r in runs], [r["x"] for r in runs],
+        ...                             [r["y"] for r in runs], max_points=100, n_restarts=1)
+        >>> m.summary["trajectories"]
+        2
+        """
+        us, xs, ys = _trajectories(u, "u"), _trajectories(x, "x"), _trajectories(y, "y")
+        c = GaussianProcess._count
+        core = _hbn.HysteresisModelCore.fit(
+            us,
+            xs,
+            ys,
+            float(rate),
+            str(kernel),
+            c(max_points, "max_points"),
+            c(n_restarts, "n_restarts"),
+            c(max_iter, "max_iter"),
+            c(seed, "seed"),
+            float(blr_window),
+            _signals_json(signals),
+        )
+        return cls(core)
+
+    def estimate(self, u: Any, y: Any, mode: str = "ekf") -> Estimate:
+        """Estimates the state from the input ``u`` and the sensor output ``y`` (same length, at
+        the model's rate). ``mode``: ``"ekf"`` or ``"ekf-blr"``.
+
+        NaN/Inf samples are allowed (sensor drop-outs): the filter holds the last input or skips
+        the update and says so in ``flags``. Returns an :class:`Estimate` that unpacks as
+        ``(x, x_std)``.
+
+        >>> import hbn
+        >>> tr = hbn.simulate("duhem", 300, seed=1)
+        >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_restarts=1)
+        >>> est = m.estimate(tr["u"], tr["y"], mode="ekf-blr")
+        >>> est.x.shape == est.x_std.shape == (300,)
+        True
+        """
+        uv, yv = _vector(u, "u"), _vector(y, "y")
+        if uv.shape != yv.shape:
+            raise ValueError(f"u and y must have equal lengths (got {uv.shape[0]} and {yv.shape[0]})")
+        return Estimate(self._core.estimate(uv, yv, str(mode)), str(mode).lower())
+
+    def simulate_open_loop(self, u: Any) -> np.ndarray:
+        """Open-loop GP simulation of ``x`` from ``u`` alone (the baseline the EKF must beat).
+
+        >>> import hbn
+        >>> tr = hbn.simulate("duhem", 300, seed=1)
+        >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_restarts=1)
+        >>> m.simulate_open_loop(tr["u"]).shape
+        (300,)
+        """
+        return self._core.simulate_open_loop(_vector(u, "u"))
+
+    def save(self, path: PathLike) -> None:
+        """Writes the model (the CLI's model file format: ``hbn inspect`` / ``hbn estimate --model``
+        read it).
+
+        >>> import hbn, os, tempfile
+        >>> tr = hbn.simulate("duhem", 200, seed=1)
+        >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=80, n_restarts=1)
+        >>> p = os.path.join(tempfile.mkdtemp(), "model.hbn"); m.save(p)
+        >>> hbn.HysteresisModel.load(p).rate
+        100.0
+        """
+        self._core.save(_fspath(path))
+
+    @classmethod
+    def load(cls, path: PathLike) -> "HysteresisModel":
+        """Loads a model written by :meth:`save` or by ``hbn train --out``.
+
+        ``FileNotFoundError`` if the file is missing; ``ValueError`` if it is not an hbn model or
+        of an unsupported format version.
+        """
+        return cls(_hbn.HysteresisModelCore.load(_fspath(path)))
+
+    @property
+    def rate(self) -> float:
+        """Sample rate in Hz (estimation data must use the same)."""
+        return self._core.rate
+
+    @property
+    def signals(self) -> Dict[str, Dict[str, Optional[str]]]:
+        """Signal descriptions: ``{"input": {"name", "path", "unit"}, "state": ..., "output": ...}``."""
+        return json.loads(self._core.signals_json())
+
+    @property
+    def params(self) -> Dict[str, Any]:
+        """Training parameters (kernels, rate, max_points, ...)."""
+        return json.loads(self._core.params_json())
+
+    @property
+    def summary(self) -> Dict[str, Any]:
+        """Training summary (trajectories, rows, seconds, warnings, observability)."""
+        return json.loads(self._core.summary_json())
+
+    @property
+    def transition(self) -> GaussianProcess:
+        """The transition GP (inputs ``[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}]``, target ``x_k``)."""
+        return GaussianProcess._from_core(self._core.transition())
+
+    @property
+    def sensor(self) -> GaussianProcess:
+        """The sensor GP (inputs ``[x_{k-1}, y_{k-1}, x_k]``, target ``y_k``)."""
+        return GaussianProcess._from_core(self._core.sensor())
+
+    def ekf_config(self, mode: str = "ekf") -> Dict[str, Any]:
+        """The default filter settings the estimator uses for ``mode`` (floors, bounds, x0)."""
+        return json.loads(self._core.ekf_config_json(str(mode)))
+
+
+# ------------------------------------------------------------------------------------------------
+# Functions
+# ------------------------------------------------------------------------------------------------
+
+
+def simulate(
+    system: str, steps: int, seed: int = 0, noise_gain: float = 0.0, rate: float = 100.0
+) -> Dict[str, np.ndarray]:
+    """Simulates a hysteretic actuator/sensor system under a random bounded-increment input.
+
+    ``system``: one of :data:`SYSTEMS` (``"maxwell-slip"``, ``"generalized-pi"``, ``"bouc-wen"``,
+    ``"preisach"``, ``"duhem"``, ``"soft-actuator"``). ``noise_gain``: the thesis' noise gain
+    (0 = clean). Returns ``{"u", "x", "y"}`` arrays of ``steps`` samples (the same data as
+    ``hbn simulate`` with the same settings).
+
+    >>> import hbn
+    >>> d = hbn.simulate("bouc-wen", 100, seed=3, noise_gain=1.0)
+    >>> sorted(d), d["x"].shape
+    (['u', 'x', 'y'], (100,))
+    """
+    n = GaussianProcess._count(steps, "steps")
+    u, x, y = _hbn.simulate(str(system), n, GaussianProcess._count(seed, "seed"), float(noise_gain), float(rate))
+    return {"u": u, "x": x, "y": y}
+
+
+def list_topics(path: PathLike) -> List[Dict[str, Any]]:
+    """Topics of an MCAP log: ``[{"topic", "message_count", "encoding", "schema"}]``.
+
+    >>> import hbn  # doctest: +SKIP
+    >>> [t["topic"] for t in hbn.list_topics("run.mcap")]  # doctest: +SKIP
+    ['/u', '/x', '/y']
+    """
+    return [
+        {"topic": t, "message_count": n, "encoding": enc, "schema": schema}
+        for (t, n, enc, schema) in _hbn.list_topics(_fspath(path))
+    ]
+
+
+def read_mcap(
+    path: PathLike, signals: Mapping[str, str], rate: Optional[float] = None
+) -> Dict[str, np.ndarray]:
+    """Reads numeric signals from an MCAP log and resamples them on one uniform grid.
+
+    ``signals`` maps your names to Foxglove-style message paths, e.g.
+    ``{"u": "/valve.pressure", "y": "/joint_states.position[1]"}``. ``rate``: grid rate in Hz
+    (``None`` = the native rate of the first signal). Returns the same keys plus ``"t"`` (seconds
+    since the first grid point).
+
+    >>> import hbn  # doctest: +SKIP
+    >>> d = hbn.read_mcap("run.mcap", {"u": "/hbn/u.data", "y": "/hbn/y.data"}, rate=100.0)  # doctest: +SKIP
+    """
+    if not isinstance(signals, Mapping) or len(signals) == 0:
+        raise ValueError("signals must be a non-empty dict {name: message path}")
+    if "t" in signals:
+        raise ValueError('"t" is reserved for the time column; name the signal otherwise')
+    names = list(signals.keys())
+    t, cols, _ = _hbn.read_mcap(
+        _fspath(path), [str(signals[n]) for n in names], None if rate is None else float(rate)
+    )
+    out: Dict[str, np.ndarray] = {"t": t}
+    out.update(zip(names, cols))
+    return out

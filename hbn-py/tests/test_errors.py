@@ -1,0 +1,92 @@
+"""Bad inputs raise the right Python exceptions with clear messages (never a panic)."""
+
+import numpy as np
+import pytest
+
+import hbn
+
+
+def test_gp_bad_data():
+    X = np.linspace(0, 1, 10)
+    y = np.sin(X)
+    with pytest.raises(ValueError, match="non-finite"):
+        hbn.GaussianProcess().fit(np.where(X > 0.5, np.nan, X), y)
+    with pytest.raises(ValueError, match="same number of samples"):
+        hbn.GaussianProcess().fit(X, y[:-1])
+    with pytest.raises(ValueError, match="unknown kernel"):
+        hbn.GaussianProcess(kernel="rbf").fit(X, y)
+    with pytest.raises(ValueError, match="length scale"):
+        hbn.GaussianProcess(lengthscales=[1.0, 2.0], optimize=False).fit(X, y)
+    with pytest.raises(ValueError, match="direction"):
+        hbn.GaussianProcess(kernel="se-ard+dir").fit(X, y)  # +dir needs 2 features
+    with pytest.raises(ValueError, match="not fitted"):
+        hbn.GaussianProcess().predict([0.0])
+    gp = hbn.GaussianProcess(optimize=False).fit(X, y)
+    with pytest.raises(ValueError, match="features"):
+        gp.predict(np.zeros((2, 3)))
+    with pytest.raises(ValueError):
+        gp.predict([np.nan])
+    with pytest.raises(ValueError, match="n_restarts"):
+        hbn.GaussianProcess(n_restarts=-1).fit(X, y)
+
+
+def test_model_bad_data():
+    d = hbn.simulate("duhem", 50, seed=1)
+    with pytest.raises(ValueError, match="equal lengths"):
+        hbn.HysteresisModel.fit(d["u"], d["x"][:-1], d["y"])
+    x = d["x"].copy()
+    x[7] = np.nan
+    with pytest.raises(ValueError, match=r"x\[7\]"):
+        hbn.HysteresisModel.fit(d["u"], x, d["y"])
+    with pytest.raises(ValueError, match="unknown kernel"):
+        hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], kernel="nope")
+    with pytest.raises(ValueError, match="rate"):
+        hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], rate=-1.0)
+
+
+def test_estimate_bad_inputs(trained):
+    model, _, test = trained
+    with pytest.raises(ValueError, match="equal lengths"):
+        model.estimate(test["u"], test["y"][:-1])
+    with pytest.raises(ValueError, match="unknown mode"):
+        model.estimate(test["u"], test["y"], mode="ukf")
+
+
+def test_simulate_bad_inputs():
+    with pytest.raises(ValueError, match="unknown system"):
+        hbn.simulate("no-such-system", 10)
+    with pytest.raises(ValueError, match="noise_gain"):
+        hbn.simulate("duhem", 10, noise_gain=-1.0)
+
+
+def test_file_errors(tmp_path):
+    missing = tmp_path / "missing.hbn"
+    with pytest.raises(FileNotFoundError, match="missing.hbn"):
+        hbn.HysteresisModel.load(missing)
+    with pytest.raises(FileNotFoundError):
+        hbn.GaussianProcess.load(missing)
+    with pytest.raises(FileNotFoundError):
+        hbn.read_mcap(tmp_path / "missing.mcap", {"u": "/u.data"})
+    with pytest.raises(OSError):
+        hbn.HysteresisModel.load(tmp_path)  # a directory
+    bad = tmp_path / "bad.hbn"
+    bad.write_text('{"format": "something-else", "version": 1}')
+    with pytest.raises(ValueError, match="not an hbn model"):
+        hbn.HysteresisModel.load(bad)
+    bad.write_text("hello")
+    with pytest.raises(ValueError, match="not an hbn model"):
+        hbn.HysteresisModel.load(bad)
+    bad.write_bytes(b"\x00\xff\xfe binary")
+    with pytest.raises(ValueError, match="not an hbn model"):
+        hbn.HysteresisModel.load(bad)
+    bad.write_text('{"format": "hbn-model", "version": 99, "model": {}}')
+    with pytest.raises(ValueError, match="version 99"):
+        hbn.HysteresisModel.load(bad)
+    with pytest.raises(ValueError, match="not an hbn GP|not a JSON"):
+        hbn.GaussianProcess.load(bad)
+    notmcap = tmp_path / "x.mcap"
+    notmcap.write_text("not an mcap")
+    with pytest.raises(ValueError, match="MCAP"):
+        hbn.read_mcap(notmcap, {"u": "/u.data"})
+    with pytest.raises(ValueError):
+        hbn.read_mcap(notmcap, {})

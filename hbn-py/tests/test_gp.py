@@ -1,0 +1,137 @@
+"""GaussianProcess: scikit-learn parity at fixed hyperparameters, gradients, persistence."""
+
+import numpy as np
+import pytest
+
+import hbn
+
+sklearn = pytest.importorskip("sklearn")
+from sklearn.gaussian_process import GaussianProcessRegressor  # noqa: E402
+from sklearn.gaussian_process.kernels import RBF, ConstantKernel  # noqa: E402
+
+
+def _data(n, d, seed):
+    rng = np.random.default_rng(seed)
+    X = rng.uniform(-2.0, 2.0, size=(n, d))
+    y = np.sin(X).sum(axis=1) + 0.3 * X[:, 0] ** 2 + 0.05 * rng.standard_normal(n)
+    Xs = rng.uniform(-2.5, 2.5, size=(15, d))
+    ls = rng.uniform(0.5, 2.0, size=d)
+    return X, y, Xs, ls, float(rng.uniform(0.5, 3.0)), float(rng.uniform(1e-3, 0.1))
+
+
+@pytest.mark.parametrize("n,d,seed", [(30, 4, 0), (60, 3, 1), (25, 1, 2), (80, 2, 3)])
+def test_sklearn_parity_fixed_hyperparameters(n, d, seed):
+    X, y, Xs, ls, sf2, noise = _data(n, d, seed)
+    sk = GaussianProcessRegressor(
+        kernel=ConstantKernel(sf2, "fixed") * RBF(ls, "fixed"),
+        alpha=noise,
+        optimizer=None,
+        normalize_y=False,
+    ).fit(X, y)
+    m_sk, s_sk = sk.predict(Xs, return_std=True)
+    gp = hbn.GaussianProcess(
+        kernel="se-ard",
+        lengthscales=ls,
+        signal_variance=sf2,
+        noise_variance=noise,
+        optimize=False,
+        normalize=False,
+    ).fit(X, y)
+    m, s = gp.predict(Xs, return_std=True)
+    np.testing.assert_allclose(m, m_sk, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(s, s_sk, rtol=1e-6, atol=1e-9)
+    lml = gp.log_marginal_likelihood()
+    assert abs(lml - sk.log_marginal_likelihood_value_) <= 1e-6 * abs(sk.log_marginal_likelihood_value_)
+    # Given hyperparameters are used exactly.
+    hp = gp.hyperparameters
+    np.testing.assert_allclose(hp["lengthscales"], ls, rtol=1e-12)
+    assert hp["signal_variance"] == pytest.approx(sf2, rel=1e-12)
+    assert hp["noise_variance"] == pytest.approx(noise, rel=1e-12)
+    assert hp["theta"].shape == (1 + d,)
+    assert gp.n_support == n
+
+
+def test_normalize_and_optimize_paths_are_finite():
+    X, y, Xs, ls, sf2, noise = _data(60, 3, 7)
+    for kwargs in (
+        dict(lengthscales=ls, signal_variance=sf2, noise_variance=noise, optimize=False, normalize=True),
+        dict(optimize=True, normalize=True, n_restarts=2),
+        dict(optimize=True, normalize=False, n_restarts=1),
+    ):
+        gp = hbn.GaussianProcess(**kwargs).fit(X, y)
+        m, s = gp.predict(Xs, return_std=True)
+        assert np.all(np.isfinite(m)) and np.all(np.isfinite(s)) and np.all(s >= 0)
+        assert np.isfinite(gp.log_marginal_likelihood())
+    # The optimised model fits the training data well.
+    assert np.sqrt(np.mean((gp.predict(X) - y) ** 2)) < 0.2
+
+
+def test_optimized_normalized_prediction_close_to_sklearn_optimum():
+    X, y, Xs, _, _, _ = _data(50, 2, 11)
+    gp = hbn.GaussianProcess(n_restarts=3).fit(X, y)
+    hp = gp.hyperparameters
+    sk = GaussianProcessRegressor(
+        kernel=ConstantKernel(hp["signal_variance"], "fixed") * RBF(hp["lengthscales"], "fixed"),
+        alpha=hp["noise_variance"],
+        optimizer=None,
+        normalize_y=False,
+    ).fit(X, y - y.mean())
+    # Standardised fit = raw-unit GP around the target mean, so predictions agree closely.
+    np.testing.assert_allclose(gp.predict(Xs), sk.predict(Xs) + y.mean(), rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    "kernel,optimize",
+    [("se", False), ("se-ard", False), ("se-ard", True), ("matern52", False),
+     ("mahalanobis", False), ("warped", False), ("thesis", False), ("se-ard+dir", False),
+     ("se-ard+dir", True)],
+)
+def test_gradient_matches_finite_differences(kernel, optimize):
+    rng = np.random.default_rng(5)
+    X = rng.uniform(-1.0, 1.0, size=(40, 3))
+    y = np.sin(2 * X[:, 0]) + X[:, 1] * X[:, 2]
+    gp = hbn.GaussianProcess(
+        kernel=kernel, optimize=optimize, noise_variance=None if optimize else 1e-2,
+        n_restarts=1, max_iter=50,
+    ).fit(X, y)
+    Xs = rng.uniform(-0.8, 0.8, size=(6, 3))
+    mean, std, grad = gp.predict(Xs, return_std=True, return_grad=True)
+    assert grad.shape == (6, 3)
+    m2, g2 = gp.predict(Xs, return_grad=True)
+    np.testing.assert_array_equal(m2, mean)
+    np.testing.assert_array_equal(g2, grad)
+    h = 1e-5  # central differences: truncation ~h^2, round-off ~eps |alpha| / h
+    for j in range(3):
+        e = np.zeros(3)
+        e[j] = h
+        if kernel.endswith("+dir"):
+            # The direction sign (x0 - x1) is piecewise constant: stay on one side.
+            keep = np.abs(Xs[:, 0] - Xs[:, 1]) > 10 * h
+        else:
+            keep = np.ones(len(Xs), bool)
+        fd = (gp.predict(Xs + e) - gp.predict(Xs - e)) / (2 * h)
+        np.testing.assert_allclose(grad[keep, j], fd[keep], rtol=1e-4, atol=1e-5)
+
+
+def test_one_dimensional_inputs_and_array_likes(tmp_path):
+    x = list(np.linspace(0.0, 5.0, 30))
+    y = [float(np.sin(v)) for v in x]
+    gp = hbn.GaussianProcess().fit(x, y)
+    assert gp.n_features_in_ == 1
+    m = gp.predict([1.0, 2.0])
+    assert m.shape == (2,)
+    np.testing.assert_allclose(m, np.sin([1.0, 2.0]), atol=1e-2)
+    assert gp.predict(np.array([[1.0], [2.0]])).shape == (2,)
+    p = tmp_path / "gp.json"
+    gp.save(p)
+    back = hbn.GaussianProcess.load(p)
+    np.testing.assert_array_equal(back.predict([1.0, 2.5]), gp.predict([1.0, 2.5]))
+    assert back.log_marginal_likelihood() == gp.log_marginal_likelihood()
+    assert isinstance(gp.report_, dict) and "n_support" in gp.report_
+
+
+def test_subset_is_reported():
+    X = np.linspace(0, 10, 300)
+    gp = hbn.GaussianProcess(max_points=50, n_restarts=1).fit(X, np.sin(X))
+    assert gp.n_support == 50
+    assert any("support points" in w for w in gp.warnings_)

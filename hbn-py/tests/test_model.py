@@ -1,0 +1,107 @@
+"""HysteresisModel: accuracy against open loop, result object, persistence, several trajectories."""
+
+import numpy as np
+import pytest
+
+import hbn
+from conftest import nrmse
+
+
+def test_ekf_beats_open_loop(trained):
+    model, _, test = trained
+    est = model.estimate(test["u"], test["y"])
+    ol = model.simulate_open_loop(test["u"])
+    e_ekf, e_ol = nrmse(est.x, test["x"]), nrmse(ol, test["x"])
+    assert e_ekf < e_ol, (e_ekf, e_ol)
+    assert e_ekf < 0.1
+    blr = model.estimate(test["u"], test["y"], mode="ekf-blr")
+    assert nrmse(blr.x, test["x"]) < e_ol
+    assert np.all(np.isfinite(blr.x)) and np.all(blr.x_std > 0)
+
+
+def test_estimate_result_object(trained):
+    model, _, test = trained
+    est = model.estimate(list(test["u"]), list(test["y"]), mode="EKF")
+    x, x_std = est
+    assert x is est.x and x_std is est.x_std
+    n = len(test["u"])
+    for name in ("x", "x_std", "y_pred", "innovation", "nis", "q_x", "r", "flags", "obs_min", "obs_max"):
+        assert getattr(est, name).shape == (n,), name
+    assert est.flags.dtype == np.uint32
+    assert "initialised" in est.flag_names(0)
+    assert est.flag_counts()["initialised"] == 1
+    assert len(est) == n and est.mode == "ekf"
+    assert set(est.to_dict()) >= {"x", "x_std", "flags"}
+
+
+def test_nan_measurements_are_flagged_not_fatal(trained):
+    model, _, test = trained
+    y = test["y"].copy()
+    y[100:110] = np.nan
+    est = model.estimate(test["u"], y)
+    assert np.all(np.isfinite(est.x))
+    assert "measurement_invalid" in est.flag_names(105)
+
+
+def test_save_load_round_trip(trained, tmp_path):
+    model, _, test = trained
+    p = tmp_path / "model.hbn"
+    model.save(p)
+    back = hbn.HysteresisModel.load(str(p))
+    a = model.estimate(test["u"], test["y"])
+    b = back.estimate(test["u"], test["y"])
+    np.testing.assert_array_equal(a.x, b.x)
+    assert back.rate == model.rate == 100.0
+    assert back.signals["input"]["name"] == "u"
+    assert back.params["max_points"] == 250
+    assert back.transition.n_features_in_ == 4 and back.sensor.n_features_in_ == 3
+    assert back.ekf_config()["x0_mean"] == pytest.approx(back.summary and model.ekf_config()["x0_mean"])
+
+
+def test_several_trajectories_and_signals(tmp_path):
+    runs = [hbn.simulate("maxwell-slip", 250, seed=s, noise_gain=1.0) for s in (3, 4)]
+    m = hbn.HysteresisModel.fit(
+        [r["u"] for r in runs],
+        [r["x"] for r in runs],
+        [r["y"] for r in runs],
+        rate=50.0,
+        max_points=120,
+        n_restarts=1,
+        signals={"u": "/valve.pressure", "x": {"path": "/camera.angle", "unit": "rad"}, "y": "/strain.data"},
+    )
+    s = m.summary
+    assert s["trajectories"] == 2 and s["rows"] == 2 * 248
+    assert m.rate == 50.0
+    assert m.signals["input"]["path"] == "/valve.pressure"
+    assert m.signals["state"]["unit"] == "rad"
+    p = tmp_path / "m.hbn"
+    m.save(p)
+    assert hbn.HysteresisModel.load(p).signals == m.signals
+
+
+def test_simulate_is_deterministic():
+    a = hbn.simulate("soft-actuator", 200, seed=5, noise_gain=1.0, rate=50.0)
+    b = hbn.simulate("soft-actuator", 200, seed=5, noise_gain=1.0, rate=50.0)
+    for k in "uxy":
+        np.testing.assert_array_equal(a[k], b[k])
+        assert a[k].shape == (200,)
+    c = hbn.simulate("soft-actuator", 200, seed=6, noise_gain=1.0, rate=50.0)
+    assert not np.array_equal(a["u"], c["u"])
+
+
+def test_read_mcap_fixture(repo):
+    f = repo / "fixtures" / "json_zstd.mcap"
+    if not f.exists():
+        pytest.skip("fixture missing")
+    topics = {t["topic"]: t for t in hbn.list_topics(f)}
+    assert topics["/input"]["message_count"] == 400
+    # /input: 100 Hz, cos(2 pi 0.3 t); /sensor: 100 Hz, 0.5 t + 0.1, 5 ms later; /state 30 Hz.
+    d = hbn.read_mcap(f, {"u": "/input.data", "y": "/sensor.data"})
+    assert set(d) == {"t", "u", "y"}
+    assert d["t"][1] - d["t"][0] == pytest.approx(0.01, rel=1e-9)  # native rate of /input
+    assert d["u"].shape == d["y"].shape == d["t"].shape
+    d2 = hbn.read_mcap(str(f), {"x": "/state.data", "u": "/input.data"}, rate=50.0)
+    assert d2["t"][1] == pytest.approx(0.02)
+    assert np.all(np.abs(d2["x"]) <= 1.0 + 1e-12)
+    with pytest.raises(ValueError, match="not in"):
+        hbn.read_mcap(f, {"u": "/nope.data"})

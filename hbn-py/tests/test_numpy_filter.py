@@ -1,0 +1,45 @@
+"""The numpy baseline of benches/numpy_filter.py is the same filter as hbn's EKF."""
+
+import numpy as np
+import pytest
+
+import hbn
+import numpy_filter  # benches/, put on sys.path by conftest
+
+
+@pytest.mark.parametrize("kernel", ["se-ard+dir", "se-ard"])
+def test_numpy_filter_matches_hbn(kernel, tmp_path):
+    train = hbn.simulate("duhem", 500, seed=3, noise_gain=1.0)
+    model = hbn.HysteresisModel.fit(
+        train["u"], train["x"], train["y"], kernel=kernel, max_points=200, n_restarts=1
+    )
+    path = tmp_path / "model.hbn"
+    model.save(path)
+    test = hbn.simulate("duhem", 300, seed=4, noise_gain=1.0)
+    est = model.estimate(test["u"], test["y"])
+    x_np, std_np = numpy_filter.numpy_estimate(
+        numpy_filter.load_model_json(str(path)), test["u"], test["y"]
+    )
+    assert np.max(np.abs(x_np - est.x)) < 1e-6
+    assert np.max(np.abs(std_np - est.x_std)) < 1e-6
+
+
+def test_numpy_gp_matches_hbn_gp(trained):
+    model, _, test = trained
+    doc = numpy_filter.load_model_json  # noqa: F841 (API presence)
+    import json
+
+    tr = json.loads(model._core.to_json())["model"]["transition"]
+    ngp = numpy_filter.NumpyGP(tr)
+    X = np.column_stack([test["x"][1:-1], test["x"][:-2], test["u"][1:-1], test["u"][:-2]])[:50]
+    mean, std, grad = model.transition.predict(X, return_std=True, return_grad=True)
+    for i in range(len(X)):
+        m, v, g = ngp.predict(X[i])
+        assert abs(m - mean[i]) < 1e-9
+        assert abs(np.sqrt(v) - std[i]) < 1e-7
+        np.testing.assert_allclose(g, grad[i], atol=1e-8)
+
+
+def test_bench_compare_runs():
+    r = numpy_filter.compare(steps=150, max_points=80, train_steps=300)
+    assert r["max_abs_diff_x"] < 1e-6 and r["ratio"] > 0
