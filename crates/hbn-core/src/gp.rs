@@ -404,25 +404,25 @@ impl Accum<'_> {
     }
 }
 
-/// Dot product with four accumulators (lets the compiler vectorise).
+/// Dot product with eight independent accumulators over fixed-size chunks, so the compiler
+/// vectorises it without bounds checks (the variance's triangular solve is this loop).
 #[inline]
 pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len().min(b.len());
     let (a, b) = (&a[..n], &b[..n]);
-    let mut s = [0.0; 4];
-    let chunks = n / 4;
-    for c in 0..chunks {
-        let i = 4 * c;
-        s[0] += a[i] * b[i];
-        s[1] += a[i + 1] * b[i + 1];
-        s[2] += a[i + 2] * b[i + 2];
-        s[3] += a[i + 3] * b[i + 3];
+    let mut acc = [0.0f64; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for i in 0..8 {
+            acc[i] += x[i] * y[i];
+        }
     }
-    let mut t = (s[0] + s[1]) + (s[2] + s[3]);
-    for i in 4 * chunks..n {
-        t += a[i] * b[i];
+    let mut s = ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7]));
+    for (x, y) in ra.iter().zip(rb) {
+        s += x * y;
     }
-    t
+    s
 }
 
 /// Solves `L v = k` for a row-packed lower-triangular `L` (`v` and `k` of length `n`).

@@ -1,0 +1,376 @@
+//! Command-line definitions (clap derive).
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use hbn_io::SignalPath;
+use hbn_model::KernelChoice;
+use hbn_sim::SystemKind;
+
+/// Gaussian-process models of hysteretic soft-robot systems and a real-time EKF.
+///
+/// Train a model of actuator input u -> state x -> soft-sensor output y from MCAP logs
+/// (ROS 2 or Foxglove SDK), then estimate x from u and y alone, and evaluate the estimate.
+/// Signals are Foxglove message paths: `/topic.field.sub`, `[i]` indices, and quoted topics
+/// with dots (`"/a.b".data`).
+#[derive(Debug, Parser)]
+#[command(
+    name = "hbn",
+    version,
+    propagate_version = true,
+    after_help = "Start here:\n  hbn demo --out hbn-demo\n\nTypical workflow:\n  hbn train --log run1.mcap --log run2.mcap --out model.hbn\n  hbn estimate --model model.hbn --log test.mcap --out est.mcap\n  hbn eval --model model.hbn --log test.mcap --plot eval.png"
+)]
+pub struct Cli {
+    /// Suppress progress bars and notices (summaries still go to stdout).
+    #[arg(short, long, global = true)]
+    pub quiet: bool,
+
+    /// The subcommand.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Simulate a hysteretic system and write its u, x, y as an MCAP log.
+    Simulate(SimulateArgs),
+    /// Train a model from one or more MCAP logs (each log is one trajectory).
+    Train(TrainArgs),
+    /// Estimate the state x from the input u and sensor y of a log.
+    Estimate(EstimateArgs),
+    /// Evaluate a model on a log that also records the true state.
+    Eval(EvalArgs),
+    /// Show what a model file contains (signals, rate, kernels, hyperparameters, diagnostics).
+    Inspect(InspectArgs),
+    /// Simulate, train, estimate and evaluate end to end in one directory (under a minute).
+    Demo(DemoArgs),
+    /// Run the thesis' simulation experiment (systems x noise gains x seeds).
+    Experiment(ExperimentArgs),
+}
+
+/// Message encoding of simulated logs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum EncodingArg {
+    /// Foxglove-style JSON messages with a JSON schema.
+    Json,
+    /// ROS 2 CDR messages with a ros2msg schema.
+    Ros2,
+}
+
+/// Which clock samples are placed at.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum TimeSourceArg {
+    /// The MCAP log time (when the recorder received the message).
+    Log,
+    /// The message's `header.stamp`.
+    Header,
+}
+
+/// Estimation mode.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ModeArg {
+    /// Plain EKF with GP mean gradients as Jacobians.
+    Ekf,
+    /// EKF with local Bayesian linear regression (Jacobians and noise).
+    EkfBlr,
+}
+
+/// Estimation modes to evaluate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum EvalModeArg {
+    /// Plain EKF.
+    Ekf,
+    /// EKF with local Bayesian linear regression.
+    EkfBlr,
+    /// Both EKF modes.
+    All,
+}
+
+fn parse_system(s: &str) -> Result<SystemKind, String> {
+    s.parse::<SystemKind>().map_err(|e| e.to_string())
+}
+
+fn parse_kernel(s: &str) -> Result<KernelChoice, String> {
+    s.parse::<KernelChoice>().map_err(|e| e.to_string())
+}
+
+fn parse_path(s: &str) -> Result<SignalPath, String> {
+    s.parse::<SignalPath>().map_err(|e| e.to_string())
+}
+
+fn parse_positive(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("expected a finite number > 0, got {s:?}")),
+    }
+}
+
+fn parse_non_negative(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("expected a finite number >= 0, got {s:?}")),
+    }
+}
+
+fn systems_help() -> String {
+    SystemKind::ALL
+        .iter()
+        .map(|k| format!("  {:<15} {}", k.name(), k.description()))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// `hbn simulate`.
+#[derive(Clone, Debug, Args)]
+#[command(after_help = format!(
+    "Systems:\n{}\n\nExample:\n  hbn simulate --system bouc-wen --steps 1000 --seed 1 --noise-gain 1 --out train1.mcap\n  \
+     hbn simulate --system bouc-wen --steps 1000 --seed 2 --input-seed 1 --noise-gain 1 --out train2.mcap\n\n\
+     Topics /input, /state and /sensor carry {{header: {{stamp}}, data}}, so the signal paths are\n\
+     /input.data, /state.data and /sensor.data (the defaults of `hbn train`).",
+    systems_help()
+))]
+pub struct SimulateArgs {
+    /// System to simulate (see the list below).
+    #[arg(long, value_parser = parse_system, default_value = "bouc-wen")]
+    pub system: SystemKind,
+    /// Number of samples.
+    #[arg(long, default_value_t = 1000)]
+    pub steps: usize,
+    /// Seed of the measurement / process noise (and of the input unless --input-seed is given).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Noise gain (0 = noise-free, 1 = the thesis' nominal noise).
+    #[arg(long, default_value_t = 1.0, value_parser = parse_non_negative)]
+    pub noise_gain: f64,
+    /// Seed of the random-ramp input (default: --seed). Reuse one input seed with different
+    /// --seed values to record repeated-input training logs.
+    #[arg(long)]
+    pub input_seed: Option<u64>,
+    /// Sample rate (Hz).
+    #[arg(long, default_value_t = 100.0, value_parser = parse_positive)]
+    pub rate: f64,
+    /// Message encoding.
+    #[arg(long, value_enum, default_value_t = EncodingArg::Json)]
+    pub encoding: EncodingArg,
+    /// Largest input increment per sample.
+    #[arg(long, default_value_t = hbn_sim::DEFAULT_MAX_INCREMENT, value_parser = parse_positive)]
+    pub max_increment: f64,
+    /// Output MCAP file.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Options shared by the commands that read logs.
+#[derive(Clone, Debug, Args)]
+pub struct ReadArgs {
+    /// Clock to place samples at.
+    #[arg(long, value_enum, default_value_t = TimeSourceArg::Log)]
+    pub time_source: TimeSourceArg,
+    /// Largest allowed gap between two samples of a signal (seconds).
+    #[arg(long, default_value_t = 0.5, value_parser = parse_positive)]
+    pub max_gap: f64,
+}
+
+/// `hbn train`.
+#[derive(Clone, Debug, Args)]
+#[command(
+    after_help = "Example:\n  hbn train --log run1.mcap --log run2.mcap --input /valve.pressure \
+     --state /mocap.angle --output /strain.data --out model.hbn\n\n\
+     Each log is one trajectory; its signals are resampled to one rate (default: the native rate\n\
+     of the input signal in the first log). Kernels: se, se-ard, matern52, mahalanobis, warped\n\
+     (each optionally +dir), thesis."
+)]
+pub struct TrainArgs {
+    /// Training log (repeat for several trajectories).
+    #[arg(long = "log", required = true)]
+    pub logs: Vec<PathBuf>,
+    /// Input signal u (Foxglove message path).
+    #[arg(long, default_value = "/input.data", value_parser = parse_path)]
+    pub input: SignalPath,
+    /// State signal x (the reference the model learns).
+    #[arg(long, default_value = "/state.data", value_parser = parse_path)]
+    pub state: SignalPath,
+    /// Sensor output signal y.
+    #[arg(long, default_value = "/sensor.data", value_parser = parse_path)]
+    pub output: SignalPath,
+    /// Resampling rate (Hz); default: the input's native rate in the first log.
+    #[arg(long, value_parser = parse_positive)]
+    pub rate: Option<f64>,
+    /// Kernel of both GPs.
+    #[arg(long, value_parser = parse_kernel)]
+    pub kernel: Option<KernelChoice>,
+    /// Kernel of the transition GP (overrides --kernel).
+    #[arg(long, value_parser = parse_kernel)]
+    pub transition_kernel: Option<KernelChoice>,
+    /// Kernel of the sensor GP (overrides --kernel).
+    #[arg(long, value_parser = parse_kernel)]
+    pub sensor_kernel: Option<KernelChoice>,
+    /// Most support points per GP.
+    #[arg(long, default_value_t = 500)]
+    pub max_points: usize,
+    /// Optimiser starts per GP.
+    #[arg(long, default_value_t = 2)]
+    pub starts: usize,
+    /// L-BFGS iterations per start.
+    #[arg(long, default_value_t = 100)]
+    pub max_iters: u64,
+    /// Seed of random starts and subsets.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// BLR window as a fraction of each coordinate's range.
+    #[arg(long, default_value_t = 0.025, value_parser = parse_positive)]
+    pub blr_window: f64,
+    /// Log reading options.
+    #[command(flatten)]
+    pub read: ReadArgs,
+    /// Output model file.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// `hbn estimate`.
+#[derive(Clone, Debug, Args)]
+#[command(
+    after_help = "Example:\n  hbn estimate --model model.hbn --log test.mcap --mode ekf-blr --out est.mcap --csv est.csv\n\n\
+     The MCAP output has one JSON channel /hbn/estimate (x, x_std, y_pred, innovation, nis,\n\
+     flags, flag_names) on the input log's clock: open it in Foxglove beside the input log.\n\
+     CSV columns: t,x,x_std,y_pred,innovation,nis,flags (t in seconds from the first sample)."
+)]
+pub struct EstimateArgs {
+    /// Model file from `hbn train`.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Log with the input and sensor signals.
+    #[arg(long)]
+    pub log: PathBuf,
+    /// Estimation mode.
+    #[arg(long, value_enum, default_value_t = ModeArg::Ekf)]
+    pub mode: ModeArg,
+    /// Input signal (default: the path the model was trained with).
+    #[arg(long, value_parser = parse_path)]
+    pub input: Option<SignalPath>,
+    /// Sensor signal (default: the path the model was trained with).
+    #[arg(long, value_parser = parse_path)]
+    pub output: Option<SignalPath>,
+    /// Write the estimate as an MCAP log.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Write the estimate as CSV.
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+    /// Log reading options.
+    #[command(flatten)]
+    pub read: ReadArgs,
+}
+
+/// `hbn eval`.
+#[derive(Clone, Debug, Args)]
+#[command(
+    after_help = "Example:\n  hbn eval --model model.hbn --log test.mcap --plot eval.png\n  \
+     hbn eval --model model.hbn --log test.mcap --mode ekf --json\n\n\
+     Scores RMSE and nRMSE (RMSE / range of the reference) of each EKF mode and of the\n\
+     open-loop GP simulation against the logged state."
+)]
+pub struct EvalArgs {
+    /// Model file from `hbn train`.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Log with input, state (reference) and sensor signals.
+    #[arg(long)]
+    pub log: PathBuf,
+    /// Modes to evaluate.
+    #[arg(long, value_enum, default_value_t = EvalModeArg::All)]
+    pub mode: EvalModeArg,
+    /// Input signal (default: the model's).
+    #[arg(long, value_parser = parse_path)]
+    pub input: Option<SignalPath>,
+    /// Reference state signal (default: the model's).
+    #[arg(long, value_parser = parse_path)]
+    pub state: Option<SignalPath>,
+    /// Sensor signal (default: the model's).
+    #[arg(long, value_parser = parse_path)]
+    pub output: Option<SignalPath>,
+    /// Write a PNG plot: state vs time with a 2-sigma band, and hysteresis loops.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    /// Log reading options.
+    #[command(flatten)]
+    pub read: ReadArgs,
+}
+
+/// `hbn inspect`.
+#[derive(Clone, Debug, Args)]
+#[command(after_help = "Example:\n  hbn inspect model.hbn\n  hbn inspect model.hbn --json")]
+pub struct InspectArgs {
+    /// Model file.
+    pub model: PathBuf,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `hbn demo`.
+#[derive(Clone, Debug, Args)]
+#[command(after_help = format!(
+    "Example:\n  hbn demo --out hbn-demo --system bouc-wen\n\n\
+     Writes train-1..3.mcap (same input, independent noise), test.mcap, model.hbn,\n\
+     estimate.csv / estimate.mcap (EKF), estimate-ekf-blr.csv / .mcap and eval.png.\n\nSystems:\n{}",
+    systems_help()
+))]
+pub struct DemoArgs {
+    /// Output directory (created if missing).
+    #[arg(long, default_value = "hbn-demo")]
+    pub out: PathBuf,
+    /// System to simulate.
+    #[arg(long, value_parser = parse_system, default_value = "bouc-wen")]
+    pub system: SystemKind,
+    /// Noise gain.
+    #[arg(long, default_value_t = 1.0, value_parser = parse_non_negative)]
+    pub noise_gain: f64,
+    /// Seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+/// `hbn experiment`.
+#[derive(Clone, Debug, Args)]
+#[command(
+    after_help = "Example:\n  hbn experiment --systems maxwell-slip,generalized-pi --gains 0,0.5,1 --seeds 1,2,3 \
+     --json results.json --plot results.png\n\n\
+     Per case: train on --repeats noisy copies of one --train-steps input, test on a fresh\n\
+     --test-steps input; prints mean nRMSE per (system, gain) as a Markdown table."
+)]
+pub struct ExperimentArgs {
+    /// Systems (comma-separated).
+    #[arg(long, value_delimiter = ',', value_parser = parse_system,
+          default_value = "maxwell-slip,generalized-pi")]
+    pub systems: Vec<SystemKind>,
+    /// Noise gains (comma-separated).
+    #[arg(long, value_delimiter = ',', value_parser = parse_non_negative, default_value = "0,0.5,1")]
+    pub gains: Vec<f64>,
+    /// Seeds (comma-separated), one run each.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,3")]
+    pub seeds: Vec<u64>,
+    /// Samples of the training input.
+    #[arg(long, default_value_t = 500)]
+    pub train_steps: usize,
+    /// Repetitions of the training input (fresh noise each).
+    #[arg(long, default_value_t = 10)]
+    pub repeats: usize,
+    /// Samples of the test input.
+    #[arg(long, default_value_t = 1000)]
+    pub test_steps: usize,
+    /// Most support points per GP.
+    #[arg(long, default_value_t = 500)]
+    pub max_points: usize,
+    /// Write all rows as JSON.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write a PNG plot of nRMSE vs noise gain.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+}

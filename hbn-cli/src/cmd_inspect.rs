@@ -1,0 +1,181 @@
+//! `hbn inspect`: what a model file contains.
+
+use hbn_gp::GaussianProcess;
+use hbn_model::{HbnModel, KernelChoice, LocalData};
+use serde_json::{Value, json};
+
+use crate::Ui;
+use crate::cli::InspectArgs;
+use crate::cmd_estimate::load_model;
+
+fn gp_json(gp: &GaussianProcess, kernel: KernelChoice) -> Value {
+    let r = gp.report();
+    json!({
+        "kernel": kernel.to_string(),
+        "signal_variance": gp.signal_variance(),
+        "length_scales": gp.length_scales(),
+        "noise_variance": gp.noise_variance(),
+        "support_points": gp.n_support(),
+        "log_marginal_likelihood": gp.log_marginal_likelihood(),
+        "training": {
+            "samples": r.n_samples,
+            "support_points": r.n_support,
+            "subset_policy": r.subset_policy.map(|p| format!("{p:?}")),
+            "starts": r.starts,
+            "best_start": r.best_start,
+            "evaluations": r.evaluations,
+            "jitter_evaluations": r.jitter_evaluations,
+            "max_jitter": r.max_jitter,
+            "final_jitter": r.final_jitter,
+            "seconds": r.seconds,
+        }
+    })
+}
+
+fn blr_json(l: &LocalData) -> Value {
+    json!({
+        "samples": l.len(),
+        "cells": l.cells(),
+        "max_cell": l.max_cell(),
+        "window": l.window_fraction(),
+    })
+}
+
+/// The model description as JSON.
+pub fn model_json(model: &HbnModel) -> Value {
+    let p = model.params();
+    let s = model.summary();
+    let (us, xs, ys) = model.stats();
+    json!({
+        "signals": model.signals(),
+        "rate_hz": model.rate_hz(),
+        "training_ranges": {"u": us, "x": xs, "y": ys},
+        "transition": gp_json(model.transition(), p.transition_kernel),
+        "sensor": gp_json(model.sensor(), p.sensor_kernel),
+        "blr": {
+            "transition": blr_json(model.transition_local()),
+            "sensor": blr_json(model.sensor_local()),
+        },
+        "summary": {
+            "trajectories": s.trajectories,
+            "rows": s.rows,
+            "seconds": s.seconds,
+        },
+        "observability": s.observability,
+        "warnings": s.warnings,
+    })
+}
+
+fn fmt_list(v: &[f64]) -> String {
+    v.iter()
+        .map(|x| format!("{x:.4e}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn gp_text(name: &str, gp: &GaussianProcess, kernel: KernelChoice) -> String {
+    let r = gp.report();
+    let failed = r.starts.iter().filter(|s| s.error.is_some()).count();
+    let mut s = format!(
+        "{name} GP\n  kernel            {kernel}\n  signal variance   {:.4e}\n  length scales     [{}]\n  \
+         noise variance    {:.4e}\n  support points    {} of {} samples",
+        gp.signal_variance(),
+        fmt_list(&gp.length_scales()),
+        gp.noise_variance(),
+        gp.n_support(),
+        r.n_samples,
+    );
+    if let Some(p) = r.subset_policy {
+        s.push_str(&format!(" (subset: {p:?})"));
+    }
+    s.push_str(&format!(
+        "\n  training LML      {:.3}\n  starts            {} ({} failed, best {}), {} evaluations, {:.2} s\n  \
+         jitter            {} evaluations needed it (max {:.1e}), final {:.1e}\n",
+        gp.log_marginal_likelihood(),
+        r.starts.len(),
+        failed,
+        r.best_start
+            .map_or_else(|| "-".to_owned(), |b| (b + 1).to_string()),
+        r.evaluations,
+        r.seconds,
+        r.jitter_evaluations,
+        r.max_jitter,
+        r.final_jitter,
+    ));
+    s
+}
+
+/// The model description as text.
+pub fn model_text(model: &HbnModel, file: &std::path::Path) -> String {
+    let p = model.params();
+    let s = model.summary();
+    let sig = model.signals();
+    let path =
+        |i: &hbn_model::SignalInfo| i.path.clone().unwrap_or_else(|| "(not from a log)".into());
+    let mut t = format!(
+        "model `{}`\nsignals\n  input  {} = {}\n  state  {} = {}\n  output {} = {}\nrate {:.1} Hz\n\
+         trained on {} trajectories, {} rows per GP, {:.1} s\n\n",
+        file.display(),
+        sig.input.name,
+        path(&sig.input),
+        sig.state.name,
+        path(&sig.state),
+        sig.output.name,
+        path(&sig.output),
+        model.rate_hz(),
+        s.trajectories,
+        s.rows,
+        s.seconds,
+    );
+    t.push_str(&gp_text(
+        "transition",
+        model.transition(),
+        p.transition_kernel,
+    ));
+    t.push('\n');
+    t.push_str(&gp_text("sensor", model.sensor(), p.sensor_kernel));
+    t.push_str("\nBLR index (EKF+BLR)\n");
+    for (n, l) in [
+        ("transition", model.transition_local()),
+        ("sensor", model.sensor_local()),
+    ] {
+        t.push_str(&format!(
+            "  {n:<10} {} samples in {} cells (max {} per cell), window +-{} of range\n",
+            l.len(),
+            l.cells(),
+            l.max_cell(),
+            l.window_fraction()
+        ));
+    }
+    match &s.observability {
+        Some(o) => t.push_str(&format!(
+            "\nobservability (first training trajectory)\n  lambda_min: min {:.3e}, median {:.3e}; lambda_max {:.3e}; \
+             near-unobservable {:.1}%\n",
+            o.min,
+            o.median,
+            o.max,
+            100.0 * o.near_unobservable
+        )),
+        None => t.push_str("\nobservability: not computed\n"),
+    }
+    if s.warnings.is_empty() {
+        t.push_str("\nno warnings\n");
+    } else {
+        t.push_str("\nwarnings\n");
+        for w in &s.warnings {
+            t.push_str(&format!("  {w}\n"));
+        }
+    }
+    t
+}
+
+/// Runs `hbn inspect`.
+pub fn run(ui: &mut Ui<'_>, args: &InspectArgs) -> anyhow::Result<()> {
+    let model = load_model(&args.model)?;
+    if args.json {
+        let text = serde_json::to_string_pretty(&model_json(&model))?;
+        ui.line(text)
+    } else {
+        ui.print(model_text(&model, &args.model))
+    }
+}
