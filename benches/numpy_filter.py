@@ -157,6 +157,8 @@ def ekf_config(model: Dict[str, Any]) -> Dict[str, Any]:
     return {
         "q_floor": 1e-10 * sx * sx,
         "r_floor": 1e-10 * sy * sy,
+        "qx_model_floor": float(model["transition"].get("loo_error_variance", 0.0)),
+        "r_model_floor": float(model["sensor"].get("loo_error_variance", 0.0)),
         "p_min": 1e-14 * min(sx, sy) ** 2,
         "p_max": 4.0 * max(sx, sy) ** 2,
         "jac_max": 20.0 * max(sy / sx, sx / sy, 1.0),
@@ -213,7 +215,7 @@ class NumpyEkf:
     def _initialise(self, u_k: float, y_k: float) -> Tuple[float, float]:
         c = self.cfg
         u0 = u_k if math.isfinite(u_k) else 0.0
-        r = max(c["r_floor"], self.se.noise_var_raw)
+        r = max(c["r_floor"], self.se.noise_var_raw, c["r_model_floor"])
         if math.isfinite(y_k):
             s0, s_var = _clamp(y_k, c["y_bounds"]), r
         else:
@@ -239,7 +241,7 @@ class NumpyEkf:
         z, p = st["z"], st["p"]
         x1, x2, s1 = z[0], z[1], z[2]
         jm = c["jac_max"]
-        r = max(c["r_floor"], self.se.noise_var_raw)
+        r = max(c["r_floor"], self.se.noise_var_raw, c["r_model_floor"])
         t = self._linearise(self.tr, np.array([x1, x2, st["u_last"], st["u_prev"]]))
         if t is not None:
             xk = _clamp(t[0], c["x_bounds"])
@@ -249,15 +251,15 @@ class NumpyEkf:
                 cc, e, f = (_clamp_jac(s[2][0], jm), _clamp_jac(s[2][1], jm), _clamp_jac(s[2][2], jm))
                 fm = np.array([[a1, a2, 0.0], [1.0, 0.0, 0.0], [cc + f * a1, f * a2, e]])
                 g = np.array([1.0, 0.0, f])
-                q_x = _floor(self.tr.noise_var_raw + t[1], c["q_floor"])
+                q_x = _floor(max(self.tr.noise_var_raw + t[1], c["qx_model_floor"]), c["q_floor"])
                 q_s = _floor(s[1], c["q_floor"])
                 s_pred = _clamp(s[0], c["y_bounds"])
                 z = np.array([xk, x1, s_pred])
-                r = _floor(self.se.noise_var_raw, c["r_floor"])
+                r = _floor(max(self.se.noise_var_raw, c["r_model_floor"]), c["r_floor"])
             else:
                 fm = np.array([[t[2][0], t[2][1], 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
                 g = np.array([1.0, 0.0, 0.0])
-                q_x = _floor(self.tr.noise_var_raw + t[1], c["q_floor"])
+                q_x = _floor(max(self.tr.noise_var_raw + t[1], c["qx_model_floor"]), c["q_floor"])
                 q_s = c["p_max"] * 0.01
                 z = np.array([xk, x1, s1])
         else:

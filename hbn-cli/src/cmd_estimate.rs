@@ -30,10 +30,7 @@ pub fn mode(m: ModeArg) -> Mode {
 
 /// CLI name of a mode.
 pub fn mode_name(m: Mode) -> &'static str {
-    match m {
-        Mode::Ekf => "ekf",
-        Mode::EkfBlr => "ekf-blr",
-    }
+    m.name()
 }
 
 /// Loads a model, naming the file in errors.

@@ -50,15 +50,7 @@ fn gp_err(e: GpError) -> PyErr {
 
 fn model_err(e: ModelError) -> PyErr {
     match &e {
-        // `ModelError::Io` keeps only the message; a path that does not exist is ENOENT.
-        ModelError::Io { path, .. } => {
-            let kind = if Path::new(path).exists() {
-                std::io::ErrorKind::Other
-            } else {
-                std::io::ErrorKind::NotFound
-            };
-            os_error(kind, e.to_string())
-        }
+        ModelError::Io { source, .. } => os_error(source.kind(), e.to_string()),
         ModelError::Gp {
             source: GpError::Io { source, .. },
             ..
@@ -109,20 +101,11 @@ fn kernel_choice(kernel: &str) -> PyResult<KernelChoice> {
 }
 
 fn parse_mode(mode: &str) -> PyResult<Mode> {
-    match mode.trim().to_ascii_lowercase().as_str() {
-        "ekf" => Ok(Mode::Ekf),
-        "ekf-blr" | "ekf+blr" | "ekf_blr" => Ok(Mode::EkfBlr),
-        _ => Err(PyValueError::new_err(format!(
-            "unknown mode {mode:?}; choose \"ekf\" or \"ekf-blr\""
-        ))),
-    }
+    Mode::from_str(mode).map_err(|e| PyValueError::new_err(format!("{mode:?}: {e}")))
 }
 
 fn mode_name(mode: Mode) -> &'static str {
-    match mode {
-        Mode::Ekf => "ekf",
-        Mode::EkfBlr => "ekf-blr",
-    }
+    mode.name()
 }
 
 fn json<T: serde::Serialize>(v: &T) -> PyResult<String> {
@@ -408,9 +391,7 @@ impl HysteresisModelCore {
         u: PyReadonlyArray1<'_, f64>,
     ) -> PyResult<Arr<'py>> {
         let u = slice(&u, "u")?.to_vec();
-        let x = detached(py, || {
-            self.inner.simulate_open_loop(&u).map_err(model_err)
-        })?;
+        let x = detached(py, || self.inner.simulate_open_loop(&u).map_err(model_err))?;
         Ok(PyArray1::from_vec(py, x))
     }
 

@@ -114,6 +114,42 @@ pub enum Mode {
     EkfBlr,
 }
 
+impl Mode {
+    /// The mode's name: `ekf` or `ekf-blr` (what [`core::str::FromStr`] accepts).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Mode::Ekf => "ekf",
+            Mode::EkfBlr => "ekf-blr",
+        }
+    }
+}
+
+impl core::fmt::Display for Mode {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl core::str::FromStr for Mode {
+    type Err = CoreError;
+    /// Parses `ekf` or `ekf-blr` (also `ekf+blr`, `ekf_blr`; case-insensitive).
+    fn from_str(s: &str) -> Result<Self, CoreError> {
+        let t = s.trim();
+        if t.eq_ignore_ascii_case("ekf") {
+            Ok(Mode::Ekf)
+        } else if ["ekf-blr", "ekf+blr", "ekf_blr"]
+            .iter()
+            .any(|n| t.eq_ignore_ascii_case(n))
+        {
+            Ok(Mode::EkfBlr)
+        } else {
+            Err(CoreError::InvalidSpec(
+                "unknown mode; choose \"ekf\" or \"ekf-blr\"",
+            ))
+        }
+    }
+}
+
 /// Filter settings, in the raw units of the signals. Checked once by [`Estimator::new`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -124,6 +160,11 @@ pub struct EkfConfig {
     pub q_floor: f64,
     /// Floor of the measurement noise variance (`r` of Eq. 24).
     pub r_floor: f64,
+    /// Model-error floor of `q_x` (the transition GP's leave-one-out error variance). Not a
+    /// guard: applying it sets no flag.
+    pub qx_model_floor: f64,
+    /// Model-error floor of `R` (the sensor GP's leave-one-out error variance). Not a guard.
+    pub r_model_floor: f64,
     /// Lower eigenvalue bound of P (`p1`).
     pub p_min: f64,
     /// Upper eigenvalue bound of P (`p2`).
@@ -156,6 +197,15 @@ impl EkfConfig {
         {
             return Err(CoreError::InvalidSpec(
                 "q_floor, r_floor, p_min, p_max and jac_max must be finite and > 0",
+            ));
+        }
+        if !(self.qx_model_floor.is_finite()
+            && self.qx_model_floor >= 0.0
+            && self.r_model_floor.is_finite()
+            && self.r_model_floor >= 0.0)
+        {
+            return Err(CoreError::InvalidSpec(
+                "model-error floors must be finite and >= 0",
             ));
         }
         if self.p_min >= self.p_max {
@@ -364,7 +414,10 @@ impl<'m, 's> Estimator<'m, 's> {
         let a_in = [x1, x2, st.u_last, st.u_prev];
         let tr = self.linearise(true, &a_in, &mut flags);
         let (f_mat, g_vec, q_x, q_s, s_pred);
-        let mut r = cfg.r_floor.max(self.model.sensor.noise_variance());
+        let mut r = cfg
+            .r_floor
+            .max(self.model.sensor.noise_variance())
+            .max(cfg.r_model_floor);
         match tr {
             Some(t) => {
                 let xk = clamp_flag(t.mean, cfg.x_bounds, &mut flags);
@@ -378,17 +431,25 @@ impl<'m, 's> Estimator<'m, 's> {
                         let f = clamp_jac(s.grad[2], cfg.jac_max, &mut flags);
                         f_mat = Matrix3::new(a1, a2, 0.0, 1.0, 0.0, 0.0, c + f * a1, f * a2, e);
                         g_vec = Vector3::new(1.0, 0.0, f);
-                        q_x = floor_flag(t.noise + t.epistemic, cfg.q_floor, &mut flags);
+                        q_x = floor_flag(
+                            (t.noise + t.epistemic).max(cfg.qx_model_floor),
+                            cfg.q_floor,
+                            &mut flags,
+                        );
                         q_s = floor_flag(s.epistemic, cfg.q_floor, &mut flags);
                         s_pred = clamp_flag(s.mean, cfg.y_bounds, &mut flags);
                         st.z = Vector3::new(xk, x1, s_pred);
-                        r = floor_flag(s.noise, cfg.r_floor, &mut flags);
+                        r = floor_flag(s.noise.max(cfg.r_model_floor), cfg.r_floor, &mut flags);
                     }
                     None => {
                         f_mat =
                             Matrix3::new(t.grad[0], t.grad[1], 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
                         g_vec = Vector3::new(1.0, 0.0, 0.0);
-                        q_x = floor_flag(t.noise + t.epistemic, cfg.q_floor, &mut flags);
+                        q_x = floor_flag(
+                            (t.noise + t.epistemic).max(cfg.qx_model_floor),
+                            cfg.q_floor,
+                            &mut flags,
+                        );
                         q_s = cfg.p_max * 0.01;
                         s_pred = s1;
                         st.z = Vector3::new(xk, x1, s1);
@@ -439,7 +500,10 @@ impl<'m, 's> Estimator<'m, 's> {
             flags |= Flags::INPUT_INVALID;
             0.0
         };
-        let r = cfg.r_floor.max(self.model.sensor.noise_variance());
+        let r = cfg
+            .r_floor
+            .max(self.model.sensor.noise_variance())
+            .max(cfg.r_model_floor);
         let s0 = if y_k.is_finite() {
             clamp_flag(y_k, cfg.y_bounds, &mut flags)
         } else {

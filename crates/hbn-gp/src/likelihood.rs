@@ -34,10 +34,16 @@ pub struct LikelihoodData<'a> {
     pub y: &'a [f64],
 }
 
+/// Log-parameters are kept inside `[-LOG_BOUND, LOG_BOUND]` (scikit-learn's default bounds
+/// `1e-5..1e5`) by a smooth quadratic penalty on the optimised objective, so that length scales
+/// and the signal variance cannot run off to values that make `K` numerically singular.
+pub const LOG_BOUND: f64 = 11.512_925_464_970_229;
+const PENALTY: f64 = 1e4;
+
 /// Value and gradient of the log marginal likelihood at one parameter vector.
 #[derive(Clone, Debug)]
 pub struct Evaluation {
-    /// Log marginal likelihood.
+    /// Log marginal likelihood minus the bound penalty (what the optimiser maximises).
     pub lml: f64,
     /// Gradient with respect to the optimised vector (kernel theta, then the noise parameter).
     pub grad: Vec<f64>,
@@ -221,8 +227,17 @@ impl<'a> Likelihood<'a> {
         let mut grad = partial;
         let trace_w: f64 = (0..n).map(|i| alpha[i] * alpha[i] - kinv[(i, i)]).sum();
         grad.push(0.5 * trace_w * p[n_k].exp());
+        // Soft bounds on every log-parameter (warp shifts a are not logs but share the bound).
+        let mut penalty = 0.0;
+        for (g, &v) in grad.iter_mut().zip(p) {
+            let excess = v.abs() - LOG_BOUND;
+            if excess > 0.0 {
+                penalty += PENALTY * excess * excess;
+                *g -= 2.0 * PENALTY * excess * v.signum();
+            }
+        }
         let ev = Evaluation {
-            lml: solved.lml,
+            lml: solved.lml - penalty,
             grad,
             jitter: solved.factor.jitter,
         };

@@ -102,6 +102,9 @@ pub struct GaussianProcess {
     pub(crate) alpha: Vec<f64>,
     pub(crate) chol_packed: Vec<f64>,
     pub(crate) log_marginal_likelihood: f64,
+    /// Mean squared leave-one-out prediction error (raw units).
+    #[serde(default)]
+    pub(crate) loo_error_variance: f64,
     pub(crate) report: TrainingReport,
 }
 
@@ -208,6 +211,13 @@ impl GaussianProcess {
     /// (equal to the raw-target value when `normalize` is off).
     pub fn log_marginal_likelihood(&self) -> f64 {
         self.log_marginal_likelihood
+    }
+    /// Mean squared leave-one-out prediction error over the support points, in raw output
+    /// units: `mean_i (alpha_i / [K_y^-1]_ii)^2`. Unlike the noise hyperparameter it includes
+    /// model mismatch (e.g. kinks the kernel cannot follow), so the EKF uses it as a floor of
+    /// its noise variances.
+    pub fn loo_error_variance(&self) -> f64 {
+        self.loo_error_variance
     }
     /// What training did.
     pub fn report(&self) -> &TrainingReport {

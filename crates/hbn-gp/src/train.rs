@@ -216,6 +216,12 @@ pub fn fit_observed(
         kernel.features(row, &mut u, &mut jac);
         features.extend_from_slice(&u[..d]);
     }
+    // Leave-one-out residuals e_i = alpha_i / [K_y^-1]_ii (Rasmussen & Williams Eq. 5.12).
+    let kinv = solved.factor.inverse();
+    let loo_std = (0..n)
+        .map(|i| (solved.alpha[i] / kinv[(i, i)]).powi(2))
+        .sum::<f64>()
+        / n as f64;
     report.seconds = t0.elapsed().as_secs_f64();
     Ok(GaussianProcess {
         kernel: spec,
@@ -238,6 +244,7 @@ pub fn fit_observed(
         alpha: solved.alpha,
         chol_packed,
         log_marginal_likelihood: solved.lml,
+        loo_error_variance: loo_std * output_scale * output_scale,
         report,
     })
 }

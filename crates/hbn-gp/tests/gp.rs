@@ -316,3 +316,25 @@ fn bad_input_gives_typed_errors() {
         Err(GpError::Core(_))
     ));
 }
+
+/// The optimiser keeps log-hyperparameters inside the soft bounds even on data that push a
+/// Matern kernel towards huge length scales (smooth data, tiny noise).
+#[test]
+fn hyperparameters_stay_bounded() {
+    let x: Vec<f64> = (0..120).map(|i| i as f64 / 119.0).collect();
+    let y: Vec<f64> = x.iter().map(|v| 2.0 * v + 0.5).collect();
+    let mut params = GpParams::new(KernelSpec {
+        profile: Profile::Matern52,
+        ..KernelSpec::se_ard(1)
+    });
+    params.n_starts = 3;
+    let gp = fit(&params, &x, &y).unwrap();
+    let bound = hbn_gp::likelihood::LOG_BOUND + 0.5;
+    assert!(
+        gp.theta().iter().all(|t| t.abs() <= bound),
+        "theta {:?}",
+        gp.theta()
+    );
+    let p = gp.predict(&[0.37], Want::ALL).unwrap();
+    assert!((p.mean - 1.24).abs() < 1e-3, "{}", p.mean);
+}

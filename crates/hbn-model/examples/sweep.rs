@@ -4,20 +4,29 @@ use hbn_model::experiment::{ExperimentConfig, markdown_table, run};
 use hbn_sim::SystemKind;
 
 fn list<T: std::str::FromStr>(arg: Option<&String>, default: Vec<T>) -> Vec<T> {
-    arg.map(|s| s.split(',').filter_map(|v| v.parse().ok()).collect()).unwrap_or(default)
+    arg.map(|s| s.split(',').filter_map(|v| v.parse().ok()).collect())
+        .unwrap_or(default)
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
-    let out = args.get(1).ok_or("usage: sweep OUT.json [systems] [gains] [seeds]")?;
+    let out = args
+        .get(1)
+        .ok_or("usage: sweep OUT.json [systems] [gains] [seeds]")?;
     let cfg = ExperimentConfig {
-        systems: list(args.get(2), vec![SystemKind::MaxwellSlip, SystemKind::GeneralizedPi]),
+        systems: list(
+            args.get(2),
+            vec![SystemKind::MaxwellSlip, SystemKind::GeneralizedPi],
+        ),
         noise_gains: list(args.get(3), vec![0.0, 0.5, 1.0, 2.0, 5.0, 10.0]),
         seeds: list(args.get(4), vec![1, 2, 3]),
         ..ExperimentConfig::default()
     };
     let rows = run(&cfg, &mut |r| {
-        eprintln!("{} gain {} seed {}: ekf {:.4} ekf+blr {:.4} open {:.4}", r.system, r.noise_gain, r.seed, r.nrmse_ekf, r.nrmse_ekf_blr, r.nrmse_open_loop)
+        eprintln!(
+            "{} gain {} seed {}: ekf {:.4} ekf+blr {:.4} open {:.4}",
+            r.system, r.noise_gain, r.seed, r.nrmse_ekf, r.nrmse_ekf_blr, r.nrmse_open_loop
+        )
     })?;
     std::fs::write(out, serde_json::to_string_pretty(&rows)?)?;
     println!("{}", markdown_table(&rows));

@@ -57,12 +57,13 @@ pub enum ModelError {
     #[error("core: {0}")]
     Core(#[from] hbn_core::CoreError),
     /// Reading or writing a file.
-    #[error("{path}: {reason}")]
+    #[error("{path}: {source}")]
     Io {
         /// The file.
         path: String,
-        /// What went wrong.
-        reason: String,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
     },
     /// A file that is not a model of a supported version.
     #[error("{path}: {reason}")]
