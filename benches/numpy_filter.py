@@ -201,6 +201,21 @@ def _bound_cov(p: np.ndarray, lo: float, hi: float) -> np.ndarray:
     return (out + out.T) * 0.5
 
 
+def initial_state(model: Dict[str, Any], y0: float) -> Optional[Tuple[float, float]]:
+    """``HbnModel::initial_state``: mean and variance of x over the 50 training samples whose y
+    is nearest ``y0`` (ties by index)."""
+    pairs = np.asarray(model.get("init_pairs", []), dtype=float).reshape(-1, 2)
+    if not math.isfinite(y0) or len(pairs) == 0:
+        return None
+    dist = np.abs(pairs[:, 0] - y0)
+    near = np.lexsort((np.arange(len(pairs)), dist))[:50]
+    xs = pairs[near, 1]
+    mean = float(xs.sum() / len(xs))
+    var = float(((xs - mean) ** 2).sum() / len(xs))
+    sx = _span(model["x_stats"])
+    return mean, max(var, 1e-4 * sx * sx)
+
+
 class NumpyEkf:
     """The plain EKF of hbn on a model file's dict."""
 
@@ -301,6 +316,10 @@ class NumpyEkf:
 def numpy_estimate(model: Dict[str, Any], u: np.ndarray, y: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     """Runs the numpy EKF over a sequence: ``(x, x_std)``."""
     ekf = NumpyEkf(model)
+    finite = [v for v in y if math.isfinite(v)]
+    init = initial_state(model, float(finite[0])) if finite else None
+    if init is not None:
+        ekf.cfg["x0_mean"], ekf.cfg["x0_var"] = init
     n = len(u)
     x = np.empty(n)
     xs = np.empty(n)
@@ -327,7 +346,7 @@ def compare(
     steps: int = 2000,
     max_points: int = 500,
     system: str = "duhem",
-    kernel: str = "se-ard+dir",
+    kernel: str = "matern52",
     train_steps: int = 1000,
     seed: int = 1,
     n_restarts: int = 1,
@@ -376,7 +395,7 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=2000, help="test samples (default 2000)")
     ap.add_argument("--max-points", type=int, default=500, help="support points per GP (default 500)")
     ap.add_argument("--system", default="duhem", help="simulated system (default duhem)")
-    ap.add_argument("--kernel", default="se-ard+dir", help="kernel of both GPs (default se-ard+dir)")
+    ap.add_argument("--kernel", default="matern52", help="kernel of both GPs (default matern52, the hbn default)")
     ap.add_argument("--train-steps", type=int, default=1000, help="training samples (default 1000)")
     ap.add_argument("--model", default=None, help="use this model file instead of training one")
     a = ap.parse_args(argv)

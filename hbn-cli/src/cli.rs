@@ -179,7 +179,7 @@ pub struct ReadArgs {
      --state /mocap.angle --output /strain.data --out model.hbn\n\n\
      Each log is one trajectory; its signals are resampled to one rate (default: the native rate\n\
      of the input signal in the first log). Kernels: se, se-ard, matern52, mahalanobis, warped\n\
-     (each optionally +dir), thesis."
+     (each optionally +dir), thesis; default matern52."
 )]
 pub struct TrainArgs {
     /// Training log (repeat for several trajectories).
@@ -197,7 +197,7 @@ pub struct TrainArgs {
     /// Resampling rate (Hz); default: the input's native rate in the first log.
     #[arg(long, value_parser = parse_positive)]
     pub rate: Option<f64>,
-    /// Kernel of both GPs.
+    /// Kernel of both GPs (default matern52).
     #[arg(long, value_parser = parse_kernel)]
     pub kernel: Option<KernelChoice>,
     /// Kernel of the transition GP (overrides --kernel).

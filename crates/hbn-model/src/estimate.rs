@@ -102,7 +102,7 @@ impl Estimate {
 impl HbnModel {
     /// Runs the filter over a sequence with the default settings of `mode`.
     pub fn estimate(&self, u: &[f64], y: &[f64], mode: Mode) -> Result<Estimate, ModelError> {
-        self.estimate_with(u, y, &self.ekf_config(mode))
+        self.estimate_with(u, y, &self.ekf_config_for(mode, y))
     }
 
     /// Runs the filter with explicit settings.

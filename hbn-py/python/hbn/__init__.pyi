@@ -117,7 +117,7 @@ class HysteresisModel:
         x: Union[ArrayLike, Sequence[ArrayLike]],
         y: Union[ArrayLike, Sequence[ArrayLike]],
         rate: float = 100.0,
-        kernel: str = "se-ard+dir",
+        kernel: str = "matern52",
         max_points: int = 500,
         n_restarts: int = 2,
         seed: int = 0,
