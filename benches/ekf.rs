@@ -68,6 +68,7 @@ fn bench_step(c: &mut Criterion) {
         });
     }
     g.finish();
+    }
 }
 
 criterion_group!(benches, bench_step);

@@ -198,11 +198,15 @@ impl<'a> Likelihood<'a> {
         let kinv = solved.factor.inverse();
         let alpha = &solved.alpha;
         // 1/2 sum_ij W_ij dK_ij/dtheta with W = alpha alpha^T - K^{-1}, over the lower triangle.
-        let partial = (0..n)
+        // Fixed row blocks summed in index order: the result does not depend on how rayon
+        // schedules the blocks, so training is bit-for-bit reproducible.
+        const BLOCK: usize = 16;
+        let blocks: Vec<Vec<f64>> = (0..n.div_ceil(BLOCK))
             .into_par_iter()
-            .fold(
-                || (vec![0.0; n_k], vec![0.0; n_k]),
-                |(mut acc, mut g), i| {
+            .map(|b| {
+                let mut acc = vec![0.0; n_k];
+                let mut g = vec![0.0; n_k];
+                for i in b * BLOCK..((b + 1) * BLOCK).min(n) {
                     for j in 0..=i {
                         let w = alpha[i] * alpha[j] - kinv[(i, j)];
                         let w = if i == j { 0.5 * w } else { w };
@@ -211,19 +215,16 @@ impl<'a> Likelihood<'a> {
                             *a += w * gv;
                         }
                     }
-                    (acc, g)
-                },
-            )
-            .map(|(acc, _)| acc)
-            .reduce(
-                || vec![0.0; n_k],
-                |mut a, b| {
-                    for (x, y) in a.iter_mut().zip(&b) {
-                        *x += y;
-                    }
-                    a
-                },
-            );
+                }
+                acc
+            })
+            .collect();
+        let mut partial = vec![0.0; n_k];
+        for block in &blocks {
+            for (x, y) in partial.iter_mut().zip(block) {
+                *x += y;
+            }
+        }
         let mut grad = partial;
         let trace_w: f64 = (0..n).map(|i| alpha[i] * alpha[i] - kinv[(i, i)]).sum();
         grad.push(0.5 * trace_w * p[n_k].exp());

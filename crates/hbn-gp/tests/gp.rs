@@ -338,3 +338,18 @@ fn hyperparameters_stay_bounded() {
     let p = gp.predict(&[0.37], Want::ALL).unwrap();
     assert!((p.mean - 1.24).abs() < 1e-3, "{}", p.mean);
 }
+
+/// Training is bit-for-bit reproducible (parallel reductions have a fixed order).
+#[test]
+fn training_is_deterministic() {
+    let (x, y) = toy(200, 3, 8);
+    let mut params = GpParams::new(KernelSpec::se_ard(3));
+    params.n_starts = 2;
+    let a = fit(&params, &x, &y).unwrap();
+    let b = fit(&params, &x, &y).unwrap();
+    assert_eq!(a.theta(), b.theta());
+    assert_eq!(
+        a.log_marginal_likelihood().to_bits(),
+        b.log_marginal_likelihood().to_bits()
+    );
+}
