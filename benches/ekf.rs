@@ -33,41 +33,39 @@ fn bench_step(c: &mut Criterion) {
             y: &t.y,
         })
         .collect();
-    let params = HbnParams {
-        max_points: 500,
-        n_starts: 1,
-        max_iters: 50,
-        ..HbnParams::default()
-    };
-    let model = HbnModel::fit(&seqs, &params).unwrap();
-    assert_eq!(model.transition().n_support(), 500);
-    assert_eq!(model.sensor().n_support(), 500);
     let test_u = generate_input(InputKind::RandomRamps, 5000, 0.02, 9).unwrap();
-    let test = simulate(
-        &SimConfig {
-            system,
-            noise_gain: 1.0,
-            rate_hz: 100.0,
-            seed: 99,
-        },
-        &test_u,
-    )
-    .unwrap();
-    let view = model.view().unwrap();
-    let mut g = c.benchmark_group("ekf_step_n500");
-    for (name, mode) in [("ekf", Mode::Ekf), ("ekf_blr", Mode::EkfBlr)] {
-        let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
-        let mut est = Estimator::new(view, model.ekf_config(mode), &mut scratch).unwrap();
-        let mut k = 0usize;
-        g.bench_function(name, |b| {
-            b.iter(|| {
-                let out = est.step(black_box(test.u[k]), black_box(test.y[k]));
-                k = (k + 1) % test.u.len();
-                out
-            })
-        });
-    }
-    g.finish();
+    let sim = SimConfig {
+        system,
+        noise_gain: 1.0,
+        rate_hz: 100.0,
+        seed: 99,
+    };
+    let test = simulate(&sim, &test_u).unwrap();
+    for n in [500usize, 150] {
+        let params = HbnParams {
+            max_points: n,
+            n_starts: 1,
+            max_iters: 50,
+            ..HbnParams::default()
+        };
+        let model = HbnModel::fit(&seqs, &params).unwrap();
+        assert_eq!(model.transition().n_support(), n);
+        assert_eq!(model.sensor().n_support(), n);
+        let view = model.view().unwrap();
+        let mut g = c.benchmark_group(format!("ekf_step_n{n}"));
+        for (name, mode) in [("ekf", Mode::Ekf), ("ekf_blr", Mode::EkfBlr)] {
+            let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
+            let mut est = Estimator::new(view, model.ekf_config(mode), &mut scratch).unwrap();
+            let mut k = 0usize;
+            g.bench_function(name, |b| {
+                b.iter(|| {
+                    let out = est.step(black_box(test.u[k]), black_box(test.y[k]));
+                    k = (k + 1) % test.u.len();
+                    out
+                })
+            });
+        }
+        g.finish();
     }
 }
 
