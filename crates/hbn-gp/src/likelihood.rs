@@ -15,7 +15,7 @@ use crate::factor::{Factor, factor_with_jitter};
 use faer::Mat;
 use faer::linalg::solvers::Solve;
 use hbn_core::kernel::Prepared;
-use hbn_core::{Kernel, KernelSpec};
+use hbn_core::{Kernel, KernelSpec, Metric};
 use rayon::prelude::*;
 use std::sync::Mutex;
 
@@ -71,6 +71,16 @@ pub struct Likelihood<'a> {
     stats: Mutex<EvalStats>,
 }
 
+/// Gram matrix pieces shared by the likelihood and its gradient.
+struct Gram {
+    /// `K` without noise (column-major lower triangle).
+    k: Vec<f64>,
+    /// `dk/dr2` per pair (same layout).
+    c: Vec<f64>,
+    /// Features `n x d`.
+    u: Vec<f64>,
+}
+
 /// Everything the final model needs from a factorisation.
 pub struct Solved {
     /// The factor.
@@ -123,30 +133,64 @@ impl<'a> Likelihood<'a> {
             .collect()
     }
 
-    /// `K` (without noise) as a faer matrix, built in parallel by columns.
-    fn gram(&self, kernel: &Kernel<'_>, prep: &[Prepared]) -> Mat<f64> {
-        let n = prep.len();
-        let mut lower = vec![0.0; n * n];
-        lower.par_chunks_mut(n).enumerate().for_each(|(j, col)| {
-            for i in j..n {
-                col[i] = kernel.eval_prepared(&prep[i], &prep[j]);
-            }
-        });
-        Mat::from_fn(n, n, |i, j| {
+    /// Kernel features `u = L phi(x)` of every point (`n x d`): `r2 = |u_i - u_j|^2`.
+    fn features(&self, kernel: &Kernel<'_>) -> Vec<f64> {
+        let d = self.data.spec.dim;
+        let mut out = Vec::with_capacity(self.data.y.len() * d);
+        let mut u = [0.0; hbn_core::MAX_DIM];
+        let mut jac = [0.0; hbn_core::MAX_DIM * hbn_core::MAX_DIM];
+        for row in self.data.x.chunks_exact(d) {
+            kernel.features(row, &mut u, &mut jac);
+            out.extend_from_slice(&u[..d]);
+        }
+        out
+    }
+
+    /// `K` (without noise) and `dk/dr2` for every pair, from features, in parallel by columns
+    /// (column-major lower triangles; one `exp` per pair).
+    fn gram(&self, kernel: &Kernel<'_>) -> Gram {
+        let d = self.data.spec.dim;
+        let n = self.data.y.len();
+        let u = self.features(kernel);
+        let spec = *kernel.spec();
+        let sf2 = kernel.signal_variance();
+        let dirs = self.data.directions;
+        let mut k = vec![0.0; n * n];
+        let mut c = vec![0.0; n * n];
+        k.par_chunks_mut(n)
+            .zip(c.par_chunks_mut(n))
+            .enumerate()
+            .for_each(|(j, (kcol, ccol))| {
+                let uj = &u[j * d..j * d + d];
+                for i in j..n {
+                    let ui = &u[i * d..i * d + d];
+                    let r2: f64 = ui.iter().zip(uj).map(|(a, b)| (a - b) * (a - b)).sum();
+                    let (f, df) = hbn_core::kernel::profile_and_slope(spec.profile, r2);
+                    let dir = spec.direction_factor(dirs[i], dirs[j]);
+                    kcol[i] = sf2 * f * dir;
+                    ccol[i] = sf2 * df * dir;
+                }
+            });
+        Gram { k, c, u }
+    }
+
+    /// Factorises `K + s_n^2 I` at kernel `theta` and noise `noise` (fixed hyperparameters).
+    pub fn solve(&self, theta: &[f64], noise: f64) -> Result<Solved, GpError> {
+        Ok(self.solve_with_gram(theta, noise)?.0)
+    }
+
+    fn solve_with_gram(&self, theta: &[f64], noise: f64) -> Result<(Solved, Gram), GpError> {
+        let kernel = Kernel::new(self.data.spec, theta, self.data.whiten)?;
+        let gram = self.gram(&kernel);
+        let n = self.data.y.len();
+        let lower = &gram.k;
+        let mut k = Mat::from_fn(n, n, |i, j| {
             if i >= j {
                 lower[j * n + i]
             } else {
                 lower[i * n + j]
             }
-        })
-    }
-
-    /// Factorises `K + s_n^2 I` at kernel `theta` and noise `noise` (fixed hyperparameters).
-    pub fn solve(&self, theta: &[f64], noise: f64) -> Result<Solved, GpError> {
-        let kernel = Kernel::new(self.data.spec, theta, self.data.whiten)?;
-        let prep = self.prepare(&kernel);
-        let mut k = self.gram(&kernel, &prep);
-        let n = prep.len();
+        });
         for i in 0..n {
             k[(i, i)] += noise;
         }
@@ -164,7 +208,7 @@ impl<'a> Likelihood<'a> {
                 retries: factor.retries,
             });
         }
-        Ok(Solved { factor, alpha, lml })
+        Ok((Solved { factor, alpha, lml }, gram))
     }
 
     /// Log marginal likelihood and its gradient at the optimised vector `p`.
@@ -191,12 +235,20 @@ impl<'a> Likelihood<'a> {
         }
         let theta = &p[..n_k];
         let noise = self.noise_of(p[n_k]);
-        let solved = self.solve(theta, noise)?;
+        let (solved, gram) = self.solve_with_gram(theta, noise)?;
         let kernel = Kernel::new(self.data.spec, theta, self.data.whiten)?;
-        let prep = self.prepare(&kernel);
-        let n = prep.len();
+        let spec = self.data.spec;
+        let d = spec.dim;
+        let n = self.data.y.len();
         let kinv = solved.factor.inverse();
         let alpha = &solved.alpha;
+        // Without warping every dK/dtheta follows from the stored K, dk/dr2 and features: no
+        // exp per pair. With warping, the general path through `Kernel::grad_theta`.
+        let prep = if spec.warp_units > 0 {
+            self.prepare(&kernel)
+        } else {
+            Vec::new()
+        };
         // 1/2 sum_ij W_ij dK_ij/dtheta with W = alpha alpha^T - K^{-1}, over the lower triangle.
         // Fixed row blocks summed in index order: the result does not depend on how rayon
         // schedules the blocks, so training is bit-for-bit reproducible.
@@ -210,9 +262,34 @@ impl<'a> Likelihood<'a> {
                     for j in 0..=i {
                         let w = alpha[i] * alpha[j] - kinv[(i, j)];
                         let w = if i == j { 0.5 * w } else { w };
-                        kernel.grad_theta(&prep[i], &prep[j], &mut g);
-                        for (a, gv) in acc.iter_mut().zip(&g) {
-                            *a += w * gv;
+                        if spec.warp_units > 0 {
+                            kernel.grad_theta(&prep[i], &prep[j], &mut g);
+                            for (a, gv) in acc.iter_mut().zip(&g) {
+                                *a += w * gv;
+                            }
+                            continue;
+                        }
+                        let (kij, cij) = (gram.k[j * n + i], gram.c[j * n + i]);
+                        let (ui, uj) = (&gram.u[i * d..i * d + d], &gram.u[j * d..j * d + d]);
+                        acc[0] += w * kij;
+                        let wc = w * cij;
+                        match spec.metric {
+                            Metric::Ard => {
+                                for m in 0..d {
+                                    let du = ui[m] - uj[m];
+                                    acc[1 + m] -= 2.0 * wc * du * du;
+                                }
+                            }
+                            Metric::Isotropic | Metric::Mahalanobis => {
+                                let r2: f64 =
+                                    ui.iter().zip(uj).map(|(a, b)| (a - b) * (a - b)).sum();
+                                let scale = if spec.metric == Metric::Isotropic {
+                                    -2.0
+                                } else {
+                                    -1.0
+                                };
+                                acc[1] += scale * wc * r2;
+                            }
                         }
                     }
                 }

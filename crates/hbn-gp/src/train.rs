@@ -276,7 +276,7 @@ fn run_lbfgs(
     let linesearch = MoreThuenteLineSearch::new();
     let solver = LBFGS::new(linesearch, 10)
         .with_tolerance_grad(1e-5)
-        .and_then(|s| s.with_tolerance_cost(1e-10))
+        .and_then(|s| s.with_tolerance_cost(1e-8))
         .map_err(|e| e.to_string())?;
     let res = Executor::new(NegLml(lik), solver)
         .configure(|state| state.param(p0).max_iters(max_iters))
