@@ -129,7 +129,6 @@ pub fn write_mcap(file: &Path, log: &LogData, est: &Estimate) -> anyhow::Result<
         &records,
     )
     .with_context(|| format!("cannot write `{}`", file.display()))?;
-    crate::make_readable(file);
     Ok(())
 }
 
@@ -188,7 +187,6 @@ pub fn run(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<(LogData, Est
     if let (Some(f), Some(text)) = (&args.csv, csv) {
         hbn_io::write_atomic(f, text.as_bytes())
             .with_context(|| format!("cannot write `{}`", f.display()))?;
-        crate::make_readable(f);
     }
     let mut text = format!(
         "estimated `{}` with `{}` at {:.1} Hz ({:.2} s)\n",

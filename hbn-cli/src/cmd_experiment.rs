@@ -95,7 +95,6 @@ pub fn run(ui: &mut Ui<'_>, args: &ExperimentArgs) -> anyhow::Result<Vec<Experim
         let text = serde_json::to_string_pretty(&rows).context("cannot format JSON")?;
         hbn_io::write_atomic(f, text.as_bytes())
             .with_context(|| format!("cannot write `{}`", f.display()))?;
-        crate::make_readable(f);
     }
     if let Some(f) = &args.plot {
         plot::experiment_plot(f, &panels(&rows))?;

@@ -58,7 +58,6 @@ pub fn simulate_to_log(args: &SimulateArgs) -> anyhow::Result<Trajectory> {
     };
     hbn_io::write_scalar_log(&args.out, &t, &topics, enc)
         .with_context(|| format!("cannot write `{}`", args.out.display()))?;
-    crate::make_readable(&args.out);
     Ok(traj)
 }
 

@@ -90,7 +90,6 @@ pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<HbnModel> {
     model
         .save(&args.out)
         .with_context(|| format!("cannot save the model to `{}`", args.out.display()))?;
-    crate::make_readable(&args.out);
     print_summary(ui, &model, samples, &args.out)?;
     Ok(model)
 }

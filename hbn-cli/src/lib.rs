@@ -130,18 +130,6 @@ pub fn main_exit_code(result: anyhow::Result<()>) -> i32 {
     }
 }
 
-/// Makes a file written by the atomic writers of hbn-io / hbn-gp world-readable (`0644`): their
-/// temporary files are created owner-only (`0600`) and keep that mode after the rename.
-pub fn make_readable(file: &Path) {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        let _ = std::fs::set_permissions(file, std::fs::Permissions::from_mode(0o644));
-    }
-    #[cfg(not(unix))]
-    let _ = file;
-}
-
 /// Fails early (before any long computation) when `file` cannot be created: its directory
 /// does not exist or `file` is a directory.
 pub fn check_output(file: &Path, what: &str) -> anyhow::Result<()> {

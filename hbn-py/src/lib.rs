@@ -549,6 +549,12 @@ fn mode_names() -> Vec<&'static str> {
     vec![mode_name(Mode::Ekf), mode_name(Mode::EkfBlr)]
 }
 
+/// Names of the estimator's guard flags, in bit order (bit `i` is element `i`).
+#[pyfunction]
+fn flag_names() -> Vec<&'static str> {
+    hbn_core::Flags::NAMES.to_vec()
+}
+
 /// The native extension of the `hbn` package.
 #[pymodule]
 fn _hbn(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -560,6 +566,7 @@ fn _hbn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(list_topics, m)?)?;
     m.add_function(wrap_pyfunction!(kernel_names, m)?)?;
     m.add_function(wrap_pyfunction!(mode_names, m)?)?;
+    m.add_function(wrap_pyfunction!(flag_names, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("MODEL_FORMAT_VERSION", hbn_model::MODEL_FORMAT_VERSION)?;
     Ok(())

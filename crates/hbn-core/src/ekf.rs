@@ -78,24 +78,26 @@ impl Flags {
         self.0 & bit != 0
     }
 
+    /// Name of each bit, in bit order (bit `i` is `NAMES[i]`).
+    pub const NAMES: [&'static str; 13] = [
+        "input_invalid",
+        "measurement_invalid",
+        "model_invalid",
+        "jacobian_clamped",
+        "noise_floor",
+        "innovation_singular",
+        "covariance_clamped",
+        "state_clamped",
+        "outlier_rejected",
+        "blr_empty_transition",
+        "blr_empty_sensor",
+        "blr_capped",
+        "initialised",
+    ];
+
     /// Names of the set flags, for logs (`no_std`: yields `&'static str`).
     pub fn names(self) -> impl Iterator<Item = &'static str> {
-        const NAMES: [&str; 13] = [
-            "input_invalid",
-            "measurement_invalid",
-            "model_invalid",
-            "jacobian_clamped",
-            "noise_floor",
-            "innovation_singular",
-            "covariance_clamped",
-            "state_clamped",
-            "outlier_rejected",
-            "blr_empty_transition",
-            "blr_empty_sensor",
-            "blr_capped",
-            "initialised",
-        ];
-        NAMES
+        Self::NAMES
             .into_iter()
             .enumerate()
             .filter(move |(i, _)| self.0 & (1 << i) != 0)

@@ -353,3 +353,21 @@ fn training_is_deterministic() {
         b.log_marginal_likelihood().to_bits()
     );
 }
+
+/// Saved models are ordinary readable files (0644), not owner-only temporaries.
+#[cfg(unix)]
+#[test]
+fn saved_files_are_world_readable() {
+    use std::os::unix::fs::PermissionsExt;
+    let (x, y) = toy(20, 1, 9);
+    let mut params = GpParams::new(KernelSpec::se_ard(1));
+    params.n_starts = 1;
+    let gp = fit(&params, &x, &y).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("gp.json");
+    gp.save(&path).unwrap();
+    assert_eq!(
+        std::fs::metadata(&path).unwrap().permissions().mode() & 0o777,
+        0o644
+    );
+}

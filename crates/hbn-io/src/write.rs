@@ -146,8 +146,15 @@ where
         op,
         source,
     };
-    let tmp = tempfile::Builder::new()
-        .prefix(".hbn-tmp-")
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".hbn-tmp-");
+    // Outputs are ordinary files (0644), not the owner-only mode of temporary files.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o644));
+    }
+    let tmp = builder
         .tempfile_in(&dir)
         .map_err(|e| open_err("create a temporary file for", e))?;
     let (handle, tmp_path) = tmp.into_parts();

@@ -351,21 +351,7 @@ class Estimate:
     'uint32'
     """
 
-    FLAG_NAMES: Tuple[str, ...] = (
-        "input_invalid",
-        "measurement_invalid",
-        "model_invalid",
-        "jacobian_clamped",
-        "noise_floor",
-        "innovation_singular",
-        "covariance_clamped",
-        "state_clamped",
-        "outlier_rejected",
-        "blr_empty_transition",
-        "blr_empty_sensor",
-        "blr_capped",
-        "initialised",
-    )
+    FLAG_NAMES: Tuple[str, ...] = tuple(_hbn.flag_names())
 
     __slots__ = (
         "x",
