@@ -205,87 +205,73 @@ pub fn eval_plot(file: &Path, d: &EvalPlot<'_>) -> anyhow::Result<()> {
             .map_err(pe)?;
 
         let first = d.estimates.first();
-        // x vs u.
         let mut xs: Vec<f64> = d.x_ref.to_vec();
         if let Some(s) = first {
             xs.extend_from_slice(s.x);
         }
-        let mut c = ChartBuilder::on(&bl)
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
-            .caption("actuator hysteresis: x vs u", ("sans-serif", 18))
-            .build_cartesian_2d(range(d.u), range(&xs))
-            .map_err(pe)?;
-        c.configure_mesh()
-            .x_desc("input u")
-            .y_desc("state x")
-            .label_style(("sans-serif", 15))
-            .draw()
-            .map_err(pe)?;
-        c.draw_series(LineSeries::new(
-            d.u.iter().zip(d.x_ref).map(|(&u, &x)| (u, x)),
-            BLACK.stroke_width(1),
-        ))
-        .map_err(pe)?
-        .label("reference")
-        .legend(legend_line(BLACK));
-        if let Some(s) = first {
-            c.draw_series(LineSeries::new(
-                d.u.iter().zip(s.x).map(|(&u, &x)| (u, x)),
-                color(0).mix(0.8).stroke_width(1),
-            ))
-            .map_err(pe)?
-            .label(s.label)
-            .legend(legend_line(color(0)));
-        }
-        c.configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 15))
-            .draw()
-            .map_err(pe)?;
-
-        // y vs x.
-        let mut c = ChartBuilder::on(&br)
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
-            .caption("sensor hysteresis: y vs x", ("sans-serif", 18))
-            .build_cartesian_2d(range(&xs), range(d.y))
-            .map_err(pe)?;
-        c.configure_mesh()
-            .x_desc("state x")
-            .y_desc("sensor y")
-            .label_style(("sans-serif", 15))
-            .draw()
-            .map_err(pe)?;
-        c.draw_series(LineSeries::new(
-            d.x_ref.iter().zip(d.y).map(|(&x, &y)| (x, y)),
-            BLACK.stroke_width(1),
-        ))
-        .map_err(pe)?
-        .label("reference x")
-        .legend(legend_line(BLACK));
-        if let Some(s) = first {
-            c.draw_series(LineSeries::new(
-                s.x.iter().zip(d.y).map(|(&x, &y)| (x, y)),
-                color(0).mix(0.8).stroke_width(1),
-            ))
-            .map_err(pe)?
-            .label(format!("{} x", s.label))
-            .legend(legend_line(color(0)));
-        }
-        c.configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 15))
-            .draw()
-            .map_err(pe)?;
+        loop_panel(
+            &bl,
+            ("actuator hysteresis: x vs u", "input u", "state x"),
+            (range(d.u), range(&xs)),
+            ("reference", d.u, d.x_ref),
+            first.map(|s| (s.label.to_string(), d.u, s.x)),
+        )?;
+        loop_panel(
+            &br,
+            ("sensor hysteresis: y vs x", "state x", "sensor y"),
+            (range(&xs), range(d.y)),
+            ("reference x", d.x_ref, d.y),
+            first.map(|s| (format!("{} x", s.label), s.x, d.y)),
+        )?;
         Ok(())
     })
+}
+
+/// One hysteresis-loop panel: the reference loop in black and, if given, the estimate's.
+fn loop_panel(
+    area: &Area<'_>,
+    (title, x_desc, y_desc): (&str, &str, &str),
+    (x_range, y_range): (Range<f64>, Range<f64>),
+    (ref_label, ref_x, ref_y): (&str, &[f64], &[f64]),
+    estimate: Option<(String, &[f64], &[f64])>,
+) -> anyhow::Result<()> {
+    let mut c = ChartBuilder::on(area)
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .caption(title, ("sans-serif", 18))
+        .build_cartesian_2d(x_range, y_range)
+        .map_err(pe)?;
+    c.configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .label_style(("sans-serif", 15))
+        .draw()
+        .map_err(pe)?;
+    c.draw_series(LineSeries::new(
+        ref_x.iter().zip(ref_y).map(|(&a, &b)| (a, b)),
+        BLACK.stroke_width(1),
+    ))
+    .map_err(pe)?
+    .label(ref_label)
+    .legend(legend_line(BLACK));
+    if let Some((label, ex, ey)) = estimate {
+        c.draw_series(LineSeries::new(
+            ex.iter().zip(ey).map(|(&a, &b)| (a, b)),
+            color(0).mix(0.8).stroke_width(1),
+        ))
+        .map_err(pe)?
+        .label(label)
+        .legend(legend_line(color(0)));
+    }
+    c.configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 15))
+        .draw()
+        .map_err(pe)?;
+    Ok(())
 }
 
 /// A tick label of a log axis: 3 significant digits, no float noise.
