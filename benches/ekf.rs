@@ -4,27 +4,20 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use hbn::core::{Estimator, Mode};
+use hbn::model::experiment::{ExperimentConfig, test_trajectory, training_set};
 use hbn::model::{HbnModel, HbnParams, Sequence};
-use hbn::sim::{InputKind, SimConfig, SystemKind, generate_input, simulate};
+use hbn::sim::SystemKind;
 use std::hint::black_box;
 
 fn bench_step(c: &mut Criterion) {
     let system = SystemKind::BoucWen;
-    let u = generate_input(InputKind::RandomRamps, 1000, 0.02, 1).unwrap();
-    let runs: Vec<_> = (0..3)
-        .map(|r| {
-            simulate(
-                &SimConfig {
-                    system,
-                    noise_gain: 1.0,
-                    rate_hz: 100.0,
-                    seed: r,
-                },
-                &u,
-            )
-            .unwrap()
-        })
-        .collect();
+    let cfg = ExperimentConfig {
+        train_steps: 1000,
+        repeats: 3,
+        test_steps: 5000,
+        ..ExperimentConfig::default()
+    };
+    let runs = training_set(system, 1.0, 1, &cfg).unwrap();
     let seqs: Vec<Sequence<'_>> = runs
         .iter()
         .map(|t| Sequence {
@@ -33,14 +26,7 @@ fn bench_step(c: &mut Criterion) {
             y: &t.y,
         })
         .collect();
-    let test_u = generate_input(InputKind::RandomRamps, 5000, 0.02, 9).unwrap();
-    let sim = SimConfig {
-        system,
-        noise_gain: 1.0,
-        rate_hz: 100.0,
-        seed: 99,
-    };
-    let test = simulate(&sim, &test_u).unwrap();
+    let test = test_trajectory(system, 1.0, 9, &cfg).unwrap();
     for n in [500usize, 150] {
         let params = HbnParams {
             max_points: n,

@@ -1,31 +1,36 @@
-//! Shared helpers of the end-to-end tests.
+//! Shared helpers of the end-to-end tests: the thesis protocol of `hbn_model::experiment`,
+//! in small.
 #![allow(dead_code)]
 
+use hbn::model::experiment::{ExperimentConfig, test_trajectory, training_set};
 use hbn::model::{HbnModel, HbnParams, Sequence};
-use hbn::sim::{InputKind, SimConfig, SystemKind, Trajectory, generate_input, simulate};
+use hbn::sim::{SystemKind, Trajectory};
 
-/// The thesis protocol in small: one training input repeated with fresh noise.
+fn config(max_points: usize, seed: u64, test_steps: usize) -> ExperimentConfig {
+    ExperimentConfig {
+        train_steps: 600,
+        repeats: 3,
+        test_steps,
+        params: HbnParams {
+            max_points,
+            n_starts: 1,
+            max_iters: 60,
+            seed,
+            ..HbnParams::default()
+        },
+        ..ExperimentConfig::default()
+    }
+}
+
+/// One training input repeated with fresh noise, fitted.
 pub fn train_model(
     system: SystemKind,
     noise_gain: f64,
     max_points: usize,
     seed: u64,
 ) -> (HbnModel, Vec<Trajectory>) {
-    let u = generate_input(InputKind::RandomRamps, 600, 0.02, seed).unwrap();
-    let runs: Vec<Trajectory> = (0..3)
-        .map(|r| {
-            simulate(
-                &SimConfig {
-                    system,
-                    noise_gain,
-                    rate_hz: 100.0,
-                    seed: seed * 100 + r,
-                },
-                &u,
-            )
-            .unwrap()
-        })
-        .collect();
+    let cfg = config(max_points, seed, 0);
+    let runs = training_set(system, noise_gain, seed, &cfg).unwrap();
     let seqs: Vec<Sequence<'_>> = runs
         .iter()
         .map(|t| Sequence {
@@ -34,27 +39,10 @@ pub fn train_model(
             y: &t.y,
         })
         .collect();
-    let params = HbnParams {
-        max_points,
-        n_starts: 1,
-        max_iters: 60,
-        seed,
-        ..HbnParams::default()
-    };
-    (HbnModel::fit(&seqs, &params).unwrap(), runs)
+    (HbnModel::fit(&seqs, &cfg.params).unwrap(), runs)
 }
 
 /// A fresh test run of `steps` samples.
 pub fn test_run(system: SystemKind, noise_gain: f64, steps: usize, seed: u64) -> Trajectory {
-    let u = generate_input(InputKind::RandomRamps, steps, 0.02, seed + 1000).unwrap();
-    simulate(
-        &SimConfig {
-            system,
-            noise_gain,
-            rate_hz: 100.0,
-            seed: seed + 2000,
-        },
-        &u,
-    )
-    .unwrap()
+    test_trajectory(system, noise_gain, seed, &config(0, seed, steps)).unwrap()
 }
