@@ -10,10 +10,13 @@
 //! Scratch memory is passed in by the caller, sized by [`GpView::predict_scratch`], so the
 //! same code runs in firmware from a `static` buffer.
 //!
-//! **Sparse GPs.** The layout is the one a sparse (inducing-point) GP needs too: for the DTC /
-//! SoR predictor, `features` holds the inducing points, `alpha = Sigma K_mn y` and the variance
-//! reduction `k^T (K_mm^{-1} - Sigma) k` needs one more packed factor; [`GpView`] takes the
-//! exact-GP case, where it is `|L^{-1} k|^2`.
+//! **Sparse GPs** (Titsias 2009, "SGPR"/"VFE") use the same view with a different
+//! [`Variance`]: `features` holds the `m` inducing points, `alpha = Sigma K_mn y / s_n^2` with
+//! `Sigma = (K_mm + K_mn K_nm / s_n^2)^{-1}`, and the latent variance is
+//! `k(x,x) - |L^{-1} k|^2 + |L_B^{-1} L^{-1} k|^2` (`L L^T = K_mm`,
+//! `L_B L_B^T = I + L^{-1} K_mn K_nm L^{-T} / s_n^2`). Both factors are stored as explicit
+//! lower-triangular matrices, so the variance is two packed matrix-vector products
+//! (`m^2` independent multiply-adds, no dependency chain) instead of two triangular solves.
 
 use crate::CoreError;
 use crate::kernel::{Kernel, MAX_DIM, Profile, profile_and_slope};
@@ -70,8 +73,36 @@ pub struct GpView<'a> {
     features: &'a [f64],
     directions: &'a [f64],
     alpha: &'a [f64],
-    chol_packed: &'a [f64],
+    variance: Variance<'a>,
     noise_var: f64,
+}
+
+/// How a [`GpView`] computes the latent variance: the exact GP's Cholesky factor, or the two
+/// factors of a sparse (inducing-point) GP. All matrices are lower-triangular and packed by
+/// rows: row `i` holds `i + 1` values starting at `i (i + 1) / 2`.
+#[derive(Clone, Copy, Debug)]
+pub enum Variance<'a> {
+    /// Exact GP: `L` with `L L^T = K + s_n^2 I` (`n (n + 1) / 2` values);
+    /// `var = k(x,x) - |L^{-1} k|^2` by forward substitution.
+    Exact {
+        /// The packed Cholesky factor.
+        chol_packed: &'a [f64],
+    },
+    /// Sparse GP on `m` inducing points: `var = k(x,x) - |A k|^2 + |C k|^2`.
+    Sparse {
+        /// `A = L^{-1}` with `L L^T = K_mm` (`m (m + 1) / 2` values).
+        kmm_inv_factor: &'a [f64],
+        /// `C = L_B^{-1} L^{-1}`, so that `C^T C = Sigma = (K_mm + K_mn K_nm / s_n^2)^{-1}`
+        /// (`m (m + 1) / 2` values).
+        sigma_factor: &'a [f64],
+    },
+}
+
+impl Variance<'_> {
+    /// True for the sparse (inducing-point) form.
+    pub fn is_sparse(&self) -> bool {
+        matches!(self, Variance::Sparse { .. })
+    }
 }
 
 /// The slices and scalars a [`GpView`] is built from.
@@ -91,11 +122,11 @@ pub struct GpParts<'a> {
     pub features: &'a [f64],
     /// Direction signs of the support points (`n`), or empty without the direction factor.
     pub directions: &'a [f64],
-    /// `alpha = (K + s_n^2 I)^{-1} y_std` (`n`).
+    /// Mean weights: `alpha = (K + s_n^2 I)^{-1} y_std` (`n`) for the exact GP, or
+    /// `Sigma K_mn y_std / s_n^2` for a sparse GP (one per inducing point).
     pub alpha: &'a [f64],
-    /// Lower Cholesky factor of `K + s_n^2 I`, rows packed: row `i` holds `i + 1` values
-    /// starting at `i (i + 1) / 2` (`n (n + 1) / 2` in all).
-    pub chol_packed: &'a [f64],
+    /// The variance factors (exact or sparse).
+    pub variance: Variance<'a>,
     /// Learned noise variance `s_n^2` in standardised output units.
     pub noise_var: f64,
 }
@@ -119,7 +150,21 @@ impl<'a> GpView<'a> {
         expect(parts.input_mean.len(), d)?;
         expect(parts.input_scale.len(), d)?;
         expect(parts.features.len(), n * d)?;
-        expect(parts.chol_packed.len(), n * (n + 1) / 2)?;
+        let tri = n * (n + 1) / 2;
+        let factors: [&[f64]; 2] = match parts.variance {
+            Variance::Exact { chol_packed } => {
+                expect(chol_packed.len(), tri)?;
+                [chol_packed, &[]]
+            }
+            Variance::Sparse {
+                kmm_inv_factor,
+                sigma_factor,
+            } => {
+                expect(kmm_inv_factor.len(), tri)?;
+                expect(sigma_factor.len(), tri)?;
+                [kmm_inv_factor, sigma_factor]
+            }
+        };
         if spec.direction.is_some() {
             expect(parts.directions.len(), n)?;
         }
@@ -128,7 +173,8 @@ impl<'a> GpView<'a> {
             && finite(parts.features)
             && finite(parts.directions)
             && finite(parts.alpha)
-            && finite(parts.chol_packed)
+            && finite(factors[0])
+            && finite(factors[1])
             && parts.output_mean.is_finite()
             && parts.noise_var.is_finite())
         {
@@ -140,11 +186,17 @@ impl<'a> GpView<'a> {
                 "input and output scales must be finite and > 0",
             ));
         }
-        for i in 0..n {
-            if parts.chol_packed[i * (i + 1) / 2 + i].partial_cmp(&0.0)
-                != Some(core::cmp::Ordering::Greater)
-            {
-                return Err(CoreError::InvalidSpec("Cholesky diagonal must be > 0"));
+        // Every factor is triangular with a positive diagonal (the inverse of a Cholesky factor
+        // is one too).
+        for factor in factors.iter().filter(|f| !f.is_empty()) {
+            for i in 0..n {
+                if factor[i * (i + 1) / 2 + i].partial_cmp(&0.0)
+                    != Some(core::cmp::Ordering::Greater)
+                {
+                    return Err(CoreError::InvalidSpec(
+                        "triangular factor diagonal must be > 0",
+                    ));
+                }
             }
         }
         Ok(Self {
@@ -156,12 +208,12 @@ impl<'a> GpView<'a> {
             features: parts.features,
             directions: parts.directions,
             alpha: parts.alpha,
-            chol_packed: parts.chol_packed,
+            variance: parts.variance,
             noise_var: parts.noise_var,
         })
     }
 
-    /// Number of support points.
+    /// Number of support points (exact) or inducing points (sparse).
     pub fn len(&self) -> usize {
         self.alpha.len()
     }
@@ -176,6 +228,11 @@ impl<'a> GpView<'a> {
         self.kernel.spec().dim
     }
 
+    /// True for a sparse (inducing-point) GP.
+    pub fn is_sparse(&self) -> bool {
+        self.variance.is_sparse()
+    }
+
     /// The kernel.
     pub fn kernel(&self) -> &Kernel<'a> {
         &self.kernel
@@ -188,13 +245,14 @@ impl<'a> GpView<'a> {
 
     /// Number of `f64` scratch values [`GpView::predict`] needs for `want`.
     pub fn predict_scratch(&self, want: Want) -> usize {
-        predict_scratch(self.len(), want)
+        predict_scratch(self.len(), self.is_sparse(), want)
     }
 
     /// Predicts at one raw input `x_raw` (`dim` values).
     ///
     /// Allocation-free and panic-free; time is `O(n d)` for the mean and its gradient plus
-    /// `O(n^2)` for the variance. `scratch` must hold [`GpView::predict_scratch`] values.
+    /// `O(n^2)` for the variance (`n` inducing points for a sparse GP).
+    /// `scratch` must hold [`GpView::predict_scratch`] values.
     pub fn predict(
         &self,
         x_raw: &[f64],
@@ -212,7 +270,8 @@ impl<'a> GpView<'a> {
         if !x_raw.iter().all(|v| v.is_finite()) {
             return Err(CoreError::NonFinite);
         }
-        let needed = predict_scratch(n, want);
+        let sparse = self.is_sparse();
+        let needed = predict_scratch(n, sparse, want);
         if scratch.len() < needed {
             return Err(CoreError::ScratchTooSmall {
                 needed,
@@ -233,7 +292,10 @@ impl<'a> GpView<'a> {
 
         let (kvec, rest) = scratch.split_at_mut(n);
         let (cvec, rest) = rest.split_at_mut(if want.grad_variance { n } else { 0 });
-        let vvec = &mut rest[..if want_var { n } else { 0 }];
+        let (vvec, rest) = rest.split_at_mut(if want_var { n } else { 0 });
+        // Sparse only: `C k`, then the variance gradient's weights.
+        let (bvec, rest) = rest.split_at_mut(if want_var && sparse { n } else { 0 });
+        let qvec = &mut rest[..if want.grad_variance && sparse { n } else { 0 }];
 
         let acc = Accum {
             features: self.features,
@@ -280,16 +342,41 @@ impl<'a> GpView<'a> {
         }
         if want_var {
             let kss = acc.sf2 * spec.direction_factor(g_star, g_star);
-            forward_substitute_packed(self.chol_packed, kvec, vvec);
-            let var_std = (kss - dot(vvec, vvec)).max(0.0);
             let s2 = self.output_scale * self.output_scale;
-            out.variance = s2 * var_std;
+            // `weights` ends up as d var / d k / (-2): K^{-1} k (exact) or (A^T A - C^T C) k.
+            let (var_std, weights) = match self.variance {
+                Variance::Exact { chol_packed } => {
+                    forward_substitute_packed(chol_packed, kvec, vvec);
+                    let var = kss - dot(vvec, vvec);
+                    if want.grad_variance {
+                        back_substitute_packed(chol_packed, vvec);
+                    }
+                    (var, &*vvec)
+                }
+                Variance::Sparse {
+                    kmm_inv_factor,
+                    sigma_factor,
+                } => {
+                    lower_packed_times(kmm_inv_factor, kvec, vvec);
+                    lower_packed_times(sigma_factor, kvec, bvec);
+                    let var = kss - dot(vvec, vvec) + dot(bvec, bvec);
+                    if want.grad_variance {
+                        lower_packed_transpose_times(kmm_inv_factor, vvec, qvec);
+                        // q -= C^T b, reusing v as the product's space.
+                        lower_packed_transpose_times(sigma_factor, bvec, vvec);
+                        for (q, cb) in qvec.iter_mut().zip(vvec.iter()) {
+                            *q -= cb;
+                        }
+                    }
+                    (var, &*qvec)
+                }
+            };
+            out.variance = s2 * var_std.max(0.0);
             if want.grad_variance {
-                // w = K^{-1} k overwrites v; dvar/du* = -2 sum_i w_i dk_i/du* = 4 sum_i w_i c_i (u_i - u*).
-                back_substitute_packed(self.chol_packed, vvec);
+                // dvar/du* = -2 sum_i w_i dk_i/du* = 4 sum_i w_i c_i (u_i - u*).
                 let mut gv_u = [0.0; MAX_DIM];
-                for i in 0..n {
-                    let wc = 4.0 * vvec[i] * cvec[i];
+                for (i, (w, c)) in weights.iter().zip(cvec.iter()).enumerate() {
+                    let wc = 4.0 * w * c;
                     let row = &self.features[i * d..i * d + d];
                     for j in 0..d {
                         gv_u[j] += wc * (row[j] - u_star[j]);
@@ -312,16 +399,48 @@ impl<'a> GpView<'a> {
     }
 }
 
-/// Number of `f64` scratch values needed to predict with `n` support points.
-pub const fn predict_scratch(n: usize, want: Want) -> usize {
+/// Number of `f64` scratch values needed to predict with `n` support (or inducing) points.
+pub const fn predict_scratch(n: usize, sparse: bool, want: Want) -> usize {
+    let want_var = want.variance || want.grad_variance;
     let mut s = n;
-    if want.variance || want.grad_variance {
+    if want_var {
         s += n;
+        if sparse {
+            s += n;
+        }
     }
     if want.grad_variance {
         s += n;
+        if sparse {
+            s += n;
+        }
     }
     s
+}
+
+/// `out = T k` for a row-packed lower-triangular `T` (`n = out.len()` rows): one independent
+/// dot product per row.
+pub fn lower_packed_times(t_packed: &[f64], k: &[f64], out: &mut [f64]) {
+    for (i, o) in out.iter_mut().enumerate() {
+        let start = i * (i + 1) / 2;
+        *o = match (t_packed.get(start..start + i + 1), k.get(..=i)) {
+            (Some(row), Some(kk)) => dot(row, kk),
+            _ => 0.0,
+        };
+    }
+}
+
+/// `out = T^T v` for a row-packed lower-triangular `T` (`n = out.len()` rows).
+pub fn lower_packed_transpose_times(t_packed: &[f64], v: &[f64], out: &mut [f64]) {
+    out.fill(0.0);
+    for (i, &vi) in v.iter().enumerate().take(out.len()) {
+        let start = i * (i + 1) / 2;
+        if let Some(row) = t_packed.get(start..start + i + 1) {
+            for (o, t) in out.iter_mut().zip(row) {
+                *o += t * vi;
+            }
+        }
+    }
 }
 
 /// `grad_raw_j = out_scale * sum_r g_u[r] du_r/dz_j / in_scale_j`.
@@ -553,7 +672,9 @@ mod tests {
                 &[]
             },
             alpha: &o.alpha,
-            chol_packed: &o.packed,
+            variance: Variance::Exact {
+                chol_packed: &o.packed,
+            },
             noise_var: noise,
         })
         .unwrap()
@@ -690,7 +811,195 @@ mod tests {
             Err(CoreError::NonFinite)
         ));
         assert_eq!(gp.predict_scratch(Want::default()), 6);
+        assert_eq!(predict_scratch(6, true, Want::ALL), 30);
         assert_eq!(gp.predict_scratch(Want::EKF), 12);
         assert_eq!(gp.predict_scratch(Want::ALL), 18);
+    }
+
+    /// Solves `M x = b` for a small symmetric positive definite `M` (test only).
+    fn spd_solve<const N: usize>(m: &[[f64; N]; N], b: &[f64; N]) -> [f64; N] {
+        let mut l = [[0.0; N]; N];
+        for i in 0..N {
+            for j in 0..=i {
+                let mut s = m[i][j];
+                for k in 0..j {
+                    s -= l[i][k] * l[j][k];
+                }
+                l[i][j] = if i == j { s.sqrt() } else { s / l[j][j] };
+            }
+        }
+        let mut y = [0.0; N];
+        for i in 0..N {
+            let s: f64 = (0..i).map(|k| l[i][k] * y[k]).sum();
+            y[i] = (b[i] - s) / l[i][i];
+        }
+        let mut x = [0.0; N];
+        for i in (0..N).rev() {
+            let s: f64 = (i + 1..N).map(|k| l[k][i] * x[k]).sum();
+            x[i] = (y[i] - s) / l[i][i];
+        }
+        x
+    }
+
+    /// Inverse of a lower-triangular matrix, row-packed (test only).
+    fn packed_lower_inverse<const N: usize>(l: &[[f64; N]; N]) -> [f64; 6] {
+        let mut inv = [[0.0; N]; N];
+        for c in 0..N {
+            for i in c..N {
+                let rhs = if i == c { 1.0 } else { 0.0 };
+                let s: f64 = (c..i).map(|k| l[i][k] * inv[k][c]).sum();
+                inv[i][c] = (rhs - s) / l[i][i];
+            }
+        }
+        let mut out = [0.0; 6];
+        for i in 0..N {
+            for j in 0..=i {
+                out[i * (i + 1) / 2 + j] = inv[i][j];
+            }
+        }
+        out
+    }
+
+    fn chol3(a: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+        let mut l = [[0.0; 3]; 3];
+        for i in 0..3 {
+            for j in 0..=i {
+                let mut s = a[i][j];
+                for k in 0..j {
+                    s -= l[i][k] * l[j][k];
+                }
+                l[i][j] = if i == j { s.sqrt() } else { s / l[j][j] };
+            }
+        }
+        l
+    }
+
+    /// A sparse GP on 3 inducing points built densely from 6 samples: the view's packed-factor
+    /// predictions must equal the textbook formulas `mean = k^T Sigma K_mn y / s2`,
+    /// `var = kss - k^T K_mm^{-1} k + k^T Sigma k` computed by solves.
+    #[test]
+    fn sparse_view_matches_dense_formulae_and_fd_gradients() {
+        for spec in all_specs() {
+            let dense = setup(spec);
+            let n_p = spec.n_params();
+            let k = Kernel::new(spec, &dense.theta[..n_p], &W).unwrap();
+            let mean = [0.1, -0.2, 0.3];
+            let scale = [1.5, 0.5, 2.0];
+            let std = |x: &[f64; 3]| -> [f64; 3] {
+                core::array::from_fn(|j| (x[j] - mean[j]) / scale[j])
+            };
+            let zx: [[f64; 3]; 3] = [[0.2, 0.5, -0.1], [-0.6, 0.9, 0.7], [0.8, -0.3, 1.2]];
+            let zg: [f64; 3] = core::array::from_fn(|i| spec.direction_of(&zx[i]));
+            let xg: [f64; 6] = core::array::from_fn(|i| spec.direction_of(&dense.x[i]));
+            let s2 = dense.noise;
+            let kz = |a: usize, b: usize| k.eval(&std(&zx[a]), zg[a], &std(&zx[b]), zg[b]);
+            let kzx = |a: usize, n: usize| k.eval(&std(&zx[a]), zg[a], &std(&dense.x[n]), xg[n]);
+            let kmm: [[f64; 3]; 3] = core::array::from_fn(|a| core::array::from_fn(|b| kz(a, b)));
+            let mut sig_inv = kmm;
+            let mut kmn_y = [0.0; 3];
+            for a in 0..3 {
+                for b in 0..3 {
+                    sig_inv[a][b] += (0..6).map(|n| kzx(a, n) * kzx(b, n)).sum::<f64>() / s2;
+                }
+                kmn_y[a] = (0..6).map(|n| kzx(a, n) * dense.y[n]).sum::<f64>();
+            }
+            let beta = spd_solve(&sig_inv, &kmn_y).map(|v| v / s2);
+            // Factors as the trainer stores them.
+            let l = chol3(&kmm);
+            let a_packed = packed_lower_inverse(&l);
+            let mut a_full = [[0.0; 3]; 3];
+            for i in 0..3 {
+                for j in 0..=i {
+                    a_full[i][j] = a_packed[i * (i + 1) / 2 + j];
+                }
+            }
+            // B = I + A P A^T / s2 with P = K_mn K_nm
+            let p_mat: [[f64; 3]; 3] =
+                core::array::from_fn(|a| core::array::from_fn(|b| sig_inv[a][b] - kmm[a][b]));
+            let mut bmat = [[0.0; 3]; 3];
+            for i in 0..3 {
+                for j in 0..3 {
+                    let mut acc = 0.0;
+                    for r in 0..3 {
+                        for c in 0..3 {
+                            acc += a_full[i][r] * p_mat[r][c] * a_full[j][c];
+                        }
+                    }
+                    bmat[i][j] = acc + if i == j { 1.0 } else { 0.0 };
+                }
+            }
+            let lb = chol3(&bmat);
+            let lb_inv = packed_lower_inverse(&lb);
+            let mut c_packed = [0.0; 6];
+            for i in 0..3 {
+                for j in 0..=i {
+                    c_packed[i * (i + 1) / 2 + j] = (j..=i)
+                        .map(|r| lb_inv[i * (i + 1) / 2 + r] * a_full[r][j])
+                        .sum();
+                }
+            }
+            let mut feats = [0.0; 9];
+            for i in 0..3 {
+                let mut u = [0.0; MAX_DIM];
+                let mut jac = [0.0; MAX_DIM * MAX_DIM];
+                k.features(&std(&zx[i]), &mut u, &mut jac);
+                feats[i * 3..i * 3 + 3].copy_from_slice(&u[..3]);
+            }
+            let gp = GpView::new(GpParts {
+                kernel: k,
+                input_mean: &mean,
+                input_scale: &scale,
+                output_mean: 0.0,
+                output_scale: 1.0,
+                features: &feats,
+                directions: if spec.direction.is_some() { &zg } else { &[] },
+                alpha: &beta,
+                variance: Variance::Sparse {
+                    kmm_inv_factor: &a_packed,
+                    sigma_factor: &c_packed,
+                },
+                noise_var: s2,
+            })
+            .unwrap();
+            assert!(gp.is_sparse());
+            let mut scratch = [0.0; 32];
+            let x0 = [0.4, 0.1, 0.9];
+            let p = gp.predict(&x0, Want::ALL, &mut scratch).unwrap();
+            let zs = std(&x0);
+            let gs = spec.direction_of(&x0);
+            let ks: [f64; 3] = core::array::from_fn(|a| k.eval(&std(&zx[a]), zg[a], &zs, gs));
+            let want_mean: f64 = (0..3).map(|a| ks[a] * beta[a]).sum();
+            let kinv_k = spd_solve(&kmm, &ks);
+            let sig_k = spd_solve(&sig_inv, &ks);
+            let want_var = k.eval(&zs, gs, &zs, gs)
+                - (0..3).map(|a| ks[a] * kinv_k[a]).sum::<f64>()
+                + (0..3).map(|a| ks[a] * sig_k[a]).sum::<f64>();
+            assert!((p.mean - want_mean).abs() < 1e-10, "{spec:?}");
+            assert!(
+                (p.variance - want_var).abs() < 1e-10,
+                "{spec:?}: {} vs {want_var}",
+                p.variance
+            );
+            for j in 0..3 {
+                let h = 1e-6;
+                let (mut a, mut b) = (x0, x0);
+                a[j] += h;
+                b[j] -= h;
+                let pa = gp.predict(&a, Want::ALL, &mut scratch).unwrap();
+                let pb = gp.predict(&b, Want::ALL, &mut scratch).unwrap();
+                let fd_m = (pa.mean - pb.mean) / (2.0 * h);
+                let fd_v = (pa.variance - pb.variance) / (2.0 * h);
+                assert!((fd_m - p.grad_mean[j]).abs() < 1e-7 * (1.0 + fd_m.abs()));
+                assert!(
+                    (fd_v - p.grad_variance[j]).abs() < 1e-7 * (1.0 + fd_v.abs()),
+                    "{spec:?} var j={j}: {fd_v} vs {}",
+                    p.grad_variance[j]
+                );
+            }
+            // Every `Want` gives the same numbers as `Want::ALL` where it computes them.
+            let e = gp.predict(&x0, Want::EKF, &mut scratch).unwrap();
+            assert_eq!(e.variance, p.variance);
+            assert_eq!(e.grad_mean, p.grad_mean);
+        }
     }
 }

@@ -5,7 +5,8 @@
 //! the estimator step with bounded time and no heap.
 //!
 //! - [`kernel`]: the thesis' covariance functions with input and hyperparameter gradients;
-//! - [`gp`]: GP prediction (mean, variance and their input gradients) from borrowed slices;
+//! - [`gp`]: GP prediction (mean, variance and their input gradients) from borrowed slices,
+//!   exact or sparse (inducing points);
 //! - [`ekf`]: the EKF / EKF+BLR step on the augmented HBN state;
 //! - [`blr`]: local Bayesian linear regression with a bounded neighbourhood query;
 //! - [`rng`]: a small portable random number generator.
@@ -26,5 +27,5 @@ pub use ekf::{
     EkfConfig, EkfState, Estimator, Flags, HbnView, Mode, StepOutput, observability_eigenvalues,
 };
 pub use error::CoreError;
-pub use gp::{GpParts, GpView, Prediction, Want};
+pub use gp::{GpParts, GpView, Prediction, Variance, Want};
 pub use kernel::{Kernel, KernelSpec, MAX_DIM, Metric, Profile};

@@ -26,12 +26,16 @@ pub mod factor;
 pub mod likelihood;
 mod model;
 mod params;
+pub mod sparse;
 mod train;
 
 pub use data::{column_stats, select_subset, whitening};
 pub use error::GpError;
-pub use model::{GP_FORMAT, GP_FORMAT_VERSION, GaussianProcess, StartReport, TrainingReport};
-pub use params::{GpParams, Hyperparameters, RawHyperparameters, SubsetPolicy};
+pub use model::{
+    GP_FORMAT, GP_FORMAT_OLDEST, GP_FORMAT_VERSION, GaussianProcess, SparseFactors, StartReport,
+    TrainingReport,
+};
+pub use params::{GpParams, Hyperparameters, RawHyperparameters, SparseParams, SubsetPolicy};
 pub use train::{FitProgress, fit, fit_observed};
 
 /// Writes `bytes` to `path` atomically: a temporary file in the same directory, flushed, then

@@ -110,12 +110,12 @@ impl<'a> Likelihood<'a> {
 
     /// Noise variance encoded by the last parameter.
     pub fn noise_of(&self, p_noise: f64) -> f64 {
-        self.noise_floor + p_noise.exp()
+        noise_of(self.noise_floor, p_noise)
     }
 
     /// Parameter encoding a noise variance (clamped just above the floor).
     pub fn param_of_noise(&self, noise: f64) -> f64 {
-        (noise - self.noise_floor).max(self.noise_floor * 1e-3).ln()
+        param_of_noise(self.noise_floor, noise)
     }
 
     /// Counters so far.
@@ -271,26 +271,7 @@ impl<'a> Likelihood<'a> {
                         }
                         let (kij, cij) = (gram.k[j * n + i], gram.c[j * n + i]);
                         let (ui, uj) = (&gram.u[i * d..i * d + d], &gram.u[j * d..j * d + d]);
-                        acc[0] += w * kij;
-                        let wc = w * cij;
-                        match spec.metric {
-                            Metric::Ard => {
-                                for m in 0..d {
-                                    let du = ui[m] - uj[m];
-                                    acc[1 + m] -= 2.0 * wc * du * du;
-                                }
-                            }
-                            Metric::Isotropic | Metric::Mahalanobis => {
-                                let r2: f64 =
-                                    ui.iter().zip(uj).map(|(a, b)| (a - b) * (a - b)).sum();
-                                let scale = if spec.metric == Metric::Isotropic {
-                                    -2.0
-                                } else {
-                                    -1.0
-                                };
-                                acc[1] += scale * wc * r2;
-                            }
-                        }
+                        add_pair_theta_grad(&spec, w, kij, cij, ui, uj, &mut acc);
                     }
                 }
                 acc
@@ -306,14 +287,7 @@ impl<'a> Likelihood<'a> {
         let trace_w: f64 = (0..n).map(|i| alpha[i] * alpha[i] - kinv[(i, i)]).sum();
         grad.push(0.5 * trace_w * p[n_k].exp());
         // Soft bounds on every log-parameter (warp shifts a are not logs but share the bound).
-        let mut penalty = 0.0;
-        for (g, &v) in grad.iter_mut().zip(p) {
-            let excess = v.abs() - LOG_BOUND;
-            if excess > 0.0 {
-                penalty += PENALTY * excess * excess;
-                *g -= 2.0 * PENALTY * excess * v.signum();
-            }
-        }
+        let penalty = soft_bound_penalty(p, &mut grad);
         let ev = Evaluation {
             lml: solved.lml - penalty,
             grad,
@@ -333,10 +307,85 @@ impl<'a> Likelihood<'a> {
     }
 }
 
-/// argmin adapter: minimise the negative log marginal likelihood.
-pub(crate) struct NegLml<'a, 'b>(pub &'b Likelihood<'a>);
+/// A training objective for the multi-start optimiser: the exact log marginal likelihood or
+/// the sparse GP's variational bound. The optimised vector starts with the kernel's `theta`
+/// and the noise parameter ([`noise_of`]); a sparse GP may append the inducing inputs.
+pub trait Objective: Sync {
+    /// Objective (to maximise) and gradient at `p`.
+    fn evaluate(&self, p: &[f64]) -> Result<Evaluation, GpError>;
+    /// Counters so far.
+    fn stats(&self) -> EvalStats;
+}
 
-impl argmin::core::CostFunction for NegLml<'_, '_> {
+impl Objective for Likelihood<'_> {
+    fn evaluate(&self, p: &[f64]) -> Result<Evaluation, GpError> {
+        Likelihood::evaluate(self, p)
+    }
+    fn stats(&self) -> EvalStats {
+        Likelihood::stats(self)
+    }
+}
+
+/// Noise variance encoded by the noise parameter: `floor + exp(p)`.
+pub fn noise_of(noise_floor: f64, p_noise: f64) -> f64 {
+    noise_floor + p_noise.exp()
+}
+
+/// Noise parameter encoding a noise variance (clamped just above the floor).
+pub fn param_of_noise(noise_floor: f64, noise: f64) -> f64 {
+    (noise - noise_floor).max(noise_floor * 1e-3).ln()
+}
+
+/// Adds the smooth soft-bound penalty on log-parameters `p` to `grad`; returns the penalty.
+pub(crate) fn soft_bound_penalty(p: &[f64], grad: &mut [f64]) -> f64 {
+    let mut penalty = 0.0;
+    for (g, &v) in grad.iter_mut().zip(p) {
+        let excess = v.abs() - LOG_BOUND;
+        if excess > 0.0 {
+            penalty += PENALTY * excess * excess;
+            *g -= 2.0 * PENALTY * excess * v.signum();
+        }
+    }
+    penalty
+}
+
+/// `acc += w * dk/dtheta` for one pair of points of an *unwarped* kernel, from the pair's
+/// `k`, `c = dk/dr2` and features `u_i`, `u_j` (no `exp` needed).
+#[inline]
+pub(crate) fn add_pair_theta_grad(
+    spec: &KernelSpec,
+    w: f64,
+    k: f64,
+    c: f64,
+    ui: &[f64],
+    uj: &[f64],
+    acc: &mut [f64],
+) {
+    acc[0] += w * k;
+    let wc = w * c;
+    match spec.metric {
+        Metric::Ard => {
+            for m in 0..spec.dim {
+                let du = ui[m] - uj[m];
+                acc[1 + m] -= 2.0 * wc * du * du;
+            }
+        }
+        Metric::Isotropic | Metric::Mahalanobis => {
+            let r2: f64 = ui.iter().zip(uj).map(|(a, b)| (a - b) * (a - b)).sum();
+            let scale = if spec.metric == Metric::Isotropic {
+                -2.0
+            } else {
+                -1.0
+            };
+            acc[1] += scale * wc * r2;
+        }
+    }
+}
+
+/// argmin adapter: minimise the negated objective.
+pub(crate) struct NegLml<'b, O: Objective>(pub &'b O);
+
+impl<O: Objective> argmin::core::CostFunction for NegLml<'_, O> {
     type Param = Vec<f64>;
     type Output = f64;
     fn cost(&self, p: &Self::Param) -> Result<f64, argmin::core::Error> {
@@ -344,7 +393,7 @@ impl argmin::core::CostFunction for NegLml<'_, '_> {
     }
 }
 
-impl argmin::core::Gradient for NegLml<'_, '_> {
+impl<O: Objective> argmin::core::Gradient for NegLml<'_, O> {
     type Param = Vec<f64>;
     type Gradient = Vec<f64>;
     fn gradient(&self, p: &Self::Param) -> Result<Vec<f64>, argmin::core::Error> {

@@ -3,14 +3,16 @@
 
 use crate::GpError;
 use crate::params::SubsetPolicy;
-use hbn_core::{CoreError, GpParts, GpView, Kernel, KernelSpec, Prediction, Want};
+use hbn_core::{CoreError, GpParts, GpView, Kernel, KernelSpec, Prediction, Variance, Want};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Format tag of a standalone GP file.
 pub const GP_FORMAT: &str = "hbn-gp";
-/// Current GP file format version.
-pub const GP_FORMAT_VERSION: u32 = 1;
+/// Current GP file format version (2 added the sparse GP; version 1 files still load).
+pub const GP_FORMAT_VERSION: u32 = 2;
+/// Oldest GP file format version this build reads.
+pub const GP_FORMAT_OLDEST: u32 = 1;
 
 /// One optimiser start.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -30,8 +32,12 @@ pub struct StartReport {
 pub struct TrainingReport {
     /// Samples given.
     pub n_samples: usize,
-    /// Support points kept.
+    /// Support points kept (exact GP) or inducing points used (sparse GP).
     pub n_support: usize,
+    /// Inducing points asked for (sparse GP only); fewer are used when the data have fewer
+    /// distinct inputs.
+    #[serde(default)]
+    pub n_inducing_requested: Option<usize>,
     /// The policy applied when samples exceeded the maximum (`None` = all kept).
     pub subset_policy: Option<SubsetPolicy>,
     /// One entry per optimiser start (empty when hyperparameters were fixed).
@@ -60,6 +66,14 @@ impl TrainingReport {
                 self.n_samples, self.n_support, p
             ));
         }
+        if let Some(asked) = self.n_inducing_requested
+            && asked > self.n_support
+        {
+            w.push(format!(
+                "asked for {asked} inducing points; the data support only {} distinct ones",
+                self.n_support
+            ));
+        }
         if self.jitter_evaluations > 0 {
             w.push(format!(
                 "{} of {} likelihood evaluations needed Cholesky jitter (max {:e})",
@@ -83,8 +97,18 @@ impl TrainingReport {
     }
 }
 
-/// A trained exact GP. Construct with [`crate::fit`]; predict with [`GaussianProcess::view`]
-/// (allocation-free) or the convenience [`GaussianProcess::predict`].
+/// The two prediction factors of a sparse GP (see [`hbn_core::Variance::Sparse`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SparseFactors {
+    /// `L^{-1}` with `L L^T = K_mm`, row-packed lower triangle.
+    pub kmm_inv_factor: Vec<f64>,
+    /// `L_B^{-1} L^{-1}`, row-packed lower triangle.
+    pub sigma_factor: Vec<f64>,
+}
+
+/// A trained GP, exact or sparse (inducing points). Construct with [`crate::fit`]; predict
+/// with [`GaussianProcess::view`] (allocation-free) or the convenience
+/// [`GaussianProcess::predict`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct GaussianProcess {
     pub(crate) kernel: KernelSpec,
@@ -100,7 +124,12 @@ pub struct GaussianProcess {
     pub(crate) directions: Vec<f64>,
     pub(crate) features: Vec<f64>,
     pub(crate) alpha: Vec<f64>,
+    /// Exact GP only (empty for a sparse GP).
+    #[serde(default)]
     pub(crate) chol_packed: Vec<f64>,
+    /// Sparse GP only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(crate) sparse: Option<SparseFactors>,
     pub(crate) log_marginal_likelihood: f64,
     /// Mean squared leave-one-out prediction error (raw units).
     #[serde(default)]
@@ -127,7 +156,15 @@ impl GaussianProcess {
             features: &self.features,
             directions: &self.directions,
             alpha: &self.alpha,
-            chol_packed: &self.chol_packed,
+            variance: match &self.sparse {
+                Some(f) => Variance::Sparse {
+                    kmm_inv_factor: &f.kmm_inv_factor,
+                    sigma_factor: &f.sigma_factor,
+                },
+                None => Variance::Exact {
+                    chol_packed: &self.chol_packed,
+                },
+            },
             noise_var: self.noise_variance,
         })
     }
@@ -195,27 +232,34 @@ impl GaussianProcess {
     pub fn output_standardisation(&self) -> (f64, f64) {
         (self.output_mean, self.output_scale)
     }
-    /// Support inputs (raw units, `n x dim`).
+    /// Support inputs (exact GP) or inducing inputs (sparse GP), raw units, `n x dim`.
     pub fn support_inputs(&self) -> &[f64] {
         &self.support_x
     }
-    /// Support targets (raw units).
+    /// Support targets (raw units; empty for a sparse GP, whose inducing points carry none).
     pub fn support_targets(&self) -> &[f64] {
         &self.support_y
     }
-    /// Number of support points.
+    /// Number of support points (exact) or inducing points (sparse).
     pub fn n_support(&self) -> usize {
         self.alpha.len()
     }
+    /// True for a sparse (inducing-point) GP.
+    pub fn is_sparse(&self) -> bool {
+        self.sparse.is_some()
+    }
     /// Log marginal likelihood of the standardised targets at the fitted hyperparameters
-    /// (equal to the raw-target value when `normalize` is off).
+    /// (equal to the raw-target value when `normalize` is off). For a sparse GP, the collapsed
+    /// variational bound (a lower bound of it).
     pub fn log_marginal_likelihood(&self) -> f64 {
         self.log_marginal_likelihood
     }
-    /// Mean squared leave-one-out prediction error over the support points, in raw output
-    /// units: `mean_i (alpha_i / [K_y^-1]_ii)^2`. Unlike the noise hyperparameter it includes
-    /// model mismatch (e.g. kinks the kernel cannot follow), so the EKF uses it as a floor of
-    /// its noise variances.
+    /// The model's own estimate of its prediction error, in raw output units, used by the EKF
+    /// as a floor of its noise variances. Exact GP: the mean squared leave-one-out error over
+    /// the support points, `mean_i (alpha_i / [K_y^-1]_ii)^2`; unlike the noise hyperparameter
+    /// it includes model mismatch (e.g. kinks the kernel cannot follow). Sparse GP: the mean
+    /// squared training residual over all samples, which with `n >> m` (a model of far fewer
+    /// degrees of freedom than samples) is close to the held-out error.
     pub fn loo_error_variance(&self) -> f64 {
         self.loo_error_variance
     }
@@ -252,11 +296,11 @@ impl GaussianProcess {
             });
         }
         let version = value.get("version").and_then(|v| v.as_u64()).unwrap_or(0);
-        if version != u64::from(GP_FORMAT_VERSION) {
+        if !(u64::from(GP_FORMAT_OLDEST)..=u64::from(GP_FORMAT_VERSION)).contains(&version) {
             return Err(GpError::Format {
                 path: origin.into(),
                 reason: format!(
-                    "GP format version {version} is not supported (this build reads {GP_FORMAT_VERSION}); retrain or convert"
+                    "GP format version {version} is not supported (this build reads {GP_FORMAT_OLDEST} to {GP_FORMAT_VERSION}); retrain or convert"
                 ),
             });
         }

@@ -36,6 +36,32 @@ pub struct RawHyperparameters {
     pub noise_variance: Option<f64>,
 }
 
+/// Settings of the sparse (inducing-point) GP: Titsias' collapsed variational bound
+/// ("SGPR"/"VFE") over every sample, `O(n m^2)` to train and `O(m^2)` to predict.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SparseParams {
+    /// Number of inducing points `m` (`>= 1`; at most the number of distinct samples are used).
+    pub n_inducing: usize,
+    /// Fixed initial inducing inputs in raw units (`m x dim`, row-major); `None` selects them
+    /// by greedy conditional variance (pivoted Cholesky, Burt et al. 2020).
+    #[serde(default)]
+    pub inducing_inputs: Option<Vec<f64>>,
+    /// Learn the inducing inputs together with the hyperparameters (analytic gradients).
+    #[serde(default)]
+    pub optimize_inducing: bool,
+}
+
+impl SparseParams {
+    /// `m` inducing points chosen by greedy conditional variance, not optimised.
+    pub fn new(n_inducing: usize) -> Self {
+        Self {
+            n_inducing,
+            inducing_inputs: None,
+            optimize_inducing: false,
+        }
+    }
+}
+
 /// GP training parameters. Build with [`GpParams::new`], adjust fields, then
 /// [`GpParams::validate`] (done by [`crate::fit`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -64,6 +90,10 @@ pub struct GpParams {
     pub subset_policy: SubsetPolicy,
     /// Jitter retries when the Cholesky factorisation fails (each multiplies the jitter by 10).
     pub max_jitter_retries: usize,
+    /// `Some` trains a sparse GP on every sample (`max_points` and `subset_policy` are then
+    /// unused); `None` trains the exact GP.
+    #[serde(default)]
+    pub sparse: Option<SparseParams>,
 }
 
 impl GpParams {
@@ -82,6 +112,7 @@ impl GpParams {
             max_points: 1000,
             subset_policy: SubsetPolicy::FarthestPoint,
             max_jitter_retries: 8,
+            sparse: None,
         }
     }
 
@@ -104,6 +135,27 @@ impl GpParams {
                 "max_points",
                 format!("must be >= 2, got {}", self.max_points),
             );
+        }
+        if let Some(sp) = &self.sparse {
+            if sp.n_inducing == 0 {
+                return bad("n_inducing", "must be >= 1".into());
+            }
+            if let Some(z) = &sp.inducing_inputs {
+                if z.len() != sp.n_inducing * self.kernel.dim {
+                    return bad(
+                        "inducing_inputs",
+                        format!(
+                            "need n_inducing x dim = {} x {} values, got {}",
+                            sp.n_inducing,
+                            self.kernel.dim,
+                            z.len()
+                        ),
+                    );
+                }
+                if !z.iter().all(|v| v.is_finite()) {
+                    return bad("inducing_inputs", "must be finite".into());
+                }
+            }
         }
         if let Some(init) = &self.init {
             if init.theta.len() != self.kernel.n_params() {

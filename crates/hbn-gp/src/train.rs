@@ -3,7 +3,7 @@
 
 use crate::GpError;
 use crate::data::{check_data, column_stats, select_subset, whitening};
-use crate::likelihood::{Likelihood, LikelihoodData, NegLml};
+use crate::likelihood::{Likelihood, LikelihoodData, NegLml, Objective, param_of_noise};
 use crate::model::{GaussianProcess, StartReport, TrainingReport};
 use crate::params::GpParams;
 use argmin::core::{Executor, State};
@@ -42,27 +42,17 @@ pub fn fit_observed(
     let spec = params.kernel;
     let d = spec.dim;
     let n_all = check_data(x, y, d)?;
-
-    // Standardisation (statistics of all samples).
-    let (input_mean, input_scale) = if params.normalize {
-        column_stats(x, d)
-    } else {
-        (vec![0.0; d], vec![1.0; d])
-    };
-    let (output_mean, output_scale) = if params.normalize {
-        let (m, s) = column_stats(y, 1);
-        (m[0], s[0])
-    } else {
-        (0.0, 1.0)
-    };
-    let std_x: Vec<f64> = x
-        .chunks_exact(d)
-        .flat_map(|row| {
-            (0..d)
-                .map(|j| (row[j] - input_mean[j]) / input_scale[j])
-                .collect::<Vec<_>>()
-        })
-        .collect();
+    let data = Standardised::new(params, x, y);
+    if let Some(sparse) = &params.sparse {
+        return crate::sparse::fit_sparse(params, sparse, x, y, &data, t0, observe);
+    }
+    let Standardised {
+        input_mean,
+        input_scale,
+        output_mean,
+        output_scale,
+        std_x,
+    } = data;
 
     // Subset.
     let keep = select_subset(
@@ -108,33 +98,7 @@ pub fn fit_observed(
         params.max_jitter_retries,
     );
 
-    // Starting point.
-    let mut theta0 = vec![0.0; spec.n_params()];
-    spec.default_theta(&mut theta0)?;
-    let mut noise0 = 0.1;
-    if let Some(init) = &params.init {
-        theta0.clone_from(&init.theta);
-        noise0 = init.noise_variance;
-    }
-    if let Some(raw) = &params.raw_init {
-        if let Some(ls) = &raw.length_scales {
-            match spec.metric {
-                Metric::Ard => {
-                    for j in 0..d {
-                        theta0[1 + j] = (ls[j] / input_scale[j]).ln();
-                    }
-                }
-                Metric::Isotropic | Metric::Mahalanobis => theta0[1] = ls[0].ln(),
-            }
-        }
-        if let Some(sf2) = raw.signal_variance {
-            theta0[0] = (sf2 / (output_scale * output_scale)).ln();
-        }
-        if let Some(noise) = raw.noise_variance {
-            noise0 = noise / (output_scale * output_scale);
-        }
-    }
-
+    let (theta0, noise0) = starting_point(params, &input_scale, output_scale)?;
     let mut report = TrainingReport {
         n_samples: n_all,
         n_support: keep.len(),
@@ -142,61 +106,12 @@ pub fn fit_observed(
         ..Default::default()
     };
     let (theta, noise) = if params.optimize {
-        let mut rng = Rng::new(params.seed);
-        let mut best: Option<(f64, Vec<f64>, usize)> = None;
-        let mut last_err = String::new();
-        for start in 0..params.n_starts {
-            let mut p0 = theta0.clone();
-            p0.push(lik.param_of_noise(noise0.max(params.noise_floor * 2.0)));
-            if start > 0 {
-                randomize(&mut p0, &spec, &mut rng);
-            }
-            let initial_lml = lik.evaluate(&p0).ok().map(|e| e.lml);
-            match run_lbfgs(&lik, p0, params.max_iters) {
-                Ok((p, lml, iters)) => {
-                    report.starts.push(StartReport {
-                        initial_lml,
-                        final_lml: Some(lml),
-                        iterations: iters,
-                        error: None,
-                    });
-                    if best.as_ref().is_none_or(|b| lml > b.0) {
-                        best = Some((lml, p, start));
-                    }
-                }
-                Err(e) => {
-                    last_err = e.clone();
-                    report.starts.push(StartReport {
-                        initial_lml,
-                        final_lml: None,
-                        iterations: 0,
-                        error: Some(e),
-                    });
-                }
-            }
-            observe(FitProgress {
-                start,
-                n_starts: params.n_starts,
-                best_lml: best.as_ref().map(|b| b.0),
-            });
-        }
-        let Some((_, p, start)) = best else {
-            return Err(GpError::OptimizationFailed {
-                starts: params.n_starts,
-                last: last_err,
-            });
-        };
-        report.best_start = Some(start);
+        let p = multi_start(&lik, &theta0, noise0, &[], params, &mut report, observe)?;
         let n_k = spec.n_params();
         (p[..n_k].to_vec(), lik.noise_of(p[n_k]))
     } else {
         (theta0, noise0)
     };
-    let stats = lik.stats();
-    report.evaluations = stats.evaluations;
-    report.jitter_evaluations = stats.jitter_evaluations;
-    report.max_jitter = stats.max_jitter;
-
     // Final factorisation at the chosen hyperparameters.
     let solved = lik.solve(&theta, noise)?;
     report.final_jitter = solved.factor.jitter;
@@ -243,10 +158,154 @@ pub fn fit_observed(
         features,
         alpha: solved.alpha,
         chol_packed,
+        sparse: None,
         log_marginal_likelihood: solved.lml,
         loo_error_variance: loo_std * output_scale * output_scale,
         report,
     })
+}
+
+/// Standardised copies of the data (statistics of all samples).
+pub(crate) struct Standardised {
+    pub input_mean: Vec<f64>,
+    pub input_scale: Vec<f64>,
+    pub output_mean: f64,
+    pub output_scale: f64,
+    /// `n x d` standardised inputs.
+    pub std_x: Vec<f64>,
+}
+
+impl Standardised {
+    pub fn new(params: &GpParams, x: &[f64], y: &[f64]) -> Self {
+        let d = params.kernel.dim;
+        let (input_mean, input_scale) = if params.normalize {
+            column_stats(x, d)
+        } else {
+            (vec![0.0; d], vec![1.0; d])
+        };
+        let (output_mean, output_scale) = if params.normalize {
+            let (m, s) = column_stats(y, 1);
+            (m[0], s[0])
+        } else {
+            (0.0, 1.0)
+        };
+        let std_x = x
+            .chunks_exact(d)
+            .flat_map(|row| (0..d).map(|j| (row[j] - input_mean[j]) / input_scale[j]))
+            .collect();
+        Self {
+            input_mean,
+            input_scale,
+            output_mean,
+            output_scale,
+            std_x,
+        }
+    }
+}
+
+/// Starting (or fixed) kernel `theta` and noise variance, in standardised units, from the
+/// defaults, `params.init` and `params.raw_init` (in that order).
+pub(crate) fn starting_point(
+    params: &GpParams,
+    input_scale: &[f64],
+    output_scale: f64,
+) -> Result<(Vec<f64>, f64), GpError> {
+    let spec = params.kernel;
+    let mut theta0 = vec![0.0; spec.n_params()];
+    spec.default_theta(&mut theta0)?;
+    let mut noise0 = 0.1;
+    if let Some(init) = &params.init {
+        theta0.clone_from(&init.theta);
+        noise0 = init.noise_variance;
+    }
+    if let Some(raw) = &params.raw_init {
+        if let Some(ls) = &raw.length_scales {
+            match spec.metric {
+                Metric::Ard => {
+                    for j in 0..spec.dim {
+                        theta0[1 + j] = (ls[j] / input_scale[j]).ln();
+                    }
+                }
+                Metric::Isotropic | Metric::Mahalanobis => theta0[1] = ls[0].ln(),
+            }
+        }
+        if let Some(sf2) = raw.signal_variance {
+            theta0[0] = (sf2 / (output_scale * output_scale)).ln();
+        }
+        if let Some(noise) = raw.noise_variance {
+            noise0 = noise / (output_scale * output_scale);
+        }
+    }
+    Ok((theta0, noise0))
+}
+
+/// Runs L-BFGS from `params.n_starts` starts (the first at `theta0`/`noise0`, the rest
+/// random in `theta` and the noise; `tail`, e.g. inducing inputs, is appended unchanged) and
+/// returns the best optimised vector. Every start is recorded in `report`.
+pub(crate) fn multi_start<O: Objective>(
+    objective: &O,
+    theta0: &[f64],
+    noise0: f64,
+    tail: &[f64],
+    params: &GpParams,
+    report: &mut TrainingReport,
+    observe: &mut dyn FnMut(FitProgress),
+) -> Result<Vec<f64>, GpError> {
+    let spec = params.kernel;
+    let mut rng = Rng::new(params.seed);
+    let mut best: Option<(f64, Vec<f64>, usize)> = None;
+    let mut last_err = String::new();
+    for start in 0..params.n_starts {
+        let mut p0 = theta0.to_vec();
+        p0.push(param_of_noise(
+            params.noise_floor,
+            noise0.max(params.noise_floor * 2.0),
+        ));
+        if start > 0 {
+            randomize(&mut p0, &spec, &mut rng);
+        }
+        p0.extend_from_slice(tail);
+        let initial_lml = objective.evaluate(&p0).ok().map(|e| e.lml);
+        match run_lbfgs(objective, p0, params.max_iters) {
+            Ok((p, lml, iters)) => {
+                report.starts.push(StartReport {
+                    initial_lml,
+                    final_lml: Some(lml),
+                    iterations: iters,
+                    error: None,
+                });
+                if best.as_ref().is_none_or(|b| lml > b.0) {
+                    best = Some((lml, p, start));
+                }
+            }
+            Err(e) => {
+                last_err = e.clone();
+                report.starts.push(StartReport {
+                    initial_lml,
+                    final_lml: None,
+                    iterations: 0,
+                    error: Some(e),
+                });
+            }
+        }
+        observe(FitProgress {
+            start,
+            n_starts: params.n_starts,
+            best_lml: best.as_ref().map(|b| b.0),
+        });
+    }
+    let Some((_, p, start)) = best else {
+        return Err(GpError::OptimizationFailed {
+            starts: params.n_starts,
+            last: last_err,
+        });
+    };
+    report.best_start = Some(start);
+    let stats = objective.stats();
+    report.evaluations = stats.evaluations;
+    report.jitter_evaluations = stats.jitter_evaluations;
+    report.max_jitter = stats.max_jitter;
+    Ok(p)
 }
 
 /// Random restart around the defaults, in log space.
@@ -264,12 +323,12 @@ fn randomize(p: &mut [f64], spec: &hbn_core::KernelSpec, rng: &mut Rng) {
         p[spec.warp_a_offset() + i] = rng.uniform_in(-2.0, 2.0);
         p[spec.warp_b_offset() + i] = rng.uniform_in(-1.5, 0.5);
     }
-    let last = p.len() - 1;
-    p[last] = rng.uniform_in(-4.0 * ln10, -0.5);
+    // The noise parameter follows theta.
+    p[spec.n_params()] = rng.uniform_in(-4.0 * ln10, -0.5);
 }
 
-fn run_lbfgs(
-    lik: &Likelihood<'_>,
+fn run_lbfgs<O: Objective>(
+    lik: &O,
     p0: Vec<f64>,
     max_iters: u64,
 ) -> Result<(Vec<f64>, f64, u64), String> {

@@ -1,0 +1,804 @@
+//! The sparse GP: Titsias' (2009) collapsed variational bound ("SGPR"/"VFE") on `m` inducing
+//! inputs `Z`, trained on every sample in `O(n m^2)` time and `O(n d + m^2)` memory.
+//!
+//! With `K_mm = k(Z, Z)`, `K_mn = k(Z, X)`, noise `s2`, `P = K_mn K_nm`, `v = K_mn y`,
+//! `L L^T = K_mm`, `B = I + L^{-1} P L^{-T} / s2 = L_B L_B^T` and `c = L_B^{-1} L^{-1} v / s2`:
+//!
+//! `F = -n/2 ln(2 pi) - sum ln diag(L_B) - n/2 ln s2 - (y^T y / s2 - c^T c) / 2
+//!      - (sum_i k(x_i, x_i) - tr(L^{-1} P L^{-T})) / (2 s2)`  (`<=` the exact LML).
+//!
+//! Every sum over the samples (`P`, `v`, `y^T y`, `sum k_ii`) is a reduction over fixed blocks
+//! of rows, computed in parallel and added in block order, so the result is bit-identical
+//! whatever the number of threads; no `n x m` matrix is ever held whole.
+//!
+//! **Gradient.** With `Sigma = (K_mm + P / s2)^{-1} = C^T C` (`C = L_B^{-1} L^{-1}`),
+//! `beta = Sigma v / s2` (the prediction weights) and `W = K_mm^{-1} - Sigma - beta beta^T`,
+//! the bound's sensitivities are
+//! - `dF/dK_mm = W / 2 - K_mm^{-1} P K_mm^{-1} / (2 s2)`,
+//! - `dF/dK_mn[:, j] = (W k_j + beta y_j) / s2` (one column per sample, a second blocked pass),
+//! - `dF/dk_jj = -1 / (2 s2)`,
+//! - `dF/ds2 = (tr(Sigma P) - n s2 + |y - K_nm beta|^2 + sum k_jj - tr(K_mm^{-1} P)) / (2 s2^2)`,
+//!
+//! and the chain rule through each kernel entry gives every hyperparameter and, optionally,
+//! every inducing input. `docs/sparse.md` derives them; the tests check them against finite
+//! differences, and the bound and predictions against the exact GP (with `Z = X`) and an
+//! independent numpy implementation.
+//!
+//! **Inducing inputs** start from greedy conditional-variance selection (a pivoted Cholesky
+//! of the kernel matrix at the starting hyperparameters, Burt et al. 2020): each new point is
+//! the sample the current ones explain worst. It needs no random seed, spreads points along a
+//! time series where the signal moves, and skips duplicates (the residual variance of a
+//! repeated input is zero). It runs on an evenly strided pool of at most
+//! [`INIT_POOL_MIN`] (or `32 m`) samples so that its `pool x m` table stays small.
+
+use crate::GpError;
+use crate::factor::factor_with_jitter;
+use crate::likelihood::{
+    EvalStats, Evaluation, LikelihoodData, Objective, add_pair_theta_grad, noise_of,
+    soft_bound_penalty,
+};
+use crate::model::{GaussianProcess, SparseFactors, TrainingReport};
+use crate::params::{GpParams, SparseParams};
+use crate::train::{FitProgress, Standardised, multi_start, starting_point};
+use faer::linalg::matmul::matmul;
+use faer::linalg::triangular_inverse::invert_lower_triangular;
+use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
+use faer::{Accum, Mat, Par};
+use hbn_core::kernel::{MAX_DIM, Prepared, profile_and_slope};
+use hbn_core::{Kernel, Metric};
+use rayon::prelude::*;
+use std::sync::Mutex;
+use std::time::Instant;
+
+/// Rows per block of the blocked reductions over the samples.
+pub const BLOCK_ROWS: usize = 1024;
+/// Smallest candidate pool of the greedy inducing-point selection.
+pub const INIT_POOL_MIN: usize = 8192;
+
+/// The collapsed bound as an optimisation problem. The optimised vector is the kernel's
+/// `theta`, the noise parameter and, when the inducing inputs are learned, `Z` (`m x d`,
+/// standardised units).
+pub struct SparseBound<'a> {
+    data: LikelihoodData<'a>,
+    /// Inducing inputs used when they are not optimised (`m x d`, standardised).
+    z_fixed: Vec<f64>,
+    /// Direction signs of the inducing inputs (fixed).
+    z_dirs: Vec<f64>,
+    optimize_z: bool,
+    noise_floor: f64,
+    max_jitter_retries: usize,
+    cache: Mutex<Option<(Vec<f64>, Evaluation)>>,
+    stats: Mutex<EvalStats>,
+}
+
+/// The bound and the posterior at fixed hyperparameters and inducing inputs.
+pub struct SparsePosterior {
+    /// The collapsed bound `F`.
+    pub bound: f64,
+    /// Prediction weights `beta = Sigma K_mn y / s2` (`m`).
+    pub beta: Vec<f64>,
+    /// `L^{-1}`, row-packed lower triangle.
+    pub kmm_inv_factor: Vec<f64>,
+    /// `C = L_B^{-1} L^{-1}`, row-packed lower triangle.
+    pub sigma_factor: Vec<f64>,
+    /// Jitter added to `K_mm`'s diagonal (0 if none).
+    pub jitter: f64,
+    /// Mean squared training residual `|y - K_nm beta|^2 / n` (standardised units).
+    pub mean_squared_residual: f64,
+}
+
+/// What the first pass and the `m x m` algebra leave for the gradient.
+struct Core {
+    bound: f64,
+    jitter: f64,
+    /// Inducing features `m x d`.
+    uz: Vec<f64>,
+    kmm: Mat<f64>,
+    cmm: Mat<f64>,
+    p: Mat<f64>,
+    v: Vec<f64>,
+    yy: f64,
+    tk: f64,
+    tr_q: f64,
+    linv: Mat<f64>,
+    c_factor: Mat<f64>,
+    beta: Vec<f64>,
+}
+
+/// Sums of one block of samples.
+struct BlockSums {
+    /// `A A^T` of the block.
+    aat: Mat<f64>,
+    /// `A y` of the block.
+    ay: Vec<f64>,
+    yy: f64,
+    tk: f64,
+}
+
+fn mat_vec(a: &Mat<f64>, x: &[f64]) -> Vec<f64> {
+    (0..a.nrows())
+        .map(|i| (0..a.ncols()).map(|j| a[(i, j)] * x[j]).sum())
+        .collect()
+}
+
+fn mat_t_vec(a: &Mat<f64>, x: &[f64]) -> Vec<f64> {
+    (0..a.ncols())
+        .map(|j| (0..a.nrows()).map(|i| a[(i, j)] * x[i]).sum())
+        .collect()
+}
+
+fn lower_inverse(l: faer::MatRef<'_, f64>) -> Mat<f64> {
+    let m = l.nrows();
+    let mut inv = Mat::zeros(m, m);
+    invert_lower_triangular(inv.as_mut(), l, Par::Seq);
+    for i in 0..m {
+        for j in i + 1..m {
+            inv[(i, j)] = 0.0;
+        }
+    }
+    inv
+}
+
+fn pack_lower(a: &Mat<f64>) -> Vec<f64> {
+    let m = a.nrows();
+    let mut out = Vec::with_capacity(m * (m + 1) / 2);
+    for i in 0..m {
+        for j in 0..=i {
+            out.push(a[(i, j)]);
+        }
+    }
+    out
+}
+
+impl<'a> SparseBound<'a> {
+    /// A bound over `data` with inducing inputs `z` (`m x d`, standardised) and their direction
+    /// signs; `optimize_z` appends `Z` to the optimised vector.
+    pub fn new(
+        data: LikelihoodData<'a>,
+        z: Vec<f64>,
+        z_dirs: Vec<f64>,
+        optimize_z: bool,
+        noise_floor: f64,
+        max_jitter_retries: usize,
+    ) -> Self {
+        Self {
+            data,
+            z_fixed: z,
+            z_dirs,
+            optimize_z,
+            noise_floor,
+            max_jitter_retries,
+            cache: Mutex::new(None),
+            stats: Mutex::new(EvalStats::default()),
+        }
+    }
+
+    /// Number of inducing points.
+    pub fn n_inducing(&self) -> usize {
+        self.z_dirs.len()
+    }
+
+    /// Length of the optimised vector.
+    pub fn n_params(&self) -> usize {
+        let z = if self.optimize_z {
+            self.z_fixed.len()
+        } else {
+            0
+        };
+        self.data.spec.n_params() + 1 + z
+    }
+
+    /// The inducing inputs a parameter vector encodes (standardised units).
+    pub fn inducing_of<'p>(&'p self, p: &'p [f64]) -> &'p [f64] {
+        let start = self.data.spec.n_params() + 1;
+        if self.optimize_z && p.len() == start + self.z_fixed.len() {
+            &p[start..]
+        } else {
+            &self.z_fixed
+        }
+    }
+
+    /// Kernel values `k(Z, x_j)` (column `j - start` of `kmn`), their `dk/dr2` (if asked) and
+    /// the rows' features, for the rows `start..end`.
+    #[allow(clippy::too_many_arguments)]
+    fn cross_block(
+        &self,
+        kernel: &Kernel<'_>,
+        uz: &[f64],
+        start: usize,
+        end: usize,
+        kmn: &mut Mat<f64>,
+        mut cmn: Option<&mut Mat<f64>>,
+        ux: &mut [f64],
+    ) {
+        let spec = *kernel.spec();
+        let d = spec.dim;
+        let m = self.n_inducing();
+        let sf2 = kernel.signal_variance();
+        let mut u = [0.0; MAX_DIM];
+        let mut jac = [0.0; MAX_DIM * MAX_DIM];
+        for (col, j) in (start..end).enumerate() {
+            kernel.features(&self.data.x[j * d..j * d + d], &mut u, &mut jac);
+            ux[col * d..col * d + d].copy_from_slice(&u[..d]);
+            let gj = self.data.directions[j];
+            for a in 0..m {
+                let za = &uz[a * d..a * d + d];
+                let r2: f64 = za.iter().zip(&u[..d]).map(|(p, q)| (p - q) * (p - q)).sum();
+                let (f, df) = profile_and_slope(spec.profile, r2);
+                let dir = spec.direction_factor(self.z_dirs[a], gj);
+                kmn[(a, col)] = sf2 * f * dir;
+                if let Some(c) = cmn.as_deref_mut() {
+                    c[(a, col)] = sf2 * df * dir;
+                }
+            }
+        }
+    }
+
+    fn n_blocks(&self) -> usize {
+        self.data.y.len().div_ceil(BLOCK_ROWS)
+    }
+
+    fn block_range(&self, b: usize) -> (usize, usize) {
+        let n = self.data.y.len();
+        (b * BLOCK_ROWS, ((b + 1) * BLOCK_ROWS).min(n))
+    }
+
+    /// First pass and the `m x m` algebra.
+    fn core(&self, kernel: &Kernel<'_>, z: &[f64], s2: f64) -> Result<Core, GpError> {
+        let spec = *kernel.spec();
+        let d = spec.dim;
+        let m = self.n_inducing();
+        let n = self.data.y.len();
+        let sf2 = kernel.signal_variance();
+        let mut uz = vec![0.0; m * d];
+        let mut u = [0.0; MAX_DIM];
+        let mut jac = [0.0; MAX_DIM * MAX_DIM];
+        for a in 0..m {
+            kernel.features(&z[a * d..a * d + d], &mut u, &mut jac);
+            uz[a * d..a * d + d].copy_from_slice(&u[..d]);
+        }
+        let mut kmm = Mat::zeros(m, m);
+        let mut cmm = Mat::zeros(m, m);
+        for a in 0..m {
+            for b in 0..m {
+                let r2: f64 = (0..d)
+                    .map(|j| (uz[a * d + j] - uz[b * d + j]).powi(2))
+                    .sum();
+                let (f, df) = profile_and_slope(spec.profile, r2);
+                let dir = spec.direction_factor(self.z_dirs[a], self.z_dirs[b]);
+                kmm[(a, b)] = sf2 * f * dir;
+                cmm[(a, b)] = sf2 * df * dir;
+            }
+        }
+        let factor = factor_with_jitter(&mut kmm, self.max_jitter_retries)?;
+        let jitter = factor.jitter;
+        for a in 0..m {
+            kmm[(a, a)] += jitter;
+        }
+        let linv = lower_inverse(factor.llt.L());
+
+        // Pass 1, in fixed blocks: A = L^{-1} K_mn one block at a time, Q = A A^T
+        // (= L^{-1} P L^{-T}), A y, y^T y and sum k_jj. Forming A first (rather than P, then
+        // two triangular solves) keeps the rounding error of Q at cond(L), not cond(K_mm).
+        let l_factor = factor.llt.L();
+        let sums: Vec<BlockSums> = (0..self.n_blocks())
+            .into_par_iter()
+            .map(|b| {
+                let (start, end) = self.block_range(b);
+                let rows = end - start;
+                let mut kmn = Mat::zeros(m, rows);
+                let mut ux = vec![0.0; rows * d];
+                self.cross_block(kernel, &uz, start, end, &mut kmn, None, &mut ux);
+                solve_lower_triangular_in_place(l_factor, kmn.as_mut(), Par::Seq);
+                let a = kmn;
+                let mut q = Mat::zeros(m, m);
+                matmul(
+                    q.as_mut(),
+                    Accum::Replace,
+                    a.as_ref(),
+                    a.transpose(),
+                    1.0,
+                    Par::Seq,
+                );
+                let y = &self.data.y[start..end];
+                let v = (0..m)
+                    .map(|i| (0..rows).map(|c| a[(i, c)] * y[c]).sum())
+                    .collect();
+                let yy = y.iter().map(|t| t * t).sum();
+                let tk = self.data.directions[start..end]
+                    .iter()
+                    .map(|&g| sf2 * spec.direction_factor(g, g))
+                    .sum();
+                BlockSums {
+                    aat: q,
+                    ay: v,
+                    yy,
+                    tk,
+                }
+            })
+            .collect();
+        let mut q = Mat::zeros(m, m);
+        let mut av = vec![0.0; m];
+        let (mut yy, mut tk) = (0.0, 0.0);
+        for s in &sums {
+            q += &s.aat;
+            for (acc, x) in av.iter_mut().zip(&s.ay) {
+                *acc += x;
+            }
+            yy += s.yy;
+            tk += s.tk;
+        }
+        drop(sums);
+        for i in 0..m {
+            for j in 0..i {
+                let s = 0.5 * (q[(i, j)] + q[(j, i)]);
+                q[(i, j)] = s;
+                q[(j, i)] = s;
+            }
+        }
+        // P = L Q L^T and v = L A y, for the gradient.
+        let l_full = Mat::from_fn(m, m, |i, j| if j <= i { l_factor[(i, j)] } else { 0.0 });
+        let p = &l_full * &q * l_full.transpose();
+        let v = mat_vec(&l_full, &av);
+
+        let tr_q: f64 = (0..m).map(|i| q[(i, i)]).sum();
+        let mut bmat = Mat::from_fn(m, m, |i, j| q[(i, j)] / s2 + if i == j { 1.0 } else { 0.0 });
+        let factor_b = factor_with_jitter(&mut bmat, self.max_jitter_retries)?;
+        let lb = factor_b.llt.L();
+        let lb_inv = lower_inverse(lb);
+        let c_factor = &lb_inv * &linv;
+        let c_vec: Vec<f64> = mat_vec(&lb_inv, &av).iter().map(|x| x / s2).collect();
+        let beta = mat_t_vec(&c_factor, &c_vec);
+        let log_det_b: f64 = (0..m).map(|i| lb[(i, i)].ln()).sum();
+        let cc: f64 = c_vec.iter().map(|x| x * x).sum();
+        let nf = n as f64;
+        let bound = -0.5 * nf * (2.0 * std::f64::consts::PI).ln()
+            - log_det_b
+            - 0.5 * nf * s2.ln()
+            - 0.5 * (yy / s2 - cc)
+            - 0.5 * (tk - tr_q) / s2;
+        if !bound.is_finite() || !beta.iter().all(|b| b.is_finite()) {
+            return Err(GpError::NotPositiveDefinite {
+                jitter: factor.jitter.max(factor_b.jitter),
+                retries: factor.retries.max(factor_b.retries),
+            });
+        }
+        Ok(Core {
+            bound,
+            jitter: jitter.max(factor_b.jitter),
+            uz,
+            kmm,
+            cmm,
+            p,
+            v,
+            yy,
+            tk,
+            tr_q,
+            linv,
+            c_factor,
+            beta,
+        })
+    }
+
+    /// The bound and the prediction factors at kernel `theta`, noise `s2` and inducing inputs
+    /// `z` (standardised units).
+    pub fn posterior(&self, theta: &[f64], s2: f64, z: &[f64]) -> Result<SparsePosterior, GpError> {
+        let kernel = Kernel::new(self.data.spec, theta, self.data.whiten)?;
+        let core = self.core(&kernel, z, s2)?;
+        let pb = mat_vec(&core.p, &core.beta);
+        let rss = core.yy - 2.0 * dot(&core.v, &core.beta) + dot(&core.beta, &pb);
+        Ok(SparsePosterior {
+            bound: core.bound,
+            kmm_inv_factor: pack_lower(&core.linv),
+            sigma_factor: pack_lower(&core.c_factor),
+            beta: core.beta,
+            jitter: core.jitter,
+            mean_squared_residual: rss.max(0.0) / self.data.y.len() as f64,
+        })
+    }
+
+    /// The bound (minus the soft-bound penalty) and its gradient at the optimised vector `p`.
+    pub fn evaluate(&self, p: &[f64]) -> Result<Evaluation, GpError> {
+        if let Ok(cache) = self.cache.lock()
+            && let Some((cp, ev)) = cache.as_ref()
+            && cp.as_slice() == p
+        {
+            return Ok(ev.clone());
+        }
+        let spec = self.data.spec;
+        let n_k = spec.n_params();
+        if p.len() != self.n_params() {
+            return Err(GpError::Shape {
+                what: "optimised parameters",
+                expected: self.n_params(),
+                got: p.len(),
+            });
+        }
+        if !p.iter().all(|v| v.is_finite()) {
+            return Err(GpError::NonFinite {
+                what: "hyperparameters",
+                row: 0,
+            });
+        }
+        let theta = &p[..n_k];
+        let s2 = noise_of(self.noise_floor, p[n_k]);
+        let z = self.inducing_of(p);
+        let kernel = Kernel::new(spec, theta, self.data.whiten)?;
+        let core = self.core(&kernel, z, s2)?;
+        let d = spec.dim;
+        let m = self.n_inducing();
+        let n = self.data.y.len();
+        let warped = spec.warp_units > 0;
+
+        // Sensitivities (see the module docs).
+        let kinv = core.linv.transpose() * &core.linv;
+        let sigma = core.c_factor.transpose() * &core.c_factor;
+        let beta = &core.beta;
+        let w = Mat::from_fn(m, m, |i, j| {
+            kinv[(i, j)] - sigma[(i, j)] - beta[i] * beta[j]
+        });
+        let kpk = &kinv * &core.p * &kinv;
+        let g_kmm = Mat::from_fn(m, m, |i, j| 0.5 * w[(i, j)] - 0.5 * kpk[(i, j)] / s2);
+        let pb = mat_vec(&core.p, beta);
+        let rss = core.yy - 2.0 * dot(&core.v, beta) + dot(beta, &pb);
+        let tr_sigma_p: f64 = (0..m)
+            .flat_map(|i| (0..m).map(move |j| (i, j)))
+            .map(|(i, j)| sigma[(i, j)] * core.p[(i, j)])
+            .sum();
+        let d_s2 = (tr_sigma_p - n as f64 * s2 + rss + core.tk - core.tr_q) / (2.0 * s2 * s2);
+
+        let prep_z: Vec<Prepared> = if warped {
+            (0..m)
+                .map(|a| kernel.prepare(&z[a * d..a * d + d], self.z_dirs[a]))
+                .collect()
+        } else {
+            Vec::new()
+        };
+
+        // Pass 2: dF/dK_mn column by column, chained into theta (and the inducing features).
+        let want_z = self.optimize_z;
+        let parts: Vec<(Vec<f64>, Vec<f64>)> = (0..self.n_blocks())
+            .into_par_iter()
+            .map(|b| {
+                let (start, end) = self.block_range(b);
+                let rows = end - start;
+                let mut kmn = Mat::zeros(m, rows);
+                let mut cmn = Mat::zeros(m, rows);
+                let mut ux = vec![0.0; rows * d];
+                self.cross_block(
+                    &kernel,
+                    &core.uz,
+                    start,
+                    end,
+                    &mut kmn,
+                    Some(&mut cmn),
+                    &mut ux,
+                );
+                // G = (W K_mn + beta y^T) / s2
+                let mut g = Mat::zeros(m, rows);
+                matmul(
+                    g.as_mut(),
+                    Accum::Replace,
+                    w.as_ref(),
+                    kmn.as_ref(),
+                    1.0 / s2,
+                    Par::Seq,
+                );
+                let y = &self.data.y[start..end];
+                let mut acc = vec![0.0; n_k];
+                let mut gz = vec![0.0; if want_z { m * d } else { 0 }];
+                let mut tmp = vec![0.0; n_k];
+                for col in 0..rows {
+                    let xu = &ux[col * d..col * d + d];
+                    let px = warped.then(|| {
+                        let j = start + col;
+                        kernel.prepare(&self.data.x[j * d..j * d + d], self.data.directions[j])
+                    });
+                    for a in 0..m {
+                        let gw = g[(a, col)] + beta[a] * y[col] / s2;
+                        let (k, c) = (kmn[(a, col)], cmn[(a, col)]);
+                        let za = &core.uz[a * d..a * d + d];
+                        if let Some(px) = &px {
+                            kernel.grad_theta(&prep_z[a], px, &mut tmp);
+                            for (s, t) in acc.iter_mut().zip(&tmp) {
+                                *s += gw * t;
+                            }
+                        } else {
+                            add_pair_theta_grad(&spec, gw, k, c, za, xu, &mut acc);
+                        }
+                        if want_z {
+                            let gc = 2.0 * gw * c;
+                            for j in 0..d {
+                                gz[a * d + j] += gc * (za[j] - xu[j]);
+                            }
+                        }
+                    }
+                }
+                (acc, gz)
+            })
+            .collect();
+        let mut grad_theta = vec![0.0; n_k];
+        let mut grad_uz = vec![0.0; if want_z { m * d } else { 0 }];
+        for (acc, gz) in &parts {
+            for (s, t) in grad_theta.iter_mut().zip(acc) {
+                *s += t;
+            }
+            for (s, t) in grad_uz.iter_mut().zip(gz) {
+                *s += t;
+            }
+        }
+
+        // K_mm and diagonal terms.
+        let mut tmp = vec![0.0; n_k];
+        for a in 0..m {
+            for b in 0..m {
+                let gw = g_kmm[(a, b)];
+                let (za, zb) = (&core.uz[a * d..a * d + d], &core.uz[b * d..b * d + d]);
+                // K_mm includes the jitter on its diagonal, which has no theta dependence.
+                let k = core.kmm[(a, b)] - if a == b { core.jitter } else { 0.0 };
+                if warped {
+                    kernel.grad_theta(&prep_z[a], &prep_z[b], &mut tmp);
+                    for (s, t) in grad_theta.iter_mut().zip(&tmp) {
+                        *s += gw * t;
+                    }
+                } else {
+                    add_pair_theta_grad(&spec, gw, k, core.cmm[(a, b)], za, zb, &mut grad_theta);
+                }
+                if want_z {
+                    let gc = 4.0 * gw * core.cmm[(a, b)];
+                    for j in 0..d {
+                        grad_uz[a * d + j] += gc * (za[j] - zb[j]);
+                    }
+                }
+            }
+        }
+        // sum_j k_jj is proportional to s_f^2.
+        grad_theta[0] -= 0.5 * core.tk / s2;
+
+        let mut grad = grad_theta;
+        grad.push(d_s2 * (s2 - self.noise_floor));
+        let penalty = soft_bound_penalty(&p[..=n_k], &mut grad);
+        if want_z {
+            // Features to inputs: dF/dz_c = sum_r dF/du_r du_r/dz_c.
+            let mut u = [0.0; MAX_DIM];
+            let mut jac = [0.0; MAX_DIM * MAX_DIM];
+            for a in 0..m {
+                kernel.features(&z[a * d..a * d + d], &mut u, &mut jac);
+                for c in 0..d {
+                    grad.push((0..d).map(|r| grad_uz[a * d + r] * jac[r * d + c]).sum());
+                }
+            }
+        }
+        let ev = Evaluation {
+            lml: core.bound - penalty,
+            grad,
+            jitter: core.jitter,
+        };
+        if !ev.grad.iter().all(|g| g.is_finite()) {
+            return Err(GpError::NonFinite {
+                what: "bound gradient",
+                row: 0,
+            });
+        }
+        if let Ok(mut s) = self.stats.lock() {
+            s.evaluations += 1;
+            if ev.jitter > 0.0 {
+                s.jitter_evaluations += 1;
+                s.max_jitter = s.max_jitter.max(ev.jitter);
+            }
+        }
+        if let Ok(mut cache) = self.cache.lock() {
+            *cache = Some((p.to_vec(), ev.clone()));
+        }
+        Ok(ev)
+    }
+}
+
+impl Objective for SparseBound<'_> {
+    fn evaluate(&self, p: &[f64]) -> Result<Evaluation, GpError> {
+        SparseBound::evaluate(self, p)
+    }
+    fn stats(&self) -> EvalStats {
+        self.stats.lock().map(|s| *s).unwrap_or_default()
+    }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// Greedy conditional-variance selection of at most `m` inducing points among the rows of
+/// `x_std` (`n x d`), under `kernel`: a pivoted Cholesky that picks, each time, the row with the
+/// largest residual variance `k(x, x) - Q(x, x)`, lowest index first on ties. Stops early when
+/// every residual is below `1e-10 s_f^2` (the data have fewer distinct inputs). Candidates are
+/// an evenly strided pool of at most `max(INIT_POOL_MIN, 32 m)` rows. Returns row indices.
+pub fn greedy_variance_selection(
+    kernel: &Kernel<'_>,
+    x_std: &[f64],
+    directions: &[f64],
+    m: usize,
+) -> Vec<usize> {
+    let spec = *kernel.spec();
+    let d = spec.dim;
+    let n = directions.len().min(x_std.len() / d.max(1));
+    let pool_size = n.min(INIT_POOL_MIN.max(32 * m));
+    let pool: Vec<usize> = (0..pool_size).map(|i| i * n / pool_size).collect();
+    let sf2 = kernel.signal_variance();
+    let mut feats = vec![0.0; pool_size * d];
+    let mut u = [0.0; MAX_DIM];
+    let mut jac = [0.0; MAX_DIM * MAX_DIM];
+    for (i, &row) in pool.iter().enumerate() {
+        kernel.features(&x_std[row * d..row * d + d], &mut u, &mut jac);
+        feats[i * d..i * d + d].copy_from_slice(&u[..d]);
+    }
+    let mut residual: Vec<f64> = pool
+        .iter()
+        .map(|&row| sf2 * spec.direction_factor(directions[row], directions[row]))
+        .collect();
+    let mut rows_e: Vec<Vec<f64>> = Vec::with_capacity(m);
+    let mut chosen = Vec::with_capacity(m);
+    let tol = 1e-10 * sf2;
+    while chosen.len() < m.min(pool_size) {
+        let (best, best_r) =
+            residual
+                .iter()
+                .enumerate()
+                .fold(
+                    (0, f64::NEG_INFINITY),
+                    |acc, (i, &r)| {
+                        if r > acc.1 { (i, r) } else { acc }
+                    },
+                );
+        if !(best_r > tol) {
+            break;
+        }
+        let sqrt_r = best_r.sqrt();
+        let fb = &feats[best * d..best * d + d];
+        let gb = directions[pool[best]];
+        let e: Vec<f64> = (0..pool_size)
+            .into_par_iter()
+            .map(|i| {
+                let fi = &feats[i * d..i * d + d];
+                let r2: f64 = fb.iter().zip(fi).map(|(p, q)| (p - q) * (p - q)).sum();
+                let (f, _) = profile_and_slope(spec.profile, r2);
+                let k = sf2 * f * spec.direction_factor(gb, directions[pool[i]]);
+                let s: f64 = rows_e.iter().map(|ej| ej[best] * ej[i]).sum();
+                (k - s) / sqrt_r
+            })
+            .collect();
+        for (r, ei) in residual.iter_mut().zip(&e) {
+            *r -= ei * ei;
+        }
+        residual[best] = f64::NEG_INFINITY;
+        rows_e.push(e);
+        chosen.push(pool[best]);
+    }
+    chosen
+}
+
+/// Fits a sparse GP (called by [`crate::fit`] when `params.sparse` is set).
+pub(crate) fn fit_sparse(
+    params: &GpParams,
+    sp: &SparseParams,
+    x: &[f64],
+    y: &[f64],
+    data: &Standardised,
+    t0: Instant,
+    observe: &mut dyn FnMut(FitProgress),
+) -> Result<GaussianProcess, GpError> {
+    let spec = params.kernel;
+    let d = spec.dim;
+    let n = y.len();
+    let ys: Vec<f64> = y
+        .iter()
+        .map(|v| (v - data.output_mean) / data.output_scale)
+        .collect();
+    let directions: Vec<f64> = x.chunks_exact(d).map(|r| spec.direction_of(r)).collect();
+    let whiten = if spec.metric == Metric::Mahalanobis {
+        crate::data::whitening(&data.std_x, d)
+    } else {
+        Vec::new()
+    };
+    let (theta0, noise0) = starting_point(params, &data.input_scale, data.output_scale)?;
+
+    // Inducing inputs: given (raw units) or greedy conditional variance at the start theta.
+    let (z_raw, z_dirs): (Vec<f64>, Vec<f64>) = match &sp.inducing_inputs {
+        Some(z) => (
+            z.clone(),
+            z.chunks_exact(d).map(|r| spec.direction_of(r)).collect(),
+        ),
+        None => {
+            let kernel = Kernel::new(spec, &theta0, &whiten)?;
+            let idx = greedy_variance_selection(&kernel, &data.std_x, &directions, sp.n_inducing);
+            (
+                idx.iter()
+                    .flat_map(|&i| x[i * d..i * d + d].iter().copied())
+                    .collect(),
+                idx.iter().map(|&i| directions[i]).collect(),
+            )
+        }
+    };
+    let z_std: Vec<f64> = z_raw
+        .chunks_exact(d)
+        .flat_map(|row| (0..d).map(|j| (row[j] - data.input_mean[j]) / data.input_scale[j]))
+        .collect();
+    let m = z_dirs.len();
+
+    let bound = SparseBound::new(
+        LikelihoodData {
+            spec,
+            whiten: &whiten,
+            x: &data.std_x,
+            directions: &directions,
+            y: &ys,
+        },
+        z_std.clone(),
+        z_dirs.clone(),
+        sp.optimize_inducing,
+        params.noise_floor,
+        params.max_jitter_retries,
+    );
+    let mut report = TrainingReport {
+        n_samples: n,
+        n_support: m,
+        n_inducing_requested: Some(sp.n_inducing),
+        ..Default::default()
+    };
+    let n_k = spec.n_params();
+    let (theta, noise, z_final) = if params.optimize {
+        let tail = if sp.optimize_inducing {
+            z_std.as_slice()
+        } else {
+            &[]
+        };
+        let p = multi_start(&bound, &theta0, noise0, tail, params, &mut report, observe)?;
+        let z = bound.inducing_of(&p).to_vec();
+        (p[..n_k].to_vec(), noise_of(params.noise_floor, p[n_k]), z)
+    } else {
+        (theta0, noise0, z_std)
+    };
+    let post = bound.posterior(&theta, noise, &z_final)?;
+    report.final_jitter = post.jitter;
+
+    let kernel = Kernel::new(spec, &theta, &whiten)?;
+    let mut features = Vec::with_capacity(m * d);
+    let mut u = [0.0; MAX_DIM];
+    let mut jac = [0.0; MAX_DIM * MAX_DIM];
+    for row in z_final.chunks_exact(d) {
+        kernel.features(row, &mut u, &mut jac);
+        features.extend_from_slice(&u[..d]);
+    }
+    let support_x: Vec<f64> = z_final
+        .chunks_exact(d)
+        .flat_map(|row| (0..d).map(|j| row[j] * data.input_scale[j] + data.input_mean[j]))
+        .collect();
+    report.seconds = t0.elapsed().as_secs_f64();
+    let s2_out = data.output_scale * data.output_scale;
+    Ok(GaussianProcess {
+        kernel: spec,
+        theta,
+        noise_variance: noise,
+        whiten,
+        input_mean: data.input_mean.clone(),
+        input_scale: data.input_scale.clone(),
+        output_mean: data.output_mean,
+        output_scale: data.output_scale,
+        support_x,
+        support_y: Vec::new(),
+        directions: if spec.direction.is_some() {
+            z_dirs
+        } else {
+            Vec::new()
+        },
+        features,
+        alpha: post.beta,
+        chol_packed: Vec::new(),
+        sparse: Some(SparseFactors {
+            kmm_inv_factor: post.kmm_inv_factor,
+            sigma_factor: post.sigma_factor,
+        }),
+        log_marginal_likelihood: post.bound,
+        loo_error_variance: post.mean_squared_residual * s2_out,
+        report,
+    })
+}

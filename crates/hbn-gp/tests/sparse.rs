@@ -1,0 +1,401 @@
+//! Sparse GP (SGPR/VFE) tests: equality with the exact GP when `Z = X`, parity with an
+//! independent numpy implementation of Titsias' formulas, gradients against finite
+//! differences, the bound below the exact LML, determinism, persistence and bad input.
+
+use hbn_core::rng::Rng;
+use hbn_core::{KernelSpec, Metric, Profile, Want};
+use hbn_gp::likelihood::LikelihoodData;
+use hbn_gp::sparse::{SparseBound, greedy_variance_selection};
+use hbn_gp::{GaussianProcess, GpError, GpParams, Hyperparameters, SparseParams, fit};
+
+fn fixture(name: &str) -> String {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures")
+        .join(name);
+    std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+fn vecf(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
+fn rel(a: f64, b: f64) -> f64 {
+    (a - b).abs() / b.abs().max(1e-12)
+}
+
+fn data(n: usize, d: usize, seed: u64) -> (Vec<f64>, Vec<f64>) {
+    let mut rng = Rng::new(seed);
+    let x: Vec<f64> = (0..n * d).map(|_| rng.uniform_in(-2.0, 2.0)).collect();
+    let y = x
+        .chunks_exact(d)
+        .map(|r| r.iter().map(|v| v.sin()).sum::<f64>() + 0.05 * rng.normal())
+        .collect();
+    (x, y)
+}
+
+fn kernels(d: usize) -> Vec<KernelSpec> {
+    vec![
+        KernelSpec::se_ard(d),
+        KernelSpec {
+            profile: Profile::Matern52,
+            ..KernelSpec::se_ard(d)
+        },
+        KernelSpec {
+            metric: Metric::Isotropic,
+            ..KernelSpec::se_ard(d)
+        },
+        KernelSpec {
+            metric: Metric::Mahalanobis,
+            warp_units: 2,
+            direction: Some([0, 1]),
+            ..KernelSpec::se_ard(d)
+        },
+    ]
+}
+
+fn fixed(spec: KernelSpec, noise: f64) -> GpParams {
+    let mut theta = vec![0.0; spec.n_params()];
+    spec.default_theta(&mut theta).unwrap();
+    theta[0] = 0.3;
+    for t in theta.iter_mut().take(1 + spec.n_metric()).skip(1) {
+        *t = 0.2;
+    }
+    let mut p = GpParams::new(spec);
+    p.optimize = false;
+    p.init = Some(Hyperparameters {
+        theta,
+        noise_variance: noise,
+    });
+    p
+}
+
+/// With the inducing inputs equal to the training inputs, the bound is the exact LML
+/// (`Q_nn = K_nn`, no trace term) and the predictions are the exact GP's.
+#[test]
+fn equals_the_exact_gp_when_z_is_x() {
+    let (x, y) = data(40, 3, 1);
+    let xs: Vec<f64> = [0.3, -0.2, 1.1, -1.0, 0.5, 0.0, 1.9, 1.2, -1.7]
+        .into_iter()
+        .collect();
+    let mut worst: f64 = 0.0;
+    for spec in kernels(3) {
+        let exact = fit(&fixed(spec, 0.05), &x, &y).unwrap();
+        let mut params = fixed(spec, 0.05);
+        params.sparse = Some(SparseParams {
+            n_inducing: 40,
+            inducing_inputs: Some(x.clone()),
+            optimize_inducing: false,
+        });
+        let sparse = fit(&params, &x, &y).unwrap();
+        assert!(sparse.is_sparse() && !exact.is_sparse());
+        assert_eq!(sparse.report().final_jitter, 0.0, "{spec:?}");
+        worst = worst.max(rel(
+            sparse.log_marginal_likelihood(),
+            exact.log_marginal_likelihood(),
+        ));
+        let pe = exact.predict_many(&xs, Want::ALL).unwrap();
+        let ps = sparse.predict_many(&xs, Want::ALL).unwrap();
+        for (a, b) in pe.iter().zip(&ps) {
+            worst = worst.max(rel(b.mean, a.mean));
+            worst = worst.max(rel(b.variance, a.variance));
+            for j in 0..3 {
+                worst = worst
+                    .max((b.grad_mean[j] - a.grad_mean[j]).abs() / (1.0 + a.grad_mean[j].abs()));
+            }
+        }
+    }
+    assert!(worst < 1e-8, "worst relative difference {worst:e}");
+}
+
+/// Fixed hyperparameters and inducing inputs: the bound, means and variances equal a direct
+/// numpy implementation (dense `Q_nn`, no Cholesky tricks; `fixtures/make_sparse_gp.py`).
+#[test]
+fn matches_numpy_titsias_formulae() {
+    let doc: serde_json::Value = serde_json::from_str(&fixture("sparse_gp_parity.json")).unwrap();
+    let mut worst: f64 = 0.0;
+    for case in doc["cases"].as_array().unwrap() {
+        let d = case["d"].as_u64().unwrap() as usize;
+        let m = case["m"].as_u64().unwrap() as usize;
+        let ls = vecf(&case["length_scales"]);
+        let mut theta = vec![case["signal_variance"].as_f64().unwrap().ln()];
+        theta.extend(ls.iter().map(|l| l.ln()));
+        let mut params = GpParams::new(KernelSpec::se_ard(d));
+        params.optimize = false;
+        params.normalize = false;
+        params.init = Some(Hyperparameters {
+            theta,
+            noise_variance: case["noise"].as_f64().unwrap(),
+        });
+        params.sparse = Some(SparseParams {
+            n_inducing: m,
+            inducing_inputs: Some(vecf(&case["z"])),
+            optimize_inducing: false,
+        });
+        let gp = fit(&params, &vecf(&case["x"]), &vecf(&case["y"])).unwrap();
+        worst = worst.max(rel(
+            gp.log_marginal_likelihood(),
+            case["bound"].as_f64().unwrap(),
+        ));
+        let preds = gp.predict_many(&vecf(&case["x_test"]), Want::EKF).unwrap();
+        for ((p, mean), var) in preds
+            .iter()
+            .zip(vecf(&case["mean"]))
+            .zip(vecf(&case["var"]))
+        {
+            worst = worst.max(rel(p.mean, mean));
+            worst = worst.max(rel(p.variance, var));
+        }
+    }
+    assert!(worst < 1e-8, "worst relative difference {worst:e}");
+}
+
+/// Every analytic derivative (hyperparameters, noise, inducing inputs) agrees with central
+/// finite differences, for every kernel family.
+#[test]
+fn gradients_match_finite_differences() {
+    let (x, y) = data(150, 3, 2);
+    let (mean, scale) = hbn_gp::column_stats(&x, 3);
+    let xs: Vec<f64> = x
+        .chunks_exact(3)
+        .flat_map(|r| {
+            (0..3)
+                .map(|j| (r[j] - mean[j]) / scale[j])
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let ys: Vec<f64> = y.iter().map(|v| v * 0.8 - 0.1).collect();
+    for spec in kernels(3) {
+        let dirs: Vec<f64> = x.chunks_exact(3).map(|r| spec.direction_of(r)).collect();
+        let whiten = if spec.metric == Metric::Mahalanobis {
+            hbn_gp::whitening(&xs, 3)
+        } else {
+            Vec::new()
+        };
+        let m = 12;
+        let z: Vec<f64> = xs[..m * 3].iter().map(|v| v + 0.05).collect();
+        let zd = dirs[..m].to_vec();
+        let bound = SparseBound::new(
+            LikelihoodData {
+                spec,
+                whiten: &whiten,
+                x: &xs,
+                directions: &dirs,
+                y: &ys,
+            },
+            z.clone(),
+            zd,
+            true,
+            1e-6,
+            8,
+        );
+        let mut p = vec![0.0; spec.n_params()];
+        spec.default_theta(&mut p).unwrap();
+        for (i, v) in p.iter_mut().enumerate() {
+            *v += 0.1 * ((i as f64) * 1.7).sin();
+        }
+        p.push((0.05f64).ln());
+        p.extend_from_slice(&z);
+        let ev = bound.evaluate(&p).unwrap();
+        assert_eq!(ev.grad.len(), bound.n_params());
+        for i in 0..p.len() {
+            let h = 1e-5;
+            let (mut a, mut b) = (p.clone(), p.clone());
+            a[i] += h;
+            b[i] -= h;
+            let fd =
+                (bound.evaluate(&a).unwrap().lml - bound.evaluate(&b).unwrap().lml) / (2.0 * h);
+            assert!(
+                (fd - ev.grad[i]).abs() < 1e-5 * (1.0 + fd.abs()),
+                "{spec:?} parameter {i}: finite difference {fd} vs analytic {}",
+                ev.grad[i]
+            );
+        }
+    }
+}
+
+/// The bound never exceeds the exact log marginal likelihood, and grows toward it as
+/// inducing points are added.
+#[test]
+fn bound_is_below_the_exact_lml() {
+    let (x, y) = data(120, 2, 3);
+    for spec in kernels(2) {
+        let exact = fit(&fixed(spec, 0.02), &x, &y).unwrap();
+        let mut last = f64::NEG_INFINITY;
+        for m in [4, 16, 60] {
+            let mut params = fixed(spec, 0.02);
+            params.sparse = Some(SparseParams::new(m));
+            let sparse = fit(&params, &x, &y).unwrap();
+            let b = sparse.log_marginal_likelihood();
+            assert!(
+                b <= exact.log_marginal_likelihood() + 1e-9,
+                "{spec:?} m={m}: bound {b} > exact {}",
+                exact.log_marginal_likelihood()
+            );
+            assert!(
+                b >= last - 1e-6,
+                "{spec:?}: bound fell from {last} to {b} at m={m}"
+            );
+            last = b;
+        }
+    }
+}
+
+/// Optimised training: bit-identical across runs and across thread counts, and close to the
+/// exact GP on held-out points.
+#[test]
+fn training_is_deterministic_and_accurate() {
+    let (x, y) = data(3000, 2, 4);
+    let mut params = GpParams::new(KernelSpec::se_ard(2));
+    params.n_starts = 2;
+    params.sparse = Some(SparseParams::new(40));
+    let a = fit(&params, &x, &y).unwrap();
+    let one_thread = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let b = one_thread.install(|| fit(&params, &x, &y).unwrap());
+    // Timings differ; everything numerical must not.
+    let numbers = |gp: &GaussianProcess| {
+        let mut v: serde_json::Value = serde_json::from_str(&gp.to_json().unwrap()).unwrap();
+        v["gp"]["report"]["seconds"] = 0.into();
+        v
+    };
+    assert_eq!(numbers(&a), numbers(&b));
+    let (xt, yt) = data(200, 2, 5);
+    let preds = a.predict_many(&xt, Want::EKF).unwrap();
+    let mse: f64 = preds
+        .iter()
+        .zip(&yt)
+        .map(|(p, t)| (p.mean - t).powi(2))
+        .sum::<f64>()
+        / yt.len() as f64;
+    // Noise variance 0.0025: the sparse GP on all samples should be near it.
+    assert!(mse < 0.005, "held-out mse {mse}");
+    assert!(a.noise_variance() < 0.005 && a.noise_variance() > 0.001);
+}
+
+/// Learning Z never lowers the bound reached with Z fixed.
+#[test]
+fn optimising_inducing_inputs_raises_the_bound() {
+    let (x, y) = data(800, 2, 6);
+    let mut params = GpParams::new(KernelSpec::se_ard(2));
+    params.n_starts = 1;
+    params.max_iters = 60;
+    params.sparse = Some(SparseParams::new(8));
+    let fixed_z = fit(&params, &x, &y).unwrap();
+    params.sparse = Some(SparseParams {
+        optimize_inducing: true,
+        ..SparseParams::new(8)
+    });
+    let learned = fit(&params, &x, &y).unwrap();
+    assert!(
+        learned.log_marginal_likelihood() > fixed_z.log_marginal_likelihood(),
+        "learned {} vs fixed {}",
+        learned.log_marginal_likelihood(),
+        fixed_z.log_marginal_likelihood()
+    );
+    assert_ne!(learned.support_inputs(), fixed_z.support_inputs());
+}
+
+/// Greedy selection skips duplicates and reports fewer points when the data have fewer
+/// distinct inputs.
+#[test]
+fn greedy_selection_skips_duplicates() {
+    let (x, _) = data(10, 2, 7);
+    let repeated: Vec<f64> = (0..5).flat_map(|_| x.iter().copied()).collect();
+    let spec = KernelSpec::se_ard(2);
+    let theta = vec![0.0; spec.n_params()];
+    let kernel = hbn_core::Kernel::new(spec, &theta, &[]).unwrap();
+    let idx = greedy_variance_selection(&kernel, &repeated, &[0.0; 50], 20);
+    assert_eq!(idx.len(), 10);
+    let mut firsts: Vec<usize> = idx.iter().map(|i| i % 10).collect();
+    firsts.sort_unstable();
+    assert_eq!(firsts, (0..10).collect::<Vec<_>>());
+
+    let y: Vec<f64> = repeated.chunks_exact(2).map(|r| r[0] - r[1]).collect();
+    let mut params = fixed(spec, 0.05);
+    params.sparse = Some(SparseParams::new(20));
+    let gp = fit(&params, &repeated, &y).unwrap();
+    assert_eq!(gp.n_support(), 10);
+    assert!(
+        gp.report()
+            .warnings()
+            .iter()
+            .any(|w| w.contains("inducing points")),
+        "{:?}",
+        gp.report().warnings()
+    );
+}
+
+#[test]
+fn persistence_round_trips_and_old_files_load() {
+    let (x, y) = data(300, 2, 8);
+    let mut params = fixed(KernelSpec::se_ard(2), 0.05);
+    params.sparse = Some(SparseParams::new(16));
+    let gp = fit(&params, &x, &y).unwrap();
+    let text = gp.to_json().unwrap();
+    let back = GaussianProcess::from_json(&text, "mem").unwrap();
+    assert_eq!(gp, back);
+    assert!(back.is_sparse());
+    // A version-1 (exact-only) file, as written before the sparse GP existed.
+    let exact = fit(&fixed(KernelSpec::se_ard(2), 0.05), &x[..60], &y[..30]).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&exact.to_json().unwrap()).unwrap();
+    v["version"] = 1.into();
+    v["gp"].as_object_mut().unwrap().remove("sparse");
+    let old = GaussianProcess::from_json(&v.to_string(), "old").unwrap();
+    assert_eq!(old, exact);
+    // A sparse file whose factor is cut short is refused with a format error.
+    let mut bad: serde_json::Value = serde_json::from_str(&text).unwrap();
+    bad["gp"]["sparse"]["sigma_factor"]
+        .as_array_mut()
+        .unwrap()
+        .pop();
+    assert!(matches!(
+        GaussianProcess::from_json(&bad.to_string(), "bad"),
+        Err(GpError::Format { .. })
+    ));
+}
+
+#[test]
+fn bad_input_gives_typed_errors() {
+    let (x, y) = data(50, 2, 9);
+    let mut params = GpParams::new(KernelSpec::se_ard(2));
+    params.sparse = Some(SparseParams::new(0));
+    assert!(matches!(
+        fit(&params, &x, &y),
+        Err(GpError::InvalidParameter {
+            name: "n_inducing",
+            ..
+        })
+    ));
+    params.sparse = Some(SparseParams {
+        inducing_inputs: Some(vec![0.0; 5]),
+        ..SparseParams::new(3)
+    });
+    assert!(matches!(
+        fit(&params, &x, &y),
+        Err(GpError::InvalidParameter {
+            name: "inducing_inputs",
+            ..
+        })
+    ));
+    params.sparse = Some(SparseParams::new(8));
+    let mut xn = x.clone();
+    xn[7] = f64::NAN;
+    assert!(matches!(
+        fit(&params, &xn, &y),
+        Err(GpError::NonFinite { .. })
+    ));
+    assert!(matches!(
+        fit(&params, &x, &vec![1.0; 50]),
+        Err(GpError::ConstantTargets { .. })
+    ));
+    assert!(matches!(
+        fit(&params, &x[..3], &y[..1]),
+        Err(GpError::TooFewSamples { .. }) | Err(GpError::Shape { .. })
+    ));
+}
