@@ -1,4 +1,5 @@
-//! One estimator step with 500 support points in each GP, variances included, in both modes.
+//! One estimator step, variances included, in both modes: sparse GPs with 64 and 128 inducing
+//! points (the default kind) and exact GPs with 500 and 150 support points.
 //!
 //! `cargo bench --bench ekf`. The numpy comparison is `python3 benches/numpy_filter.py`.
 
@@ -27,18 +28,26 @@ fn bench_step(c: &mut Criterion) {
         })
         .collect();
     let test = test_trajectory(system, 1.0, 9, &cfg).unwrap();
-    for n in [500usize, 150] {
+    let cases = [
+        ("sparse_m64", Some(64usize), 500usize),
+        ("sparse_m128", Some(128), 500),
+        ("exact_n500", None, 500),
+        ("exact_n150", None, 150),
+    ];
+    for (label, n_inducing, max_points) in cases {
         let params = HbnParams {
-            max_points: n,
+            n_inducing,
+            max_points,
             n_starts: 1,
             max_iters: 50,
             ..HbnParams::default()
         };
         let model = HbnModel::fit(&seqs, &params).unwrap();
+        let n = n_inducing.unwrap_or(max_points);
         assert_eq!(model.transition().n_support(), n);
         assert_eq!(model.sensor().n_support(), n);
         let view = model.view().unwrap();
-        let mut g = c.benchmark_group(format!("ekf_step_n{n}"));
+        let mut g = c.benchmark_group(format!("ekf_step_{label}"));
         for (name, mode) in [("ekf", Mode::Ekf), ("ekf_blr", Mode::EkfBlr)] {
             let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
             let mut est = Estimator::new(view, model.ekf_config(mode), &mut scratch).unwrap();

@@ -200,14 +200,26 @@ fn check_len(got: usize, expected: usize) -> Result<(), CoreError> {
 /// Profile value `f(r2)` and its derivative `df/dr2`.
 #[inline(always)]
 pub fn profile_and_slope(profile: Profile, r2: f64) -> (f64, f64) {
+    profile_and_slope_with(profile, r2, libm::exp, libm::sqrt)
+}
+
+/// [`profile_and_slope`] with the caller's `exp` and `sqrt`: training code on a host passes
+/// the platform's (faster) ones; the `no_std` core uses `libm`'s, identical on every target.
+#[inline(always)]
+pub fn profile_and_slope_with(
+    profile: Profile,
+    r2: f64,
+    exp: impl Fn(f64) -> f64,
+    sqrt: impl Fn(f64) -> f64,
+) -> (f64, f64) {
     match profile {
         Profile::SquaredExponential => {
-            let f = libm::exp(-0.5 * r2);
+            let f = exp(-0.5 * r2);
             (f, -0.5 * f)
         }
         Profile::Matern52 => {
-            let r = libm::sqrt(r2.max(0.0));
-            let e = libm::exp(-SQRT5 * r);
+            let r = sqrt(r2.max(0.0));
+            let e = exp(-SQRT5 * r);
             let f = (1.0 + SQRT5 * r + (5.0 / 3.0) * r2) * e;
             (f, -(5.0 / 6.0) * (1.0 + SQRT5 * r) * e)
         }

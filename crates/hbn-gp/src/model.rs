@@ -44,6 +44,13 @@ pub struct TrainingReport {
     pub starts: Vec<StartReport>,
     /// Index of the start that won.
     pub best_start: Option<usize>,
+    /// Sparse GP with more samples than its search subset: the starts ran on
+    /// `search_samples` samples, and this L-BFGS run refined the winner on every sample.
+    #[serde(default)]
+    pub refinement: Option<StartReport>,
+    /// Samples the multi-start search used (sparse GP; `None` = all).
+    #[serde(default)]
+    pub search_samples: Option<usize>,
     /// Likelihood evaluations in all.
     pub evaluations: usize,
     /// Evaluations whose Cholesky needed jitter.
@@ -57,6 +64,13 @@ pub struct TrainingReport {
 }
 
 impl TrainingReport {
+    /// Adds an objective's evaluation counters.
+    pub fn add_stats(&mut self, stats: crate::likelihood::EvalStats) {
+        self.evaluations += stats.evaluations;
+        self.jitter_evaluations += stats.jitter_evaluations;
+        self.max_jitter = self.max_jitter.max(stats.max_jitter);
+    }
+
     /// Human-readable warnings (jitter, subset, failed starts); empty when all went cleanly.
     pub fn warnings(&self) -> Vec<String> {
         let mut w = Vec::new();
@@ -257,9 +271,9 @@ impl GaussianProcess {
     /// The model's own estimate of its prediction error, in raw output units, used by the EKF
     /// as a floor of its noise variances. Exact GP: the mean squared leave-one-out error over
     /// the support points, `mean_i (alpha_i / [K_y^-1]_ii)^2`; unlike the noise hyperparameter
-    /// it includes model mismatch (e.g. kinks the kernel cannot follow). Sparse GP: the mean
-    /// squared training residual over all samples, which with `n >> m` (a model of far fewer
-    /// degrees of freedom than samples) is close to the held-out error.
+    /// it includes model mismatch (e.g. kinks the kernel cannot follow). Sparse GP: the same
+    /// over every sample, exact for its mean, a linear smoother `y_hat = H y` with
+    /// `H = K_nm Sigma K_mn / s_n^2`: `mean_j (r_j / (1 - H_jj))^2`.
     pub fn loo_error_variance(&self) -> f64 {
         self.loo_error_variance
     }

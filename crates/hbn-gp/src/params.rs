@@ -49,15 +49,39 @@ pub struct SparseParams {
     /// Learn the inducing inputs together with the hyperparameters (analytic gradients).
     #[serde(default)]
     pub optimize_inducing: bool,
+    /// With more samples than this, the multi-start search runs on an evenly strided subset
+    /// of this many samples, then L-BFGS refines the winner on every sample for at most
+    /// `refine_iters` iterations. Hyperparameters are a handful of numbers that a subset
+    /// determines well; the refinement and the final posterior use every sample.
+    #[serde(default = "default_search_samples")]
+    pub search_samples: usize,
+    /// Iterations of the refinement on every sample (0 skips it).
+    #[serde(default = "default_refine_iters")]
+    pub refine_iters: u64,
+}
+
+fn default_search_samples() -> usize {
+    SparseParams::DEFAULT_SEARCH_SAMPLES
+}
+
+fn default_refine_iters() -> u64 {
+    SparseParams::DEFAULT_REFINE_ITERS
 }
 
 impl SparseParams {
+    /// Default of [`SparseParams::search_samples`].
+    pub const DEFAULT_SEARCH_SAMPLES: usize = 10_000;
+    /// Default of [`SparseParams::refine_iters`].
+    pub const DEFAULT_REFINE_ITERS: u64 = 20;
+
     /// `m` inducing points chosen by greedy conditional variance, not optimised.
     pub fn new(n_inducing: usize) -> Self {
         Self {
             n_inducing,
             inducing_inputs: None,
             optimize_inducing: false,
+            search_samples: Self::DEFAULT_SEARCH_SAMPLES,
+            refine_iters: Self::DEFAULT_REFINE_ITERS,
         }
     }
 }
@@ -139,6 +163,12 @@ impl GpParams {
         if let Some(sp) = &self.sparse {
             if sp.n_inducing == 0 {
                 return bad("n_inducing", "must be >= 1".into());
+            }
+            if sp.search_samples < 2 {
+                return bad(
+                    "search_samples",
+                    format!("must be >= 2, got {}", sp.search_samples),
+                );
             }
             if let Some(z) = &sp.inducing_inputs {
                 if z.len() != sp.n_inducing * self.kernel.dim {

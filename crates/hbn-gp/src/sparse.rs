@@ -37,14 +37,14 @@ use crate::likelihood::{
     EvalStats, Evaluation, LikelihoodData, Objective, add_pair_theta_grad, noise_of,
     soft_bound_penalty,
 };
-use crate::model::{GaussianProcess, SparseFactors, TrainingReport};
+use crate::model::{GaussianProcess, SparseFactors, StartReport, TrainingReport};
 use crate::params::{GpParams, SparseParams};
-use crate::train::{FitProgress, Standardised, multi_start, starting_point};
+use crate::train::{FitProgress, Standardised, multi_start, run_lbfgs, starting_point};
 use faer::linalg::matmul::matmul;
 use faer::linalg::triangular_inverse::invert_lower_triangular;
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::{Accum, Mat, Par};
-use hbn_core::kernel::{MAX_DIM, Prepared, profile_and_slope};
+use hbn_core::kernel::{MAX_DIM, Prepared, Profile, profile_and_slope_with};
 use hbn_core::{Kernel, Metric};
 use rayon::prelude::*;
 use std::sync::Mutex;
@@ -54,6 +54,13 @@ use std::time::Instant;
 pub const BLOCK_ROWS: usize = 1024;
 /// Smallest candidate pool of the greedy inducing-point selection.
 pub const INIT_POOL_MIN: usize = 8192;
+
+/// The kernel profile with the platform's `exp` and `sqrt` (training runs on a host; `libm`'s
+/// portable versions are about twice as slow and the kernel sums are half the training time).
+#[inline(always)]
+fn profile_and_slope(profile: Profile, r2: f64) -> (f64, f64) {
+    profile_and_slope_with(profile, r2, f64::exp, f64::sqrt)
+}
 
 /// The collapsed bound as an optimisation problem. The optimised vector is the kernel's
 /// `theta`, the noise parameter and, when the inducing inputs are learned, `Z` (`m x d`,
@@ -85,6 +92,8 @@ pub struct SparsePosterior {
     pub jitter: f64,
     /// Mean squared training residual `|y - K_nm beta|^2 / n` (standardised units).
     pub mean_squared_residual: f64,
+    /// Mean squared leave-one-out residual of the posterior mean (standardised units).
+    pub loo_mean_squared_residual: f64,
 }
 
 /// What the first pass and the `m x m` algebra leave for the gradient.
@@ -96,8 +105,6 @@ struct Core {
     kmm: Mat<f64>,
     cmm: Mat<f64>,
     p: Mat<f64>,
-    v: Vec<f64>,
-    yy: f64,
     tk: f64,
     tr_q: f64,
     linv: Mat<f64>,
@@ -339,7 +346,6 @@ impl<'a> SparseBound<'a> {
         // P = L Q L^T and v = L A y, for the gradient.
         let l_full = Mat::from_fn(m, m, |i, j| if j <= i { l_factor[(i, j)] } else { 0.0 });
         let p = &l_full * &q * l_full.transpose();
-        let v = mat_vec(&l_full, &av);
 
         let tr_q: f64 = (0..m).map(|i| q[(i, i)]).sum();
         let mut bmat = Mat::from_fn(m, m, |i, j| q[(i, j)] / s2 + if i == j { 1.0 } else { 0.0 });
@@ -370,8 +376,6 @@ impl<'a> SparseBound<'a> {
             kmm,
             cmm,
             p,
-            v,
-            yy,
             tk,
             tr_q,
             linv,
@@ -385,16 +389,59 @@ impl<'a> SparseBound<'a> {
     pub fn posterior(&self, theta: &[f64], s2: f64, z: &[f64]) -> Result<SparsePosterior, GpError> {
         let kernel = Kernel::new(self.data.spec, theta, self.data.whiten)?;
         let core = self.core(&kernel, z, s2)?;
-        let pb = mat_vec(&core.p, &core.beta);
-        let rss = core.yy - 2.0 * dot(&core.v, &core.beta) + dot(&core.beta, &pb);
+        let (mean_squared_residual, loo_mean_squared_residual) = self.residuals(&kernel, &core, s2);
         Ok(SparsePosterior {
             bound: core.bound,
             kmm_inv_factor: pack_lower(&core.linv),
             sigma_factor: pack_lower(&core.c_factor),
             beta: core.beta,
             jitter: core.jitter,
-            mean_squared_residual: rss.max(0.0) / self.data.y.len() as f64,
+            mean_squared_residual,
+            loo_mean_squared_residual,
         })
+    }
+
+    /// Mean squared training residual and mean squared leave-one-out residual of the
+    /// posterior mean, one sample at a time (the closed form
+    /// `y^T y - 2 v^T beta + beta^T P beta` cancels catastrophically when `s_f^2` is large).
+    /// The mean `K_nm Sigma K_mn y / s2` is a linear smoother with hat-matrix diagonal
+    /// `h_j = |C k_j|^2 / s2`, so the leave-one-out residual is exactly `r_j / (1 - h_j)`.
+    fn residuals(&self, kernel: &Kernel<'_>, core: &Core, s2: f64) -> (f64, f64) {
+        let m = self.n_inducing();
+        let d = kernel.spec().dim;
+        let parts: Vec<(f64, f64)> = (0..self.n_blocks())
+            .into_par_iter()
+            .map(|b| {
+                let (start, end) = self.block_range(b);
+                let rows = end - start;
+                let mut kmn = Mat::zeros(m, rows);
+                let mut ux = vec![0.0; rows * d];
+                self.cross_block(kernel, &core.uz, start, end, &mut kmn, None, &mut ux);
+                let mut ck = Mat::zeros(m, rows);
+                matmul(
+                    ck.as_mut(),
+                    Accum::Replace,
+                    core.c_factor.as_ref(),
+                    kmn.as_ref(),
+                    1.0,
+                    Par::Seq,
+                );
+                let (mut sq, mut loo) = (0.0, 0.0);
+                for c in 0..rows {
+                    let mean: f64 = (0..m).map(|a| kmn[(a, c)] * core.beta[a]).sum();
+                    let r = self.data.y[start + c] - mean;
+                    let h: f64 = (0..m).map(|a| ck[(a, c)] * ck[(a, c)]).sum::<f64>() / s2;
+                    sq += r * r;
+                    loo += (r / (1.0 - h).max(1e-12)).powi(2);
+                }
+                (sq, loo)
+            })
+            .collect();
+        let n = self.data.y.len() as f64;
+        let (sq, loo) = parts
+            .iter()
+            .fold((0.0, 0.0), |acc, p| (acc.0 + p.0, acc.1 + p.1));
+        (sq / n, loo / n)
     }
 
     /// The bound (minus the soft-bound penalty) and its gradient at the optimised vector `p`.
@@ -439,13 +486,10 @@ impl<'a> SparseBound<'a> {
         });
         let kpk = &kinv * &core.p * &kinv;
         let g_kmm = Mat::from_fn(m, m, |i, j| 0.5 * w[(i, j)] - 0.5 * kpk[(i, j)] / s2);
-        let pb = mat_vec(&core.p, beta);
-        let rss = core.yy - 2.0 * dot(&core.v, beta) + dot(beta, &pb);
         let tr_sigma_p: f64 = (0..m)
             .flat_map(|i| (0..m).map(move |j| (i, j)))
             .map(|(i, j)| sigma[(i, j)] * core.p[(i, j)])
             .sum();
-        let d_s2 = (tr_sigma_p - n as f64 * s2 + rss + core.tk - core.tr_q) / (2.0 * s2 * s2);
 
         let prep_z: Vec<Prepared> = if warped {
             (0..m)
@@ -457,7 +501,7 @@ impl<'a> SparseBound<'a> {
 
         // Pass 2: dF/dK_mn column by column, chained into theta (and the inducing features).
         let want_z = self.optimize_z;
-        let parts: Vec<(Vec<f64>, Vec<f64>)> = (0..self.n_blocks())
+        let parts: Vec<(Vec<f64>, Vec<f64>, f64)> = (0..self.n_blocks())
             .into_par_iter()
             .map(|b| {
                 let (start, end) = self.block_range(b);
@@ -488,7 +532,10 @@ impl<'a> SparseBound<'a> {
                 let mut acc = vec![0.0; n_k];
                 let mut gz = vec![0.0; if want_z { m * d } else { 0 }];
                 let mut tmp = vec![0.0; n_k];
+                let mut rss = 0.0;
                 for col in 0..rows {
+                    let mean: f64 = (0..m).map(|a| kmn[(a, col)] * beta[a]).sum();
+                    rss += (y[col] - mean).powi(2);
                     let xu = &ux[col * d..col * d + d];
                     let px = warped.then(|| {
                         let j = start + col;
@@ -514,12 +561,14 @@ impl<'a> SparseBound<'a> {
                         }
                     }
                 }
-                (acc, gz)
+                (acc, gz, rss)
             })
             .collect();
         let mut grad_theta = vec![0.0; n_k];
         let mut grad_uz = vec![0.0; if want_z { m * d } else { 0 }];
-        for (acc, gz) in &parts {
+        let mut rss = 0.0;
+        for (acc, gz, r) in &parts {
+            rss += r;
             for (s, t) in grad_theta.iter_mut().zip(acc) {
                 *s += t;
             }
@@ -552,6 +601,7 @@ impl<'a> SparseBound<'a> {
                 }
             }
         }
+        let d_s2 = (tr_sigma_p - n as f64 * s2 + rss + core.tk - core.tr_q) / (2.0 * s2 * s2);
         // sum_j k_jj is proportional to s_f^2.
         grad_theta[0] -= 0.5 * core.tk / s2;
 
@@ -601,10 +651,6 @@ impl Objective for SparseBound<'_> {
     fn stats(&self) -> EvalStats {
         self.stats.lock().map(|s| *s).unwrap_or_default()
     }
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 /// Greedy conditional-variance selection of at most `m` inducing points among the rows of
@@ -751,7 +797,64 @@ pub(crate) fn fit_sparse(
         } else {
             &[]
         };
-        let p = multi_start(&bound, &theta0, noise0, tail, params, &mut report, observe)?;
+        let p = if n > sp.search_samples {
+            // Search on an evenly strided subset, then refine on every sample.
+            let rows: Vec<usize> = (0..sp.search_samples)
+                .map(|i| i * n / sp.search_samples)
+                .collect();
+            let sub_x: Vec<f64> = rows
+                .iter()
+                .flat_map(|&i| data.std_x[i * d..i * d + d].iter().copied())
+                .collect();
+            let sub_dirs: Vec<f64> = rows.iter().map(|&i| directions[i]).collect();
+            let sub_y: Vec<f64> = rows.iter().map(|&i| ys[i]).collect();
+            let search = SparseBound::new(
+                LikelihoodData {
+                    spec,
+                    whiten: &whiten,
+                    x: &sub_x,
+                    directions: &sub_dirs,
+                    y: &sub_y,
+                },
+                z_std.clone(),
+                z_dirs.clone(),
+                sp.optimize_inducing,
+                params.noise_floor,
+                params.max_jitter_retries,
+            );
+            let p_search =
+                multi_start(&search, &theta0, noise0, tail, params, &mut report, observe)?;
+            report.search_samples = Some(sp.search_samples);
+            report.add_stats(search.stats());
+            if sp.refine_iters == 0 {
+                p_search
+            } else {
+                let initial_lml = bound.evaluate(&p_search).ok().map(|e| e.lml);
+                match run_lbfgs(&bound, p_search.clone(), sp.refine_iters) {
+                    Ok((p, lml, iterations)) => {
+                        report.refinement = Some(StartReport {
+                            initial_lml,
+                            final_lml: Some(lml),
+                            iterations,
+                            error: None,
+                        });
+                        p
+                    }
+                    Err(e) => {
+                        report.refinement = Some(StartReport {
+                            initial_lml,
+                            final_lml: None,
+                            iterations: 0,
+                            error: Some(e),
+                        });
+                        p_search
+                    }
+                }
+            }
+        } else {
+            multi_start(&bound, &theta0, noise0, tail, params, &mut report, observe)?
+        };
+        report.add_stats(bound.stats());
         let z = bound.inducing_of(&p).to_vec();
         (p[..n_k].to_vec(), noise_of(params.noise_floor, p[n_k]), z)
     } else {
@@ -798,7 +901,7 @@ pub(crate) fn fit_sparse(
             sigma_factor: post.sigma_factor,
         }),
         log_marginal_likelihood: post.bound,
-        loo_error_variance: post.mean_squared_residual * s2_out,
+        loo_error_variance: post.loo_mean_squared_residual * s2_out,
         report,
     })
 }

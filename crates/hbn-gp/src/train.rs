@@ -107,6 +107,7 @@ pub fn fit_observed(
     };
     let (theta, noise) = if params.optimize {
         let p = multi_start(&lik, &theta0, noise0, &[], params, &mut report, observe)?;
+        report.add_stats(lik.stats());
         let n_k = spec.n_params();
         (p[..n_k].to_vec(), lik.noise_of(p[n_k]))
     } else {
@@ -241,7 +242,8 @@ pub(crate) fn starting_point(
 
 /// Runs L-BFGS from `params.n_starts` starts (the first at `theta0`/`noise0`, the rest
 /// random in `theta` and the noise; `tail`, e.g. inducing inputs, is appended unchanged) and
-/// returns the best optimised vector. Every start is recorded in `report`.
+/// returns the best optimised vector. Every start is recorded in `report` (the caller adds
+/// the objective's counters with [`TrainingReport::add_stats`]).
 pub(crate) fn multi_start<O: Objective>(
     objective: &O,
     theta0: &[f64],
@@ -301,10 +303,6 @@ pub(crate) fn multi_start<O: Objective>(
         });
     };
     report.best_start = Some(start);
-    let stats = objective.stats();
-    report.evaluations = stats.evaluations;
-    report.jitter_evaluations = stats.jitter_evaluations;
-    report.max_jitter = stats.max_jitter;
     Ok(p)
 }
 
@@ -327,7 +325,8 @@ fn randomize(p: &mut [f64], spec: &hbn_core::KernelSpec, rng: &mut Rng) {
     p[spec.n_params()] = rng.uniform_in(-4.0 * ln10, -0.5);
 }
 
-fn run_lbfgs<O: Objective>(
+/// One L-BFGS run from `p0`: the best parameters, objective and iterations.
+pub(crate) fn run_lbfgs<O: Objective>(
     lik: &O,
     p0: Vec<f64>,
     max_iters: u64,

@@ -41,6 +41,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         seed,
         ..cfg.params.clone()
     };
+    if let Ok(m) = std::env::var("INDUCING") {
+        params.n_inducing = m.parse().ok();
+    }
     if let Ok(k) = std::env::var("KERNEL") {
         params.transition_kernel = k.parse()?;
         params.sensor_kernel = k.parse()?;

@@ -31,8 +31,8 @@ pub use dataset::{Dataset, Sequence, Table, build_dataset};
 pub use estimate::{Estimate, NEAR_UNOBSERVABLE, OBSERVABILITY_WINDOW, ObservabilitySummary};
 pub use local::LocalData;
 pub use model::{
-    HbnModel, HbnParams, INIT_NEIGHBOURS, KernelChoice, KernelFamily, MODEL_FORMAT,
-    MODEL_FORMAT_VERSION, SignalInfo, SignalStats, Signals, TrainingSummary,
+    DEFAULT_INDUCING, HbnModel, HbnParams, INIT_NEIGHBOURS, KernelChoice, KernelFamily,
+    MODEL_FORMAT, MODEL_FORMAT_VERSION, SignalInfo, SignalStats, Signals, TrainingSummary,
 };
 
 /// Errors of the model layer; each says what would fix it.

@@ -6,7 +6,7 @@ use crate::dataset::{
 };
 use crate::local::LocalData;
 use hbn_core::{EkfConfig, HbnView, KernelSpec, LocalRegression, Metric, Mode, Profile};
-use hbn_gp::{GaussianProcess, GpParams, SubsetPolicy};
+use hbn_gp::{GaussianProcess, GpParams, SparseParams, SubsetPolicy};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use std::str::FromStr;
@@ -173,6 +173,9 @@ impl Default for Signals {
     }
 }
 
+/// Default number of inducing points per GP (see `docs/results.md` for the measurements).
+pub const DEFAULT_INDUCING: usize = 128;
+
 /// Training parameters of the HBN (checked by [`HbnParams::validate`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HbnParams {
@@ -182,7 +185,12 @@ pub struct HbnParams {
     pub transition_kernel: KernelChoice,
     /// Kernel of the sensor GP.
     pub sensor_kernel: KernelChoice,
-    /// Most support points per GP.
+    /// Inducing points per GP: `Some(m)` trains sparse GPs (Titsias' bound) on every sample;
+    /// `None` trains exact GPs on at most `max_points` samples. Model files written before the
+    /// sparse GP existed read as `None`.
+    #[serde(default)]
+    pub n_inducing: Option<usize>,
+    /// Most support points per exact GP (unused by the sparse GP).
     pub max_points: usize,
     /// Policy when there are more samples.
     pub subset_policy: SubsetPolicy,
@@ -213,6 +221,7 @@ impl Default for HbnParams {
             rate_hz: 100.0,
             transition_kernel: KernelChoice::default(),
             sensor_kernel: KernelChoice::default(),
+            n_inducing: Some(DEFAULT_INDUCING),
             max_points: 500,
             subset_policy: SubsetPolicy::FarthestPoint,
             n_starts: 2,
@@ -258,6 +267,7 @@ impl HbnParams {
     fn gp_params(&self, spec: KernelSpec) -> GpParams {
         let mut p = GpParams::new(spec);
         p.max_points = self.max_points;
+        p.sparse = self.n_inducing.map(SparseParams::new);
         p.subset_policy = self.subset_policy;
         p.n_starts = self.n_starts;
         p.max_iters = self.max_iters;

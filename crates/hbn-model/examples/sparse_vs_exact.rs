@@ -1,0 +1,56 @@
+//! The sparse-vs-exact measurement of docs/results.md: on each simulator, noise gain and seed,
+//! the thesis protocol (one training input repeated 10 times with fresh noise, a fresh test
+//! input), trained once with exact GPs on 500 support points and once with sparse GPs on
+//! every sample, scored by nRMSE of the EKF and EKF+BLR on the test run.
+//!
+//! `cargo run --release -p hbn-model --example sparse_vs_exact -- OUT.json [systems] [gains]
+//! [seeds] [m,...]`
+use hbn_model::HbnParams;
+use hbn_model::experiment::{ExperimentConfig, run_case};
+use hbn_sim::SystemKind;
+
+fn list<T: std::str::FromStr>(arg: Option<&String>, default: Vec<T>) -> Vec<T> {
+    arg.map(|s| s.split(',').filter_map(|v| v.parse().ok()).collect())
+        .unwrap_or(default)
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    let out = args
+        .get(1)
+        .ok_or("usage: sparse_vs_exact OUT.json [systems] [gains] [seeds] [m,...]")?;
+    let systems = list(args.get(2), SystemKind::ALL.to_vec());
+    let gains = list(args.get(3), vec![0.0, 1.0, 10.0]);
+    let seeds = list(args.get(4), vec![1, 2, 3]);
+    let ms = list(args.get(5), vec![hbn_model::DEFAULT_INDUCING]);
+    let mut rows = Vec::new();
+    for &system in &systems {
+        for &gain in &gains {
+            for &seed in &seeds {
+                let mut row = serde_json::Map::new();
+                row.insert("system".into(), system.name().into());
+                row.insert("gain".into(), gain.into());
+                row.insert("seed".into(), seed.into());
+                let runs = std::iter::once(("exact500".to_string(), None))
+                    .chain(ms.iter().map(|&m| (format!("sparse{m}"), Some(m))));
+                for (name, n_inducing) in runs {
+                    let cfg = ExperimentConfig {
+                        params: HbnParams {
+                            n_inducing,
+                            ..HbnParams::default()
+                        },
+                        ..ExperimentConfig::default()
+                    };
+                    let r = run_case(system, seed, gain, &cfg)?;
+                    row.insert(format!("{name}_ekf"), r.nrmse_ekf.into());
+                    row.insert(format!("{name}_ekf_blr"), r.nrmse_ekf_blr.into());
+                    row.insert(format!("{name}_seconds"), r.train_seconds.into());
+                }
+                eprintln!("{}", serde_json::Value::Object(row.clone()));
+                rows.push(serde_json::Value::Object(row));
+            }
+        }
+    }
+    std::fs::write(out, serde_json::to_string_pretty(&rows)?)?;
+    Ok(())
+}
