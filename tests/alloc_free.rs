@@ -1,6 +1,6 @@
 //! Proof that the estimator step allocates nothing: a counting global allocator, armed only on
 //! this thread and only around the step loop, must see zero allocations over 20,000 steps in
-//! each mode (EKF and EKF+BLR).
+//! each mode (EKF and EKF+BLR), with exact and with sparse GPs.
 
 mod common;
 
@@ -47,10 +47,18 @@ static GLOBAL: Counting = Counting;
 
 #[test]
 fn the_step_never_allocates() {
-    let (model, _) = common::train_model(SystemKind::BoucWen, 1.0, 120, 3);
     let test = common::test_run(SystemKind::BoucWen, 1.0, 20_000, 3);
-    let view = model.view().unwrap();
-    for mode in [Mode::Ekf, Mode::EkfBlr] {
+    let exact = common::train_model_kind(SystemKind::BoucWen, 1.0, 120, None, 3).0;
+    let sparse = common::train_model_kind(SystemKind::BoucWen, 1.0, 120, Some(32), 3).0;
+    assert!(!exact.transition().is_sparse() && sparse.transition().is_sparse());
+    assert!(!exact.sensor().is_sparse() && sparse.sensor().is_sparse());
+    for (model, mode) in [
+        (&exact, Mode::Ekf),
+        (&exact, Mode::EkfBlr),
+        (&sparse, Mode::Ekf),
+        (&sparse, Mode::EkfBlr),
+    ] {
+        let view = model.view().unwrap();
         let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
         let mut est = Estimator::new(view, model.ekf_config(mode), &mut scratch).unwrap();
         let mut checksum = 0.0;

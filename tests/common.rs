@@ -22,14 +22,33 @@ fn config(max_points: usize, seed: u64, test_steps: usize) -> ExperimentConfig {
     }
 }
 
-/// One training input repeated with fresh noise, fitted.
+/// One training input repeated with fresh noise, fitted with the default GP kind.
 pub fn train_model(
     system: SystemKind,
     noise_gain: f64,
     max_points: usize,
     seed: u64,
 ) -> (HbnModel, Vec<Trajectory>) {
-    let cfg = config(max_points, seed, 0);
+    train_model_kind(
+        system,
+        noise_gain,
+        max_points,
+        HbnParams::default().n_inducing,
+        seed,
+    )
+}
+
+/// [`train_model`] with the GP kind given: `Some(m)` inducing points, or `None` for exact GPs
+/// on `max_points` support points.
+pub fn train_model_kind(
+    system: SystemKind,
+    noise_gain: f64,
+    max_points: usize,
+    n_inducing: Option<usize>,
+    seed: u64,
+) -> (HbnModel, Vec<Trajectory>) {
+    let mut cfg = config(max_points, seed, 0);
+    cfg.params.n_inducing = n_inducing;
     let runs = training_set(system, noise_gain, seed, &cfg).unwrap();
     let seqs: Vec<Sequence<'_>> = runs
         .iter()

@@ -747,119 +747,148 @@ pub(crate) fn fit_sparse(
     };
     let (theta0, noise0) = starting_point(params, &data.input_scale, data.output_scale)?;
 
-    // Inducing inputs: given (raw units) or greedy conditional variance at the start theta.
-    let (z_raw, z_dirs): (Vec<f64>, Vec<f64>) = match &sp.inducing_inputs {
+    // Inducing inputs (standardised) and their direction signs: given, or greedy conditional
+    // variance under a kernel.
+    let select = |theta: &[f64]| -> Result<(Vec<f64>, Vec<f64>), GpError> {
+        let kernel = Kernel::new(spec, theta, &whiten)?;
+        let idx = greedy_variance_selection(&kernel, &data.std_x, &directions, sp.n_inducing);
+        Ok((
+            idx.iter()
+                .flat_map(|&i| data.std_x[i * d..i * d + d].iter().copied())
+                .collect(),
+            idx.iter().map(|&i| directions[i]).collect(),
+        ))
+    };
+    let (mut z_std, mut z_dirs) = match &sp.inducing_inputs {
         Some(z) => (
-            z.clone(),
+            z.chunks_exact(d)
+                .flat_map(|row| (0..d).map(|j| (row[j] - data.input_mean[j]) / data.input_scale[j]))
+                .collect(),
             z.chunks_exact(d).map(|r| spec.direction_of(r)).collect(),
         ),
-        None => {
-            let kernel = Kernel::new(spec, &theta0, &whiten)?;
-            let idx = greedy_variance_selection(&kernel, &data.std_x, &directions, sp.n_inducing);
-            (
-                idx.iter()
-                    .flat_map(|&i| x[i * d..i * d + d].iter().copied())
-                    .collect(),
-                idx.iter().map(|&i| directions[i]).collect(),
-            )
-        }
+        None => select(&theta0)?,
     };
-    let z_std: Vec<f64> = z_raw
-        .chunks_exact(d)
-        .flat_map(|row| (0..d).map(|j| (row[j] - data.input_mean[j]) / data.input_scale[j]))
-        .collect();
-    let m = z_dirs.len();
-
-    let bound = SparseBound::new(
-        LikelihoodData {
-            spec,
-            whiten: &whiten,
-            x: &data.std_x,
-            directions: &directions,
-            y: &ys,
-        },
-        z_std.clone(),
-        z_dirs.clone(),
-        sp.optimize_inducing,
-        params.noise_floor,
-        params.max_jitter_retries,
-    );
+    let all = LikelihoodData {
+        spec,
+        whiten: &whiten,
+        x: &data.std_x,
+        directions: &directions,
+        y: &ys,
+    };
+    fn bound_on<'b>(
+        data: LikelihoodData<'b>,
+        z: &[f64],
+        zd: &[f64],
+        sp: &SparseParams,
+        params: &GpParams,
+    ) -> SparseBound<'b> {
+        SparseBound::new(
+            data,
+            z.to_vec(),
+            zd.to_vec(),
+            sp.optimize_inducing,
+            params.noise_floor,
+            params.max_jitter_retries,
+        )
+    }
     let mut report = TrainingReport {
         n_samples: n,
-        n_support: m,
         n_inducing_requested: Some(sp.n_inducing),
         ..Default::default()
     };
     let n_k = spec.n_params();
-    let (theta, noise, z_final) = if params.optimize {
+    let (theta, noise) = if params.optimize {
         let tail = if sp.optimize_inducing {
-            z_std.as_slice()
+            z_std.clone()
         } else {
-            &[]
+            Vec::new()
         };
-        let p = if n > sp.search_samples {
-            // Search on an evenly strided subset, then refine on every sample.
-            let rows: Vec<usize> = (0..sp.search_samples)
+        // 1. Multi-start search, on an evenly strided subset when the data are large.
+        let use_subset = n > sp.search_samples;
+        let rows: Vec<usize> = if use_subset {
+            (0..sp.search_samples)
                 .map(|i| i * n / sp.search_samples)
-                .collect();
-            let sub_x: Vec<f64> = rows
-                .iter()
-                .flat_map(|&i| data.std_x[i * d..i * d + d].iter().copied())
-                .collect();
-            let sub_dirs: Vec<f64> = rows.iter().map(|&i| directions[i]).collect();
-            let sub_y: Vec<f64> = rows.iter().map(|&i| ys[i]).collect();
-            let search = SparseBound::new(
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let sub_x: Vec<f64> = rows
+            .iter()
+            .flat_map(|&i| data.std_x[i * d..i * d + d].iter().copied())
+            .collect();
+        let sub_dirs: Vec<f64> = rows.iter().map(|&i| directions[i]).collect();
+        let sub_y: Vec<f64> = rows.iter().map(|&i| ys[i]).collect();
+        let search = if use_subset {
+            report.search_samples = Some(sp.search_samples);
+            bound_on(
                 LikelihoodData {
-                    spec,
-                    whiten: &whiten,
                     x: &sub_x,
                     directions: &sub_dirs,
                     y: &sub_y,
+                    ..all
                 },
-                z_std.clone(),
-                z_dirs.clone(),
-                sp.optimize_inducing,
-                params.noise_floor,
-                params.max_jitter_retries,
-            );
-            let p_search =
-                multi_start(&search, &theta0, noise0, tail, params, &mut report, observe)?;
-            report.search_samples = Some(sp.search_samples);
-            report.add_stats(search.stats());
-            if sp.refine_iters == 0 {
-                p_search
-            } else {
-                let initial_lml = bound.evaluate(&p_search).ok().map(|e| e.lml);
-                match run_lbfgs(&bound, p_search.clone(), sp.refine_iters) {
-                    Ok((p, lml, iterations)) => {
-                        report.refinement = Some(StartReport {
-                            initial_lml,
-                            final_lml: Some(lml),
-                            iterations,
-                            error: None,
-                        });
-                        p
-                    }
-                    Err(e) => {
-                        report.refinement = Some(StartReport {
-                            initial_lml,
-                            final_lml: None,
-                            iterations: 0,
-                            error: Some(e),
-                        });
-                        p_search
+                &z_std,
+                &z_dirs,
+                sp,
+                params,
+            )
+        } else {
+            bound_on(all, &z_std, &z_dirs, sp, params)
+        };
+        let mut p = multi_start(
+            &search,
+            &theta0,
+            noise0,
+            &tail,
+            params,
+            &mut report,
+            observe,
+        )?;
+        report.add_stats(search.stats());
+        if sp.optimize_inducing {
+            z_std = search.inducing_of(&p).to_vec();
+        }
+        // 2. Greedy selection again under the learned kernel (Burt et al. 2020): the starting
+        //    kernel's length scales rarely match the learned ones.
+        let reselect = sp.inducing_inputs.is_none() && !sp.optimize_inducing;
+        if reselect {
+            (z_std, z_dirs) = select(&p[..n_k])?;
+        }
+        // 3. Refine on every sample.
+        let full = bound_on(all, &z_std, &z_dirs, sp, params);
+        if sp.refine_iters > 0 && (use_subset || reselect) {
+            let initial_lml = full.evaluate(&p).ok().map(|e| e.lml);
+            let run = run_lbfgs(&full, p.clone(), sp.refine_iters);
+            report.refinement = Some(match run {
+                Ok((q, lml, iterations)) => {
+                    p = q;
+                    StartReport {
+                        initial_lml,
+                        final_lml: Some(lml),
+                        iterations,
+                        error: None,
                     }
                 }
-            }
-        } else {
-            multi_start(&bound, &theta0, noise0, tail, params, &mut report, observe)?
-        };
-        report.add_stats(bound.stats());
-        let z = bound.inducing_of(&p).to_vec();
-        (p[..n_k].to_vec(), noise_of(params.noise_floor, p[n_k]), z)
+                Err(e) => StartReport {
+                    initial_lml,
+                    final_lml: None,
+                    iterations: 0,
+                    error: Some(e),
+                },
+            });
+            report.add_stats(full.stats());
+        }
+        if sp.optimize_inducing {
+            z_std = full.inducing_of(&p).to_vec();
+        }
+        (p[..n_k].to_vec(), noise_of(params.noise_floor, p[n_k]))
     } else {
-        (theta0, noise0, z_std)
+        (theta0, noise0)
     };
+    let m = z_dirs.len();
+    report.n_support = m;
+    let z_final = z_std;
+    let bound = bound_on(all, &z_final, &z_dirs, sp, params);
     let post = bound.posterior(&theta, noise, &z_final)?;
     report.final_jitter = post.jitter;
 

@@ -237,7 +237,7 @@ fn save_and_load_predict_bit_identically() {
     let text = gp
         .to_json()
         .unwrap()
-        .replacen("\"version\":1", "\"version\":99", 1);
+        .replacen("\"version\":2", "\"version\":99", 1);
     std::fs::write(&path, text).unwrap();
     assert!(
         GaussianProcess::load(&path)

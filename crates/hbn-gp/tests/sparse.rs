@@ -86,9 +86,8 @@ fn equals_the_exact_gp_when_z_is_x() {
         let exact = fit(&fixed(spec, 0.05), &x, &y).unwrap();
         let mut params = fixed(spec, 0.05);
         params.sparse = Some(SparseParams {
-            n_inducing: 40,
             inducing_inputs: Some(x.clone()),
-            optimize_inducing: false,
+            ..SparseParams::new(40)
         });
         let sparse = fit(&params, &x, &y).unwrap();
         assert!(sparse.is_sparse() && !exact.is_sparse());
@@ -131,9 +130,8 @@ fn matches_numpy_titsias_formulae() {
             noise_variance: case["noise"].as_f64().unwrap(),
         });
         params.sparse = Some(SparseParams {
-            n_inducing: m,
             inducing_inputs: Some(vecf(&case["z"])),
-            optimize_inducing: false,
+            ..SparseParams::new(m)
         });
         let gp = fit(&params, &vecf(&case["x"]), &vecf(&case["y"])).unwrap();
         worst = worst.max(rel(
@@ -276,6 +274,28 @@ fn training_is_deterministic_and_accurate() {
     // Noise variance 0.0025: the sparse GP on all samples should be near it.
     assert!(mse < 0.005, "held-out mse {mse}");
     assert!(a.noise_variance() < 0.005 && a.noise_variance() > 0.001);
+}
+
+/// With more samples than the search subset, the starts run on the subset and L-BFGS refines
+/// the winner on every sample: the refined bound is at least the search optimum's bound on
+/// all samples, and the report says what ran.
+#[test]
+fn large_data_search_on_a_subset_then_refine_on_all() {
+    let (x, y) = data(6000, 2, 10);
+    let mut params = GpParams::new(KernelSpec::se_ard(2));
+    params.n_starts = 1;
+    params.sparse = Some(SparseParams {
+        search_samples: 1500,
+        ..SparseParams::new(24)
+    });
+    let gp = fit(&params, &x, &y).unwrap();
+    let r = gp.report();
+    assert_eq!(r.search_samples, Some(1500));
+    assert_eq!(r.n_samples, 6000);
+    let refine = r.refinement.as_ref().expect("refinement ran");
+    assert!(refine.error.is_none());
+    assert!(refine.final_lml.unwrap() >= refine.initial_lml.unwrap());
+    assert_eq!(gp.log_marginal_likelihood(), refine.final_lml.unwrap());
 }
 
 /// Learning Z never lowers the bound reached with Z fixed.
