@@ -106,6 +106,23 @@ fn parse_positive(s: &str) -> Result<f64, String> {
     }
 }
 
+/// `--inducing`: a count of inducing points (sparse GPs) or `exact`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Inducing(pub Option<usize>);
+
+fn parse_inducing(s: &str) -> Result<Inducing, String> {
+    let t = s.trim();
+    if t.eq_ignore_ascii_case("exact") {
+        return Ok(Inducing(None));
+    }
+    match t.parse::<usize>() {
+        Ok(m) if m >= 1 => Ok(Inducing(Some(m))),
+        _ => Err(format!(
+            "expected a number of inducing points >= 1 or `exact`, got {s:?}"
+        )),
+    }
+}
+
 fn parse_non_negative(s: &str) -> Result<f64, String> {
     match s.trim().parse::<f64>() {
         Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
@@ -206,7 +223,12 @@ pub struct TrainArgs {
     /// Kernel of the sensor GP (overrides --kernel).
     #[arg(long, value_parser = parse_kernel)]
     pub sensor_kernel: Option<KernelChoice>,
-    /// Most support points per GP.
+    /// Inducing points per GP: sparse GPs trained on every sample (default
+    /// hbn_model::DEFAULT_INDUCING = 128), or `exact` for exact GPs on at most --max-points
+    /// samples each.
+    #[arg(long, value_parser = parse_inducing, value_name = "M|exact")]
+    pub inducing: Option<Inducing>,
+    /// Most support points per exact GP (with --inducing exact).
     #[arg(long, default_value_t = 500)]
     pub max_points: usize,
     /// Optimiser starts per GP.
@@ -364,6 +386,9 @@ pub struct ExperimentArgs {
     /// Samples of the test input.
     #[arg(long, default_value_t = 1000)]
     pub test_steps: usize,
+    /// Inducing points per GP (sparse GPs on every sample), or `exact` (default 128).
+    #[arg(long, value_parser = parse_inducing, value_name = "M|exact")]
+    pub inducing: Option<Inducing>,
     /// Most support points per GP.
     #[arg(long, default_value_t = 500)]
     pub max_points: usize,

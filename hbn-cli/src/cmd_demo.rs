@@ -72,6 +72,7 @@ pub fn run(ui: &mut Ui<'_>, args: &DemoArgs) -> anyhow::Result<()> {
         kernel: None,
         transition_kernel: None,
         sensor_kernel: None,
+        inducing: None,
         max_points: 300,
         starts: 2,
         max_iters: 100,

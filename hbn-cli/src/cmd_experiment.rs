@@ -76,6 +76,9 @@ pub fn run(ui: &mut Ui<'_>, args: &ExperimentArgs) -> anyhow::Result<Vec<Experim
         test_steps: args.test_steps,
         max_increment: hbn_sim::DEFAULT_MAX_INCREMENT,
         params: HbnParams {
+            n_inducing: args
+                .inducing
+                .map_or(HbnParams::default().n_inducing, |i| i.0),
             max_points: args.max_points,
             ..HbnParams::default()
         },

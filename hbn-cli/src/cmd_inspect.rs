@@ -15,9 +15,12 @@ fn gp_json(gp: &GaussianProcess, kernel: KernelChoice) -> Value {
         "signal_variance": gp.signal_variance(),
         "length_scales": gp.length_scales(),
         "noise_variance": gp.noise_variance(),
+        "kind": if gp.is_sparse() { "sparse" } else { "exact" },
         "support_points": gp.n_support(),
         "log_marginal_likelihood": gp.log_marginal_likelihood(),
         "training": {
+            "search_samples": r.search_samples,
+            "refinement": r.refinement,
             "samples": r.n_samples,
             "support_points": r.n_support,
             "subset_policy": r.subset_policy.map(|p| format!("{p:?}")),
@@ -78,10 +81,15 @@ fn gp_text(name: &str, gp: &GaussianProcess, kernel: KernelChoice) -> String {
     let failed = r.starts.iter().filter(|s| s.error.is_some()).count();
     let mut s = format!(
         "{name} GP\n  kernel            {kernel}\n  signal variance   {:.4e}\n  length scales     [{}]\n  \
-         noise variance    {:.4e}\n  support points    {} of {} samples",
+         noise variance    {:.4e}\n  {}    {} of {} samples",
         gp.signal_variance(),
         fmt_list(&gp.length_scales()),
         gp.noise_variance(),
+        if gp.is_sparse() {
+            "inducing points"
+        } else {
+            "support points "
+        },
         gp.n_support(),
         r.n_samples,
     );

@@ -50,6 +50,9 @@ pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<HbnModel> {
         rate_hz,
         transition_kernel: args.transition_kernel.unwrap_or(default_kernel),
         sensor_kernel: args.sensor_kernel.unwrap_or(default_kernel),
+        n_inducing: args
+            .inducing
+            .map_or(HbnParams::default().n_inducing, |i| i.0),
         max_points: args.max_points,
         n_starts: args.starts,
         max_iters: args.max_iters,
@@ -120,8 +123,13 @@ pub fn print_summary(
         ("transition", model.transition(), p.transition_kernel),
         ("sensor", model.sensor(), p.sensor_kernel),
     ] {
+        let (points, score) = if gp.is_sparse() {
+            ("inducing points", "bound")
+        } else {
+            ("support points", "LML")
+        };
         text.push_str(&format!(
-            "  {name:<10} GP: {:>4} support points, LML {:>10.2}, kernel {}\n",
+            "  {name:<10} GP: {:>4} {points}, {score} {:>10.2}, kernel {}\n",
             gp.n_support(),
             gp.log_marginal_likelihood(),
             kernel_name(k)

@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 use hbn_core::{Mode, Want};
-use hbn_gp::{GaussianProcess, GpError, GpParams, RawHyperparameters};
+use hbn_gp::{GaussianProcess, GpError, GpParams, RawHyperparameters, SparseParams};
 use hbn_io::{IoError, ReadOptions, ResampleOptions, SignalPath};
 use hbn_model::{HbnModel, HbnParams, KernelChoice, ModelError, Sequence, Signals};
 use hbn_sim::{SimConfig, SystemKind};
@@ -116,7 +116,7 @@ fn json<T: serde::Serialize>(v: &T) -> PyResult<String> {
 // Gaussian process
 // ---------------------------------------------------------------------------------------------
 
-/// Native exact GP (`hbn_gp::GaussianProcess`). Use `hbn.GaussianProcess` instead.
+/// Native GP, exact or sparse (`hbn_gp::GaussianProcess`). Use `hbn.GaussianProcess` instead.
 #[pyclass(name = "GaussianProcessCore", module = "hbn._hbn", frozen)]
 pub struct GaussianProcessCore {
     inner: GaussianProcess,
@@ -129,7 +129,8 @@ impl GaussianProcessCore {
     #[staticmethod]
     #[allow(clippy::too_many_arguments)]
     #[pyo3(signature = (x, dim, y, kernel, lengthscales, signal_variance, noise_variance,
-                        optimize, normalize, n_starts, max_iters, max_points, seed))]
+                        optimize, normalize, n_starts, max_iters, max_points, seed,
+                        n_inducing=None, inducing_points=None, optimize_inducing=false))]
     fn fit(
         py: Python<'_>,
         x: PyReadonlyArray1<'_, f64>,
@@ -145,6 +146,9 @@ impl GaussianProcessCore {
         max_iters: u64,
         max_points: usize,
         seed: u64,
+        n_inducing: Option<usize>,
+        inducing_points: Option<PyReadonlyArray1<'_, f64>>,
+        optimize_inducing: bool,
     ) -> PyResult<Self> {
         let choice = kernel_choice(kernel)?;
         let mut params = GpParams::new(choice.spec(dim, [0, 1]));
@@ -154,6 +158,16 @@ impl GaussianProcessCore {
         params.max_iters = max_iters;
         params.max_points = max_points;
         params.seed = seed;
+        if let Some(m) = n_inducing {
+            params.sparse = Some(SparseParams {
+                inducing_inputs: match &inducing_points {
+                    Some(z) => Some(slice(z, "inducing_points")?.to_vec()),
+                    None => None,
+                },
+                optimize_inducing,
+                ..SparseParams::new(m)
+            });
+        }
         if lengthscales.is_some() || signal_variance.is_some() || noise_variance.is_some() {
             params.raw_init = Some(RawHyperparameters {
                 length_scales: lengthscales,
@@ -232,10 +246,20 @@ impl GaussianProcessCore {
     fn theta(&self) -> Vec<f64> {
         self.inner.theta().to_vec()
     }
-    /// Number of support points.
+    /// Number of support points (exact) or inducing points (sparse).
     #[getter]
     fn n_support(&self) -> usize {
         self.inner.n_support()
+    }
+    /// True for a sparse (inducing-point) GP.
+    #[getter]
+    fn is_sparse(&self) -> bool {
+        self.inner.is_sparse()
+    }
+    /// Support inputs (exact) or inducing inputs (sparse), raw units, row-major.
+    #[getter]
+    fn support_inputs<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, self.inner.support_inputs())
     }
     /// Number of inputs.
     #[getter]
@@ -301,7 +325,7 @@ impl HysteresisModelCore {
     /// Fits both GPs to trajectories (lists of equal-length `u`, `x`, `y` arrays).
     #[staticmethod]
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (u, x, y, rate, kernel, max_points, n_starts, max_iters, seed, blr_window, signals_json))]
+    #[pyo3(signature = (u, x, y, rate, kernel, max_points, n_starts, max_iters, seed, blr_window, signals_json, n_inducing=None))]
     fn fit(
         py: Python<'_>,
         u: Vec<PyReadonlyArray1<'_, f64>>,
@@ -315,6 +339,7 @@ impl HysteresisModelCore {
         seed: u64,
         blr_window: f64,
         signals_json: Option<&str>,
+        n_inducing: Option<usize>,
     ) -> PyResult<Self> {
         let choice = kernel_choice(kernel)?;
         let signals: Signals = match signals_json {
@@ -338,6 +363,7 @@ impl HysteresisModelCore {
             rate_hz: rate,
             transition_kernel: choice,
             sensor_kernel: choice,
+            n_inducing,
             max_points,
             n_starts,
             max_iters,
@@ -569,5 +595,6 @@ fn _hbn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(flag_names, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("MODEL_FORMAT_VERSION", hbn_model::MODEL_FORMAT_VERSION)?;
+    m.add("DEFAULT_INDUCING", hbn_model::DEFAULT_INDUCING)?;
     Ok(())
 }

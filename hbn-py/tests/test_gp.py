@@ -135,3 +135,75 @@ def test_subset_is_reported():
     gp = hbn.GaussianProcess(max_points=50, n_restarts=1).fit(X, np.sin(X))
     assert gp.n_support == 50
     assert any("support points" in w for w in gp.warnings_)
+
+
+# ------------------------------------------------------------------------------------------------
+# Sparse GP (n_inducing)
+# ------------------------------------------------------------------------------------------------
+
+
+def test_sparse_with_all_points_as_inducing_equals_exact():
+    rng = np.random.default_rng(3)
+    X = rng.uniform(-2, 2, size=(40, 2))
+    y = np.sin(X).sum(axis=1) + 0.05 * rng.standard_normal(40)
+    kw = dict(lengthscales=[1.2, 0.8], signal_variance=1.5, noise_variance=0.01, optimize=False)
+    exact = hbn.GaussianProcess(**kw).fit(X, y)
+    sparse = hbn.GaussianProcess(n_inducing=40, inducing_points=X, **kw).fit(X, y)
+    assert sparse.is_sparse and not exact.is_sparse
+    Xs = rng.uniform(-2, 2, size=(10, 2))
+    m1, s1, g1 = exact.predict(Xs, return_std=True, return_grad=True)
+    m2, s2, g2 = sparse.predict(Xs, return_std=True, return_grad=True)
+    np.testing.assert_allclose(m2, m1, rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(s2, s1, rtol=1e-7, atol=1e-10)
+    np.testing.assert_allclose(g2, g1, rtol=1e-7, atol=1e-9)
+    assert sparse.log_marginal_likelihood() == pytest.approx(exact.log_marginal_likelihood(), rel=1e-8)
+
+
+def test_sparse_learns_from_every_sample_and_bounds_the_exact_lml():
+    rng = np.random.default_rng(4)
+    X = rng.uniform(0, 5, size=(3000, 1))
+    y = np.sin(X[:, 0]) + 0.1 * rng.standard_normal(3000)
+    sparse = hbn.GaussianProcess(n_inducing=20).fit(X, y)
+    assert sparse.n_support == 20
+    assert sparse.report_["n_samples"] == 3000
+    assert sparse.inducing_points_.shape == (20, 1)
+    Xt = np.linspace(0.2, 4.8, 50)[:, None]
+    assert np.max(np.abs(sparse.predict(Xt) - np.sin(Xt[:, 0]))) < 0.05
+    # The bound never exceeds the exact LML at the same hyperparameters.
+    hp = sparse.hyperparameters
+    fixed = dict(
+        lengthscales=hp["lengthscales"],
+        signal_variance=hp["signal_variance"],
+        noise_variance=hp["noise_variance"],
+        optimize=False,
+    )
+    small = slice(0, 400)
+    b = hbn.GaussianProcess(n_inducing=20, **fixed).fit(X[small], y[small])
+    e = hbn.GaussianProcess(max_points=400, **fixed).fit(X[small], y[small])
+    assert b.log_marginal_likelihood() <= e.log_marginal_likelihood() + 1e-9
+
+
+def test_fixed_and_learned_inducing_points():
+    rng = np.random.default_rng(5)
+    X = rng.uniform(-1, 1, size=(600, 2))
+    y = X[:, 0] ** 2 - X[:, 1] + 0.05 * rng.standard_normal(600)
+    Z = X[:6] + 0.01
+    fixed = hbn.GaussianProcess(n_inducing=6, inducing_points=Z, n_restarts=1).fit(X, y)
+    np.testing.assert_array_equal(fixed.inducing_points_, Z)
+    learned = hbn.GaussianProcess(
+        n_inducing=6, inducing_points=Z, optimize_inducing=True, n_restarts=1
+    ).fit(X, y)
+    assert not np.array_equal(learned.inducing_points_, Z)
+    assert learned.log_marginal_likelihood() > fixed.log_marginal_likelihood()
+
+
+def test_sparse_argument_errors():
+    X = np.linspace(0, 1, 20)
+    with pytest.raises(ValueError, match="n_inducing"):
+        hbn.GaussianProcess(inducing_points=[[0.0]]).fit(X, X**2)
+    with pytest.raises(ValueError, match="rows"):
+        hbn.GaussianProcess(n_inducing=3, inducing_points=[[0.0], [1.0]]).fit(X, X**2)
+    with pytest.raises(ValueError, match="n_inducing"):
+        hbn.GaussianProcess(n_inducing=0).fit(X, X**2)
+    with pytest.raises(ValueError, match="exact GP has no inducing"):
+        _ = hbn.GaussianProcess().fit(X, X**2).inducing_points_

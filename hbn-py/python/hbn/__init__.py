@@ -98,7 +98,7 @@ def _fspath(path: PathLike) -> str:
 
 
 class GaussianProcess:
-    """Exact Gaussian-process regression (the engine of the HBN's two GPs).
+    """Gaussian-process regression, exact or sparse (the engine of the HBN's two GPs).
 
     Parameters
     ----------
@@ -128,6 +128,16 @@ class GaussianProcess:
         fit reports it in :attr:`warnings_`).
     seed : int, default 0
         Seed of the random starts.
+    n_inducing : int or None, default None
+        ``None`` fits the exact GP (on at most ``max_points`` samples). An integer ``m`` fits
+        the sparse GP of Titsias (2009) on *every* sample with ``m`` inducing points:
+        ``O(n m^2)`` to train, ``O(m^2)`` per prediction; ``log_marginal_likelihood()`` is then
+        its variational lower bound. The inducing inputs start from greedy conditional-variance
+        selection (see ``docs/sparse.md``); fewer are used if the data have fewer distinct inputs.
+    inducing_points : array-like (m x d), optional
+        Fixed starting inducing inputs (raw units) for the sparse GP, instead of the selection.
+    optimize_inducing : bool, default False
+        Learn the inducing inputs together with the hyperparameters (sparse GP only).
 
     Examples
     --------
@@ -136,6 +146,15 @@ class GaussianProcess:
     >>> gp = hbn.GaussianProcess().fit(X, np.sin(X))
     >>> mean, std = gp.predict([[1.0], [2.0]], return_std=True)
     >>> bool(abs(mean[0] - np.sin(1.0)) < 1e-2)
+    True
+
+    A sparse GP on every sample of a larger data set:
+
+    >>> X = np.linspace(0, 5, 5000)
+    >>> gp = hbn.GaussianProcess(n_inducing=32).fit(X, np.sin(X))
+    >>> gp.is_sparse, gp.n_support
+    (True, 32)
+    >>> bool(abs(gp.predict([[1.0]])[0] - np.sin(1.0)) < 1e-2)
     True
     """
 
@@ -151,8 +170,14 @@ class GaussianProcess:
         max_iter: int = 200,
         max_points: int = 1000,
         seed: int = 0,
+        n_inducing: Optional[int] = None,
+        inducing_points: Optional[Any] = None,
+        optimize_inducing: bool = False,
     ) -> None:
         self.kernel = kernel
+        self.n_inducing = n_inducing
+        self.inducing_points = inducing_points
+        self.optimize_inducing = optimize_inducing
         self.lengthscales = lengthscales
         self.signal_variance = signal_variance
         self.noise_variance = noise_variance
@@ -201,6 +226,17 @@ class GaussianProcess:
         ls = self.lengthscales
         if ls is not None:
             ls = [float(v) for v in np.atleast_1d(np.asarray(ls, dtype=np.float64))]
+        m = None if self.n_inducing is None else self._count(self.n_inducing, "n_inducing")
+        Z = None
+        if self.inducing_points is not None:
+            if m is None:
+                raise ValueError("inducing_points needs n_inducing (the sparse GP)")
+            Z = _matrix(self.inducing_points, "inducing_points", Xm.shape[1])
+            if Z.shape[0] != m:
+                raise ValueError(
+                    f"inducing_points has {Z.shape[0]} rows but n_inducing is {m}"
+                )
+            Z = Z.ravel()
         self._core = _hbn.GaussianProcessCore.fit(
             Xm.ravel(),
             Xm.shape[1],
@@ -215,6 +251,9 @@ class GaussianProcess:
             self._count(self.max_iter, "max_iter"),
             self._count(self.max_points, "max_points"),
             self._count(self.seed, "seed"),
+            m,
+            Z,
+            bool(self.optimize_inducing),
         )
         return self
 
@@ -244,7 +283,8 @@ class GaussianProcess:
         return out[0] if len(out) == 1 else tuple(out)
 
     def log_marginal_likelihood(self) -> float:
-        """Log marginal likelihood at the fitted hyperparameters.
+        """Log marginal likelihood at the fitted hyperparameters (for a sparse GP, its
+        variational lower bound).
 
         Of the standardised targets when ``normalize=True`` (of the raw targets otherwise, equal to
         scikit-learn's ``log_marginal_likelihood_value_``).
@@ -276,13 +316,32 @@ class GaussianProcess:
 
     @property
     def n_support(self) -> int:
-        """Number of support points kept.
+        """Number of support points kept (exact) or inducing points used (sparse).
 
         >>> import hbn
         >>> hbn.GaussianProcess(optimize=False).fit([0.0, 1.0, 2.0], [1.0, 0.0, 1.0]).n_support
         3
         """
         return self._fitted().n_support
+
+    @property
+    def is_sparse(self) -> bool:
+        """True for a sparse (inducing-point) GP."""
+        return self._fitted().is_sparse
+
+    @property
+    def inducing_points_(self) -> np.ndarray:
+        """The sparse GP's inducing inputs (``m x d``, raw units) after fitting.
+
+        >>> import numpy as np, hbn
+        >>> X = np.linspace(0, 5, 500)
+        >>> hbn.GaussianProcess(n_inducing=8).fit(X, np.sin(X)).inducing_points_.shape
+        (8, 1)
+        """
+        core = self._fitted()
+        if not core.is_sparse:
+            raise ValueError("an exact GP has no inducing points (fit with n_inducing=m)")
+        return np.asarray(core.support_inputs, dtype=np.float64).reshape(-1, core.dim)
 
     @property
     def n_features_in_(self) -> int:
@@ -480,6 +539,7 @@ class HysteresisModel:
         blr_window: float = 0.025,
         max_iter: int = 100,
         signals: Optional[Mapping[str, Any]] = None,
+        n_inducing: Optional[int] = _hbn.DEFAULT_INDUCING,
     ) -> "HysteresisModel":
         """Learns both GPs from logged trajectories sampled at ``rate`` Hz.
 
@@ -488,7 +548,9 @@ class HysteresisModel:
         GPs (see :class:`GaussianProcess`; ``+dir`` uses the direction of ``u`` for the transition
         and of ``x`` for the sensor). ``n_restarts``: optimiser starts in all per GP;
         ``max_iter``: L-BFGS iterations per start; ``blr_window``: half-width of the EKF+BLR
-        window as a fraction of each coordinate's range. Same defaults as ``hbn train``.
+        window as a fraction of each coordinate's range. ``n_inducing``: inducing points per GP
+        of the sparse GPs trained on every sample (the default); ``None`` trains exact GPs on at
+        most ``max_points`` samples each. Same defaults as ``hbn train``.
         ``signals`` (optional) records where the signals come from, in the form of
         :func:`read_mcap`'s dict, ``{"u": "/valve.pressure", "x": ..., "y": ...}`` (or with
         ``{"name", "path", "unit"}`` dicts as values): ``hbn estimate --model`` then reads ``u``
@@ -515,6 +577,7 @@ class HysteresisModel:
             c(seed, "seed"),
             float(blr_window),
             _signals_json(signals),
+            None if n_inducing is None else c(n_inducing, "n_inducing"),
         )
         return cls(core)
 

@@ -7,6 +7,7 @@ import numpy.typing as npt
 
 __version__: str
 MODEL_FORMAT_VERSION: int
+DEFAULT_INDUCING: int
 
 class GaussianProcessCore:
     @staticmethod
@@ -24,6 +25,9 @@ class GaussianProcessCore:
         max_iters: int,
         max_points: int,
         seed: int,
+        n_inducing: Optional[int] = None,
+        inducing_points: Optional[npt.NDArray[np.float64]] = None,
+        optimize_inducing: bool = False,
     ) -> GaussianProcessCore: ...
     def predict(
         self, x: npt.NDArray[np.float64], variance: bool, grad: bool
@@ -43,6 +47,10 @@ class GaussianProcessCore:
     def theta(self) -> List[float]: ...
     @property
     def n_support(self) -> int: ...
+    @property
+    def is_sparse(self) -> bool: ...
+    @property
+    def support_inputs(self) -> npt.NDArray[np.float64]: ...
     @property
     def dim(self) -> int: ...
     @property
@@ -70,6 +78,7 @@ class HysteresisModelCore:
         seed: int,
         blr_window: float,
         signals_json: Optional[str],
+        n_inducing: Optional[int] = None,
     ) -> HysteresisModelCore: ...
     def estimate(
         self, u: npt.NDArray[np.float64], y: npt.NDArray[np.float64], mode: str
