@@ -223,9 +223,8 @@ pub struct TrainArgs {
     /// Kernel of the sensor GP (overrides --kernel).
     #[arg(long, value_parser = parse_kernel)]
     pub sensor_kernel: Option<KernelChoice>,
-    /// Inducing points per GP: sparse GPs trained on every sample (default
-    /// hbn_model::DEFAULT_INDUCING = 128), or `exact` for exact GPs on at most --max-points
-    /// samples each.
+    /// Inducing points per GP for sparse GPs trained on every sample (64 is a good start), or
+    /// `exact` (the default): exact GPs on at most --max-points samples each.
     #[arg(long, value_parser = parse_inducing, value_name = "M|exact")]
     pub inducing: Option<Inducing>,
     /// Most support points per exact GP (with --inducing exact).
@@ -386,7 +385,7 @@ pub struct ExperimentArgs {
     /// Samples of the test input.
     #[arg(long, default_value_t = 1000)]
     pub test_steps: usize,
-    /// Inducing points per GP (sparse GPs on every sample), or `exact` (default 128).
+    /// Inducing points per GP (sparse GPs on every sample), or `exact` (the default).
     #[arg(long, value_parser = parse_inducing, value_name = "M|exact")]
     pub inducing: Option<Inducing>,
     /// Most support points per GP.

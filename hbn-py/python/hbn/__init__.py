@@ -45,6 +45,7 @@ __all__ = [
     "list_topics",
     "SYSTEMS",
     "KERNELS",
+    "DEFAULT_INDUCING",
     "__version__",
 ]
 
@@ -54,6 +55,8 @@ __version__: str = _hbn.__version__
 SYSTEMS: Tuple[str, ...] = tuple(_hbn.systems())
 #: Kernel names accepted by ``kernel=`` (each of the first five optionally with ``+dir``).
 KERNELS: str = _hbn.kernel_names()
+#: Suggested inducing points per GP for sparse models (``HysteresisModel.fit(n_inducing=...)``).
+DEFAULT_INDUCING: int = _hbn.DEFAULT_INDUCING
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -539,7 +542,7 @@ class HysteresisModel:
         blr_window: float = 0.025,
         max_iter: int = 100,
         signals: Optional[Mapping[str, Any]] = None,
-        n_inducing: Optional[int] = _hbn.DEFAULT_INDUCING,
+        n_inducing: Optional[int] = None,
     ) -> "HysteresisModel":
         """Learns both GPs from logged trajectories sampled at ``rate`` Hz.
 
@@ -548,9 +551,9 @@ class HysteresisModel:
         GPs (see :class:`GaussianProcess`; ``+dir`` uses the direction of ``u`` for the transition
         and of ``x`` for the sensor). ``n_restarts``: optimiser starts in all per GP;
         ``max_iter``: L-BFGS iterations per start; ``blr_window``: half-width of the EKF+BLR
-        window as a fraction of each coordinate's range. ``n_inducing``: inducing points per GP
-        of the sparse GPs trained on every sample (the default); ``None`` trains exact GPs on at
-        most ``max_points`` samples each. Same defaults as ``hbn train``.
+        window as a fraction of each coordinate's range. ``n_inducing``: ``None`` (the default)
+        trains exact GPs on at most ``max_points`` samples each; an integer (``hbn.DEFAULT_INDUCING``
+        = 64 is a good start) trains sparse GPs with that many inducing points on every sample. Same defaults as ``hbn train``.
         ``signals`` (optional) records where the signals come from, in the form of
         :func:`read_mcap`'s dict, ``{"u": "/valve.pressure", "x": ..., "y": ...}`` (or with
         ``{"name", "path", "unit"}`` dicts as values): ``hbn estimate --model`` then reads ``u``

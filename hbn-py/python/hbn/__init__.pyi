@@ -17,12 +17,14 @@ __all__ = [
     "list_topics",
     "SYSTEMS",
     "KERNELS",
+    "DEFAULT_INDUCING",
     "__version__",
 ]
 
 __version__: str
 SYSTEMS: Tuple[str, ...]
 KERNELS: str
+DEFAULT_INDUCING: int
 
 PathLike = Union[str, os.PathLike[str]]
 ArrayLike = npt.ArrayLike
@@ -131,7 +133,7 @@ class HysteresisModel:
         blr_window: float = 0.025,
         max_iter: int = 100,
         signals: Optional[Mapping[str, Any]] = None,
-        n_inducing: Optional[int] = ...,
+        n_inducing: Optional[int] = None,
     ) -> HysteresisModel: ...
     def estimate(self, u: ArrayLike, y: ArrayLike, mode: str = "ekf") -> Estimate: ...
     def simulate_open_loop(self, u: ArrayLike) -> FloatArray: ...
