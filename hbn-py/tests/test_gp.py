@@ -164,9 +164,12 @@ def test_sparse_learns_from_every_sample_and_bounds_the_exact_lml():
     X = rng.uniform(0, 5, size=(3000, 1))
     y = np.sin(X[:, 0]) + 0.1 * rng.standard_normal(3000)
     sparse = hbn.GaussianProcess(n_inducing=20).fit(X, y)
-    assert sparse.n_support == 20
+    # A smooth 1-D function: the greedy selection may stop before 20 points (it says so).
+    assert 8 <= sparse.n_support <= 20
+    if sparse.n_support < 20:
+        assert any("inducing points" in w for w in sparse.warnings_)
     assert sparse.report_["n_samples"] == 3000
-    assert sparse.inducing_points_.shape == (20, 1)
+    assert sparse.inducing_points_.shape == (sparse.n_support, 1)
     Xt = np.linspace(0.2, 4.8, 50)[:, None]
     assert np.max(np.abs(sparse.predict(Xt) - np.sin(Xt[:, 0]))) < 0.05
     # The bound never exceeds the exact LML at the same hyperparameters.
@@ -189,7 +192,7 @@ def test_fixed_and_learned_inducing_points():
     y = X[:, 0] ** 2 - X[:, 1] + 0.05 * rng.standard_normal(600)
     Z = X[:6] + 0.01
     fixed = hbn.GaussianProcess(n_inducing=6, inducing_points=Z, n_restarts=1).fit(X, y)
-    np.testing.assert_array_equal(fixed.inducing_points_, Z)
+    np.testing.assert_allclose(fixed.inducing_points_, Z, rtol=1e-13, atol=1e-15)
     learned = hbn.GaussianProcess(
         n_inducing=6, inducing_points=Z, optimize_inducing=True, n_restarts=1
     ).fit(X, y)

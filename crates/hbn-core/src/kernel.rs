@@ -392,6 +392,12 @@ impl<'a> Kernel<'a> {
         }
     }
 
+    /// Feature vector `u = L phi(x)` of a standardised input only (see [`Kernel::features`]).
+    pub fn feature_vector(&self, x_std: &[f64], u: &mut [f64; MAX_DIM]) {
+        let prep = self.prepare(x_std, 0.0);
+        self.apply_metric(&prep.p, u);
+    }
+
     /// Feature vector `u = L phi(x)` of a standardised input, so that `r2 = |u - u'|^2`,
     /// and the input Jacobian of the features, row-major `d x d` (`du_r / dx_c`).
     pub fn features(

@@ -385,11 +385,18 @@ pub(crate) fn add_pair_theta_grad(
 /// argmin adapter: minimise the negated objective.
 pub(crate) struct NegLml<'b, O: Objective>(pub &'b O);
 
+/// Cost the optimiser sees where the objective cannot be evaluated (a covariance that is not
+/// positive definite even with jitter, or a non-finite value): large enough that the line
+/// search backs off, small enough that its cubic interpolation cannot overflow. Without it,
+/// one failed trial step (the first L-BFGS step is as long as the gradient, easily thousands
+/// of log-units) ended the whole start at its initial point.
+const FAILED_COST: f64 = 1e150;
+
 impl<O: Objective> argmin::core::CostFunction for NegLml<'_, O> {
     type Param = Vec<f64>;
     type Output = f64;
     fn cost(&self, p: &Self::Param) -> Result<f64, argmin::core::Error> {
-        Ok(-self.0.evaluate(p)?.lml)
+        Ok(self.0.evaluate(p).map_or(FAILED_COST, |e| -e.lml))
     }
 }
 
@@ -397,6 +404,9 @@ impl<O: Objective> argmin::core::Gradient for NegLml<'_, O> {
     type Param = Vec<f64>;
     type Gradient = Vec<f64>;
     fn gradient(&self, p: &Self::Param) -> Result<Vec<f64>, argmin::core::Error> {
-        Ok(self.0.evaluate(p)?.grad.iter().map(|g| -g).collect())
+        Ok(match self.0.evaluate(p) {
+            Ok(e) => e.grad.iter().map(|g| -g).collect(),
+            Err(_) => vec![0.0; p.len()],
+        })
     }
 }

@@ -223,19 +223,20 @@ impl<'a> SparseBound<'a> {
         let m = self.n_inducing();
         let sf2 = kernel.signal_variance();
         let mut u = [0.0; MAX_DIM];
-        let mut jac = [0.0; MAX_DIM * MAX_DIM];
         for (col, j) in (start..end).enumerate() {
-            kernel.features(&self.data.x[j * d..j * d + d], &mut u, &mut jac);
-            ux[col * d..col * d + d].copy_from_slice(&u[..d]);
+            kernel.feature_vector(&self.data.x[j * d..j * d + d], &mut u);
+            let u = &u[..d];
+            ux[col * d..col * d + d].copy_from_slice(u);
             let gj = self.data.directions[j];
-            for a in 0..m {
-                let za = &uz[a * d..a * d + d];
-                let r2: f64 = za.iter().zip(&u[..d]).map(|(p, q)| (p - q) * (p - q)).sum();
+            let kcol = kmn.col_as_slice_mut(col);
+            let mut ccol = cmn.as_deref_mut().map(|c| c.col_as_slice_mut(col));
+            for (a, (za, k_out)) in uz.chunks_exact(d).zip(kcol.iter_mut()).enumerate().take(m) {
+                let r2: f64 = za.iter().zip(u).map(|(p, q)| (p - q) * (p - q)).sum();
                 let (f, df) = profile_and_slope(spec.profile, r2);
                 let dir = spec.direction_factor(self.z_dirs[a], gj);
-                kmn[(a, col)] = sf2 * f * dir;
-                if let Some(c) = cmn.as_deref_mut() {
-                    c[(a, col)] = sf2 * df * dir;
+                *k_out = sf2 * f * dir;
+                if let Some(c) = ccol.as_deref_mut() {
+                    c[a] = sf2 * df * dir;
                 }
             }
         }
@@ -428,9 +429,10 @@ impl<'a> SparseBound<'a> {
                 );
                 let (mut sq, mut loo) = (0.0, 0.0);
                 for c in 0..rows {
-                    let mean: f64 = (0..m).map(|a| kmn[(a, c)] * core.beta[a]).sum();
+                    let kcol = kmn.col_as_slice(c);
+                    let mean: f64 = kcol.iter().zip(&core.beta).map(|(k, b)| k * b).sum();
                     let r = self.data.y[start + c] - mean;
-                    let h: f64 = (0..m).map(|a| ck[(a, c)] * ck[(a, c)]).sum::<f64>() / s2;
+                    let h: f64 = ck.col_as_slice(c).iter().map(|v| v * v).sum::<f64>() / s2;
                     sq += r * r;
                     loo += (r / (1.0 - h).max(1e-12)).powi(2);
                 }
@@ -534,16 +536,22 @@ impl<'a> SparseBound<'a> {
                 let mut tmp = vec![0.0; n_k];
                 let mut rss = 0.0;
                 for col in 0..rows {
-                    let mean: f64 = (0..m).map(|a| kmn[(a, col)] * beta[a]).sum();
+                    let (kcol, ccol, gcol) = (
+                        kmn.col_as_slice(col),
+                        cmn.col_as_slice(col),
+                        g.col_as_slice(col),
+                    );
+                    let mean: f64 = kcol.iter().zip(beta).map(|(k, b)| k * b).sum();
                     rss += (y[col] - mean).powi(2);
                     let xu = &ux[col * d..col * d + d];
+                    let yc = y[col] / s2;
                     let px = warped.then(|| {
                         let j = start + col;
                         kernel.prepare(&self.data.x[j * d..j * d + d], self.data.directions[j])
                     });
                     for a in 0..m {
-                        let gw = g[(a, col)] + beta[a] * y[col] / s2;
-                        let (k, c) = (kmn[(a, col)], cmn[(a, col)]);
+                        let gw = gcol[a] + beta[a] * yc;
+                        let (k, c) = (kcol[a], ccol[a]);
                         let za = &core.uz[a * d..a * d + d];
                         if let Some(px) = &px {
                             kernel.grad_theta(&prep_z[a], px, &mut tmp);

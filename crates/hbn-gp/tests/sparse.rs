@@ -298,6 +298,25 @@ fn large_data_search_on_a_subset_then_refine_on_all() {
     assert_eq!(gp.log_marginal_likelihood(), refine.final_lml.unwrap());
 }
 
+/// A failed trial step of the line search (a covariance that is not positive definite at an
+/// absurd length scale) must not end the start: every start moves far from its initial point.
+/// (Regression: all three starts stopped after one iteration at their initial bound.)
+#[test]
+fn failed_trial_steps_do_not_end_the_optimisation() {
+    let (x, _) = data(600, 2, 11);
+    let y: Vec<f64> = x.chunks_exact(2).map(|r| r[0] * r[0] - r[1]).collect();
+    let mut params = GpParams::new(KernelSpec::se_ard(2));
+    params.sparse = Some(SparseParams::new(6));
+    let gp = fit(&params, &x, &y).unwrap();
+    for s in &gp.report().starts {
+        assert!(s.iterations > 3, "{s:?}");
+        assert!(
+            s.final_lml.unwrap() > s.initial_lml.unwrap() + 100.0,
+            "{s:?}"
+        );
+    }
+}
+
 /// Learning Z never lowers the bound reached with Z fixed.
 #[test]
 fn optimising_inducing_inputs_raises_the_bound() {
