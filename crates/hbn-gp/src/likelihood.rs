@@ -62,13 +62,48 @@ pub struct EvalStats {
     pub max_jitter: f64,
 }
 
+/// The last evaluation (argmin asks for the cost and the gradient at the same point in two
+/// calls) and the counters of an objective.
+#[derive(Default)]
+pub(crate) struct EvalMemo {
+    last: Mutex<Option<(Vec<f64>, Evaluation)>>,
+    stats: Mutex<EvalStats>,
+}
+
+impl EvalMemo {
+    /// The evaluation at `p` if it was the last one.
+    pub fn recall(&self, p: &[f64]) -> Option<Evaluation> {
+        let last = self.last.lock().ok()?;
+        let (cp, ev) = last.as_ref()?;
+        (cp.as_slice() == p).then(|| ev.clone())
+    }
+
+    /// Counts a fresh evaluation at `p` and remembers it.
+    pub fn record(&self, p: &[f64], ev: &Evaluation) {
+        if let Ok(mut s) = self.stats.lock() {
+            s.evaluations += 1;
+            if ev.jitter > 0.0 {
+                s.jitter_evaluations += 1;
+                s.max_jitter = s.max_jitter.max(ev.jitter);
+            }
+        }
+        if let Ok(mut last) = self.last.lock() {
+            *last = Some((p.to_vec(), ev.clone()));
+        }
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> EvalStats {
+        self.stats.lock().map(|s| *s).unwrap_or_default()
+    }
+}
+
 /// The log marginal likelihood as an optimisation problem.
 pub struct Likelihood<'a> {
     data: LikelihoodData<'a>,
     noise_floor: f64,
     max_jitter_retries: usize,
-    cache: Mutex<Option<(Vec<f64>, Evaluation)>>,
-    stats: Mutex<EvalStats>,
+    memo: EvalMemo,
 }
 
 /// Gram matrix pieces shared by the likelihood and its gradient.
@@ -98,8 +133,7 @@ impl<'a> Likelihood<'a> {
             data,
             noise_floor,
             max_jitter_retries,
-            cache: Mutex::new(None),
-            stats: Mutex::new(EvalStats::default()),
+            memo: EvalMemo::default(),
         }
     }
 
@@ -120,7 +154,7 @@ impl<'a> Likelihood<'a> {
 
     /// Counters so far.
     pub fn stats(&self) -> EvalStats {
-        self.stats.lock().map(|s| *s).unwrap_or_default()
+        self.memo.stats()
     }
 
     fn prepare(&self, kernel: &Kernel<'_>) -> Vec<Prepared> {
@@ -213,11 +247,8 @@ impl<'a> Likelihood<'a> {
 
     /// Log marginal likelihood and its gradient at the optimised vector `p`.
     pub fn evaluate(&self, p: &[f64]) -> Result<Evaluation, GpError> {
-        if let Ok(cache) = self.cache.lock()
-            && let Some((cp, ev)) = cache.as_ref()
-            && cp.as_slice() == p
-        {
-            return Ok(ev.clone());
+        if let Some(ev) = self.memo.recall(p) {
+            return Ok(ev);
         }
         let n_k = self.data.spec.n_params();
         if p.len() != n_k + 1 {
@@ -293,16 +324,7 @@ impl<'a> Likelihood<'a> {
             grad,
             jitter: solved.factor.jitter,
         };
-        if let Ok(mut s) = self.stats.lock() {
-            s.evaluations += 1;
-            if ev.jitter > 0.0 {
-                s.jitter_evaluations += 1;
-                s.max_jitter = s.max_jitter.max(ev.jitter);
-            }
-        }
-        if let Ok(mut cache) = self.cache.lock() {
-            *cache = Some((p.to_vec(), ev.clone()));
-        }
+        self.memo.record(p, &ev);
         Ok(ev)
     }
 }

@@ -34,7 +34,7 @@
 use crate::GpError;
 use crate::factor::factor_with_jitter;
 use crate::likelihood::{
-    EvalStats, Evaluation, LikelihoodData, Objective, add_pair_theta_grad, noise_of,
+    EvalMemo, EvalStats, Evaluation, LikelihoodData, Objective, add_pair_theta_grad, noise_of,
     soft_bound_penalty,
 };
 use crate::model::{GaussianProcess, SparseFactors, StartReport, TrainingReport};
@@ -47,7 +47,6 @@ use faer::{Accum, Mat, Par};
 use hbn_core::kernel::{MAX_DIM, Prepared, Profile, profile_and_slope_with};
 use hbn_core::{Kernel, Metric};
 use rayon::prelude::*;
-use std::sync::Mutex;
 use std::time::Instant;
 
 /// Rows per block of the blocked reductions over the samples.
@@ -74,8 +73,7 @@ pub struct SparseBound<'a> {
     optimize_z: bool,
     noise_floor: f64,
     max_jitter_retries: usize,
-    cache: Mutex<Option<(Vec<f64>, Evaluation)>>,
-    stats: Mutex<EvalStats>,
+    memo: EvalMemo,
 }
 
 /// The bound and the posterior at fixed hyperparameters and inducing inputs.
@@ -175,8 +173,7 @@ impl<'a> SparseBound<'a> {
             optimize_z,
             noise_floor,
             max_jitter_retries,
-            cache: Mutex::new(None),
-            stats: Mutex::new(EvalStats::default()),
+            memo: EvalMemo::default(),
         }
     }
 
@@ -448,11 +445,8 @@ impl<'a> SparseBound<'a> {
 
     /// The bound (minus the soft-bound penalty) and its gradient at the optimised vector `p`.
     pub fn evaluate(&self, p: &[f64]) -> Result<Evaluation, GpError> {
-        if let Ok(cache) = self.cache.lock()
-            && let Some((cp, ev)) = cache.as_ref()
-            && cp.as_slice() == p
-        {
-            return Ok(ev.clone());
+        if let Some(ev) = self.memo.recall(p) {
+            return Ok(ev);
         }
         let spec = self.data.spec;
         let n_k = spec.n_params();
@@ -638,16 +632,7 @@ impl<'a> SparseBound<'a> {
                 row: 0,
             });
         }
-        if let Ok(mut s) = self.stats.lock() {
-            s.evaluations += 1;
-            if ev.jitter > 0.0 {
-                s.jitter_evaluations += 1;
-                s.max_jitter = s.max_jitter.max(ev.jitter);
-            }
-        }
-        if let Ok(mut cache) = self.cache.lock() {
-            *cache = Some((p.to_vec(), ev.clone()));
-        }
+        self.memo.record(p, &ev);
         Ok(ev)
     }
 }
@@ -657,7 +642,7 @@ impl Objective for SparseBound<'_> {
         SparseBound::evaluate(self, p)
     }
     fn stats(&self) -> EvalStats {
-        self.stats.lock().map(|s| *s).unwrap_or_default()
+        self.memo.stats()
     }
 }
 
