@@ -6,7 +6,8 @@ and reimplements, with numpy only:
 
 * GP prediction (``crates/hbn-core/src/gp.rs``): raw input -> standardised ``z`` -> kernel
   features ``u* = L phi(z)`` (``crates/hbn-core/src/kernel.rs``), ``k_i = s_f^2 f(|u_i - u*|^2)
-  D(g*, g_i)``, mean ``= m_y + s_y k.alpha``, variance ``= s_y^2 (k** - |L^-1 k|^2)``, mean
+  D(g*, g_i)``, mean ``= m_y + s_y k.alpha``, variance ``= s_y^2 (k** - |L^-1 k|^2)`` (exact
+  GP) or ``s_y^2 (k** - |L^-1 k|^2 + |C k|^2)`` (sparse GP, ``docs/sparse.md``), mean
   gradient by the chain rule through the features and the standardisation;
 * the EKF step (``crates/hbn-core/src/ekf.rs``): state ``[x_k, x_{k-1}, s_k]``, transition and
   sensor linearisation, the guards (state box, Jacobian bound, noise floors, Gershgorin test and
@@ -22,7 +23,7 @@ variance is one dense mat-vec per prediction.
 
 Usage::
 
-    python benches/numpy_filter.py [--steps 2000] [--max-points 500] [--system duhem]
+    python benches/numpy_filter.py [--steps 2000] [--max-points 500] [--system duhem] [--inducing 64]
 
 prints the per-step time of numpy and of ``hbn`` (the Python binding running the Rust filter,
 same model, same data), their ratio, and ``max |x_numpy - x_hbn|``.
@@ -93,12 +94,23 @@ class NumpyGP:
         self.dirs = (
             np.asarray(gp["directions"], dtype=np.float64) if self.direction is not None else None
         )
-        packed = np.asarray(gp["chol_packed"], dtype=np.float64)
-        chol = np.zeros((n, n))
         rows, cols = np.tril_indices(n)  # row-major lower triangle: the packed order
-        chol[rows, cols] = packed
-        # L^{-1}, once: the variance is then |L^{-1} k|^2, one mat-vec.
-        self.chol_inv = np.linalg.solve(chol, np.eye(n))
+
+        def unpack(values: Any) -> np.ndarray:
+            m = np.zeros((n, n))
+            m[rows, cols] = np.asarray(values, dtype=np.float64)
+            return m
+
+        sparse = gp.get("sparse")
+        if sparse is None:
+            # Exact GP: L^{-1}, once; the variance is then |L^{-1} k|^2, one mat-vec.
+            self.chol_inv = np.linalg.solve(unpack(gp["chol_packed"]), np.eye(n))
+            self.sigma_factor = None
+        else:
+            # Sparse GP (docs/sparse.md): var = k** - |L^{-1} k|^2 + |C k|^2, both factors stored
+            # already inverted.
+            self.chol_inv = unpack(sparse["kmm_inv_factor"])
+            self.sigma_factor = unpack(sparse["sigma_factor"])
 
     def _features(self, z: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """``u = L phi(z)`` and ``du/dz`` (d x d)."""
@@ -137,7 +149,11 @@ class NumpyGP:
         grad_u = (-2.0 * c * self.alpha) @ delta
         grad = self.out_scale * (grad_u @ du_dz) / self.in_scale
         v = self.chol_inv @ k
-        var = self.out_scale**2 * max(kss - v @ v, 0.0)
+        reduction = v @ v
+        if self.sigma_factor is not None:
+            b = self.sigma_factor @ k
+            reduction -= b @ b
+        var = self.out_scale**2 * max(kss - reduction, 0.0)
         return self.out_mean + self.out_scale * mean_std, var, grad
 
 
@@ -351,6 +367,7 @@ def compare(
     seed: int = 1,
     n_restarts: int = 1,
     model_path: Optional[str] = None,
+    n_inducing: Optional[int] = None,
 ) -> Dict[str, float]:
     """Fits (or loads) a model, runs both filters on the same test data, returns timings and the
     largest difference."""
@@ -361,7 +378,7 @@ def compare(
         train = hbn.simulate(system, train_steps, seed=seed, noise_gain=1.0)
         model = hbn.HysteresisModel.fit(
             train["u"], train["x"], train["y"], kernel=kernel, max_points=max_points,
-            n_restarts=n_restarts, seed=seed,
+            n_restarts=n_restarts, seed=seed, n_inducing=n_inducing,
         )
         tmp = tempfile.TemporaryDirectory()
         model_path = os.path.join(tmp.name, "model.hbn")
@@ -398,9 +415,14 @@ def main(argv=None) -> int:
     ap.add_argument("--kernel", default="matern52", help="kernel of both GPs (default matern52, the hbn default)")
     ap.add_argument("--train-steps", type=int, default=1000, help="training samples (default 1000)")
     ap.add_argument("--model", default=None, help="use this model file instead of training one")
+    ap.add_argument("--inducing", type=int, default=None, help="sparse GPs with this many inducing points (default: exact)")
     a = ap.parse_args(argv)
-    r = compare(a.steps, a.max_points, a.system, a.kernel, a.train_steps, model_path=a.model)
-    print(f"model: {r['n_transition']} transition + {r['n_sensor']} sensor support points; {r['steps']} steps")
+    r = compare(
+        a.steps, a.max_points, a.system, a.kernel, a.train_steps, model_path=a.model,
+        n_inducing=a.inducing,
+    )
+    kind = "inducing" if a.inducing else "support"
+    print(f"model: {r['n_transition']} transition + {r['n_sensor']} sensor {kind} points; {r['steps']} steps")
     print(f"numpy : {r['us_per_step_numpy']:9.1f} us/step")
     print(f"hbn   : {r['us_per_step_hbn']:9.1f} us/step")
     print(f"ratio : {r['ratio']:9.1f} x (numpy time / hbn time)")

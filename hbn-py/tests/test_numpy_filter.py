@@ -24,6 +24,25 @@ def test_numpy_filter_matches_hbn(kernel, tmp_path):
     assert np.max(np.abs(std_np - est.x_std)) < 1e-6
 
 
+def test_numpy_filter_matches_hbn_with_sparse_gps(tmp_path):
+    """An independent implementation of the sparse predictor (dense numpy mat-vecs) inside the
+    same filter gives hbn's estimates."""
+    train = hbn.simulate("duhem", 1500, seed=3, noise_gain=1.0)
+    model = hbn.HysteresisModel.fit(
+        train["u"], train["x"], train["y"], n_inducing=24, n_restarts=1
+    )
+    assert model.transition.is_sparse and model.sensor.is_sparse
+    path = tmp_path / "model.hbn"
+    model.save(path)
+    test = hbn.simulate("duhem", 300, seed=4, noise_gain=1.0)
+    est = model.estimate(test["u"], test["y"])
+    x_np, std_np = numpy_filter.numpy_estimate(
+        numpy_filter.load_model_json(str(path)), test["u"], test["y"]
+    )
+    assert np.max(np.abs(x_np - est.x)) < 1e-6
+    assert np.max(np.abs(std_np - est.x_std)) < 1e-6
+
+
 def test_numpy_gp_matches_hbn_gp(trained):
     model, _, test = trained
     doc = numpy_filter.load_model_json  # noqa: F841 (API presence)
