@@ -175,8 +175,8 @@ impl Default for Signals {
 
 /// Suggested number of inducing points per GP when sparse GPs are asked for
 /// (`HbnParams::n_inducing = Some(DEFAULT_INDUCING)`, `hbn train --inducing 64`). The default
-/// model stays exact: measured on the thesis protocol, sparse GPs are as accurate or better on
-/// noisy data but up to 6x worse on noise-free data (`docs/results.md`, "Sparse or exact").
+/// model stays exact: measured on the thesis protocol, sparse GPs are as accurate at noise gain
+/// 10 but up to 2.8x less accurate at gains 0 and 1 (`docs/results.md`, "Sparse or exact").
 pub const DEFAULT_INDUCING: usize = 64;
 
 /// Training parameters of the HBN (checked by [`HbnParams::validate`]).
