@@ -688,7 +688,8 @@ pub fn greedy_variance_selection(
                         if r > acc.1 { (i, r) } else { acc }
                     },
                 );
-        if !(best_r > tol) {
+        // NaN residuals (never expected) also stop the selection.
+        if best_r.partial_cmp(&tol) != Some(std::cmp::Ordering::Greater) {
             break;
         }
         let sqrt_r = best_r.sqrt();
