@@ -176,11 +176,26 @@ fn simulate_train_inspect_estimate_eval() {
     assert!(n("ekf") < 0.15, "{v}");
     assert!(n("ekf_blr") < 0.15, "{v}");
     assert!(v["rmse"]["ekf"].as_f64().is_some());
+    // Calibration of both filter modes (not of open loop, which has no uncertainty): values in
+    // range and consistent with each other (the 2-sigma band holds at least the 1-sigma one).
+    for mode in ["ekf", "ekf_blr"] {
+        let c = &v["calibration"][mode];
+        let f = |k: &str| c[k].as_f64().expect(k);
+        assert_eq!(c["samples"], 600, "{c}");
+        assert!((0.0..=1.0).contains(&f("coverage_1sigma")), "{c}");
+        assert!(f("coverage_2sigma") >= f("coverage_1sigma"), "{c}");
+        assert!(f("mean_nees") > 0.0 && f("nlpd").is_finite(), "{c}");
+    }
+    assert!(v["calibration"].get("open_loop").is_none());
     let bytes = std::fs::read(&png).expect("png");
     assert!(bytes.starts_with(b"\x89PNG"), "PNG written");
     // The table form.
     let (out, _) = ok(&["eval", "--model", &model, "--log", &test, "--mode", "ekf"]);
     assert!(out.contains("ekf") && out.contains("open_loop") && !out.contains("ekf_blr"));
+    assert!(
+        out.contains("in 2 sd") && out.contains("mean NEES"),
+        "{out}"
+    );
 
     // Errors leave no output behind and name the topic.
     let bad = p(dir, "bad.csv");

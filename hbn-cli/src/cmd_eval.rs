@@ -2,7 +2,7 @@
 
 use anyhow::Context;
 use hbn_core::Mode;
-use hbn_model::metrics::{nrmse, rmse};
+use hbn_model::metrics::{Calibration, calibration, nrmse, rmse};
 use serde_json::{Map, Value, json};
 
 use crate::Ui;
@@ -20,6 +20,8 @@ pub struct Score {
     pub rmse: f64,
     /// nRMSE.
     pub nrmse: f64,
+    /// Calibration of the estimate's standard deviation (`None` for open loop, which has none).
+    pub calibration: Option<Calibration>,
 }
 
 /// The result of an evaluation.
@@ -34,28 +36,50 @@ pub struct EvalResult {
 }
 
 impl EvalResult {
-    /// JSON: `{"rmse": {..}, "nrmse": {..}, "samples": N, "rate_hz": ..}`.
+    /// JSON: `{"rmse": {..}, "nrmse": {..}, "calibration": {method: {coverage_1sigma,
+    /// coverage_2sigma, mean_nees, nlpd, samples}}, "samples": N, "rate_hz": ..}`.
     pub fn to_json(&self) -> Value {
         let mut r = Map::new();
         let mut n = Map::new();
+        let mut c = Map::new();
         for s in &self.scores {
             r.insert(s.method.into(), json!(s.rmse));
             n.insert(s.method.into(), json!(s.nrmse));
+            if let Some(cal) = &s.calibration {
+                c.insert(s.method.into(), json!(cal));
+            }
         }
-        json!({"rmse": r, "nrmse": n, "samples": self.samples, "rate_hz": self.rate_hz})
+        json!({"rmse": r, "nrmse": n, "calibration": c, "samples": self.samples,
+               "rate_hz": self.rate_hz})
     }
 
-    /// An aligned text table.
+    /// An aligned text table; the calibration columns say how often the truth lies within
+    /// 1 and 2 standard deviations (about 68% and 95% when the uncertainty is honest) and the
+    /// mean squared error in standard deviations (about 1 when honest).
     pub fn table(&self) -> String {
-        let mut s = format!("{:<10} {:>12} {:>10}\n", "method", "RMSE", "nRMSE");
+        let mut s = format!(
+            "{:<10} {:>12} {:>10} {:>9} {:>9} {:>10} {:>9}\n",
+            "method", "RMSE", "nRMSE", "in 1 sd", "in 2 sd", "mean NEES", "NLPD"
+        );
         for sc in &self.scores {
             s.push_str(&format!(
-                "{:<10} {:>12.6} {:>10.4}\n",
+                "{:<10} {:>12.6} {:>10.4}",
                 sc.method, sc.rmse, sc.nrmse
             ));
+            match &sc.calibration {
+                Some(c) => s.push_str(&format!(
+                    " {:>8.1}% {:>8.1}% {:>10.2} {:>9.3}\n",
+                    100.0 * c.coverage_1sigma,
+                    100.0 * c.coverage_2sigma,
+                    c.mean_nees,
+                    c.nlpd
+                )),
+                None => s.push_str(&format!(" {:>9} {:>9} {:>10} {:>9}\n", "-", "-", "-", "-")),
+            }
         }
         s.push_str(&format!(
-            "{} samples at {:.1} Hz\n",
+            "{} samples at {:.1} Hz; NEES = ((x - x_hat) / x_std)^2, NLPD = negative log \
+             predictive density (lower is better)\n",
             self.samples, self.rate_hz
         ));
         s
@@ -107,6 +131,7 @@ pub fn run(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<EvalResult> {
             method: key(m),
             rmse: rmse(&est.x, xr),
             nrmse: nrmse(&est.x, xr),
+            calibration: Some(calibration(&est.x, &est.x_std, xr)),
         });
         estimates.push((m, est));
     }
@@ -117,6 +142,7 @@ pub fn run(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<EvalResult> {
         method: "open_loop",
         rmse: rmse(&open, xr),
         nrmse: nrmse(&open, xr),
+        calibration: None,
     });
     let result = EvalResult {
         scores,

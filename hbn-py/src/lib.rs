@@ -505,6 +505,40 @@ fn simulate<'py>(
     ))
 }
 
+/// Scores of an estimate against a reference: RMSE, nRMSE and the calibration of its standard
+/// deviation (`hbn_model::metrics`), as a dict.
+#[pyfunction]
+fn score<'py>(
+    py: Python<'py>,
+    x: PyReadonlyArray1<'_, f64>,
+    x_std: PyReadonlyArray1<'_, f64>,
+    x_ref: PyReadonlyArray1<'_, f64>,
+) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+    let (x, s, r) = (
+        slice(&x, "x")?,
+        slice(&x_std, "x_std")?,
+        slice(&x_ref, "x_ref")?,
+    );
+    if x.len() != r.len() || s.len() != r.len() {
+        return Err(PyValueError::new_err(format!(
+            "x, x_std and x_ref must have the same length (got {}, {}, {})",
+            x.len(),
+            s.len(),
+            r.len()
+        )));
+    }
+    let c = hbn_model::metrics::calibration(x, s, r);
+    let d = pyo3::types::PyDict::new(py);
+    d.set_item("rmse", hbn_model::metrics::rmse(x, r))?;
+    d.set_item("nrmse", hbn_model::metrics::nrmse(x, r))?;
+    d.set_item("coverage_1sigma", c.coverage_1sigma)?;
+    d.set_item("coverage_2sigma", c.coverage_2sigma)?;
+    d.set_item("mean_nees", c.mean_nees)?;
+    d.set_item("nlpd", c.nlpd)?;
+    d.set_item("samples", c.samples)?;
+    Ok(d)
+}
+
 /// Names of the simulated systems.
 #[pyfunction]
 fn systems() -> Vec<&'static str> {
@@ -588,6 +622,7 @@ fn _hbn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<HysteresisModelCore>()?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(systems, m)?)?;
+    m.add_function(wrap_pyfunction!(score, m)?)?;
     m.add_function(wrap_pyfunction!(read_mcap, m)?)?;
     m.add_function(wrap_pyfunction!(list_topics, m)?)?;
     m.add_function(wrap_pyfunction!(kernel_names, m)?)?;

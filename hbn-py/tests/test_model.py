@@ -105,3 +105,24 @@ def test_read_mcap_fixture(repo):
     assert np.all(np.abs(d2["x"]) <= 1.0 + 1e-12)
     with pytest.raises(ValueError, match="not in"):
         hbn.read_mcap(f, {"u": "/nope.data"})
+
+
+def test_estimate_score_reports_accuracy_and_calibration():
+    tr = hbn.simulate("duhem", 400, seed=1, noise_gain=1.0)
+    m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_restarts=1)
+    te = hbn.simulate("duhem", 300, seed=2, noise_gain=1.0)
+    est = m.estimate(te["u"], te["y"])
+    s = est.score(te["x"])
+    err = te["x"] - est.x
+    # The same numbers a user would compute by hand.
+    assert s["rmse"] == pytest.approx(np.sqrt(np.mean(err**2)), rel=1e-12)
+    assert s["nrmse"] == pytest.approx(s["rmse"] / np.ptp(te["x"]), rel=1e-12)
+    z = err / est.x_std
+    assert s["coverage_1sigma"] == pytest.approx(np.mean(np.abs(z) <= 1.0))
+    assert s["coverage_2sigma"] == pytest.approx(np.mean(np.abs(z) <= 2.0))
+    assert s["mean_nees"] == pytest.approx(np.mean(z**2), rel=1e-12)
+    nlpd = np.mean(0.5 * np.log(2 * np.pi * est.x_std**2) + 0.5 * z**2)
+    assert s["nlpd"] == pytest.approx(nlpd, rel=1e-12)
+    assert s["samples"] == 300
+    with pytest.raises(ValueError, match="same length"):
+        est.score(te["x"][:10])

@@ -470,6 +470,24 @@ class Estimate:
         """All per-sample arrays by name."""
         return {k: getattr(self, k) for k in self.__slots__ if k != "mode"}
 
+    def score(self, x_ref: Any) -> Dict[str, float]:
+        """Scores against the true state ``x_ref`` (same length), as ``hbn eval`` reports them:
+        ``rmse``, ``nrmse`` (RMSE over the reference's range), ``coverage_1sigma`` and
+        ``coverage_2sigma`` (fraction of samples with ``|x_ref - x| <= k * x_std``; about 0.683
+        and 0.954 when the uncertainty is honest), ``mean_nees`` (mean of
+        ``((x_ref - x) / x_std)^2``, about 1 when honest), ``nlpd`` (mean negative log predictive
+        density, lower is better) and ``samples`` (those scored: finite, ``x_std > 0``).
+
+        >>> import hbn
+        >>> tr = hbn.simulate("duhem", 300, seed=1)
+        >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_restarts=1)
+        >>> te = hbn.simulate("duhem", 200, seed=2)
+        >>> s = m.estimate(te["u"], te["y"]).score(te["x"])
+        >>> sorted(s)[:3], s["samples"]
+        (['coverage_1sigma', 'coverage_2sigma', 'mean_nees'], 200)
+        """
+        return dict(_hbn.score(self.x, self.x_std, _vector(x_ref, "x_ref")))
+
 
 def _trajectories(a: Any, name: str) -> List[np.ndarray]:
     if isinstance(a, (list, tuple)) and len(a) > 0 and np.ndim(a[0]) >= 1:
