@@ -171,7 +171,7 @@ impl GpParams {
                 );
             }
             if let Some(z) = &sp.inducing_inputs {
-                if z.len() != sp.n_inducing * self.kernel.dim {
+                if sp.n_inducing.checked_mul(self.kernel.dim) != Some(z.len()) {
                     return bad(
                         "inducing_inputs",
                         format!(

@@ -660,7 +660,7 @@ pub fn greedy_variance_selection(
     let spec = *kernel.spec();
     let d = spec.dim;
     let n = directions.len().min(x_std.len() / d.max(1));
-    let pool_size = n.min(INIT_POOL_MIN.max(32 * m));
+    let pool_size = n.min(INIT_POOL_MIN.max(m.saturating_mul(32)));
     let pool: Vec<usize> = (0..pool_size).map(|i| i * n / pool_size).collect();
     let sf2 = kernel.signal_variance();
     let mut feats = vec![0.0; pool_size * d];
@@ -674,10 +674,11 @@ pub fn greedy_variance_selection(
         .iter()
         .map(|&row| sf2 * spec.direction_factor(directions[row], directions[row]))
         .collect();
-    let mut rows_e: Vec<Vec<f64>> = Vec::with_capacity(m);
-    let mut chosen = Vec::with_capacity(m);
+    let target = m.min(pool_size);
+    let mut rows_e: Vec<Vec<f64>> = Vec::with_capacity(target);
+    let mut chosen = Vec::with_capacity(target);
     let tol = 1e-10 * sf2;
-    while chosen.len() < m.min(pool_size) {
+    while chosen.len() < target {
         let (best, best_r) =
             residual
                 .iter()

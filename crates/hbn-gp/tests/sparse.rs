@@ -422,6 +422,12 @@ fn bad_input_gives_typed_errors() {
             ..
         })
     ));
+    // An absurd number of inducing points is capped by the data, not an allocation failure.
+    params.sparse = Some(SparseParams::new(usize::MAX));
+    params.n_starts = 1;
+    params.max_iters = 5;
+    let gp = fit(&params, &x, &y).unwrap();
+    assert!(gp.n_support() <= 50);
     params.sparse = Some(SparseParams::new(8));
     let mut xn = x.clone();
     xn[7] = f64::NAN;
