@@ -184,7 +184,7 @@ def evaluate(
     methods: Sequence[str] = METHODS,
     gp_rows: int = gp_ekf.GP_ROWS,
     lstm_config: Optional[lstm.LstmConfig] = None,
-    log: Any = sys.stderr,
+    log: Any = None,
 ) -> Dict[str, Any]:
     """Trains every method in ``methods`` on ``train_paths`` and scores it on ``test_path``.
 
@@ -212,7 +212,7 @@ def evaluate(
 
     def note(msg: str) -> None:
         report["notices"].append(msg)
-        print(msg, file=log)
+        print(msg, file=log or sys.stderr)
 
     if any(m.startswith("hbn-") for m in methods):
         try:
@@ -382,7 +382,7 @@ def grid(
     gp_rows: int = gp_ekf.GP_ROWS,
     lstm_config: Optional[lstm.LstmConfig] = None,
     keep_logs: bool = False,
-    log: Any = sys.stderr,
+    log: Any = None,
 ) -> Dict[str, Any]:
     """Runs :func:`evaluate` on simulated logs for every system x gain x seed, writing
     ``out_dir/grid.json`` (after every run, so a long grid can be stopped and read) and
@@ -409,8 +409,8 @@ def grid(
                 if not keep_logs:
                     _forget_tmp(rep)
                 doc["runs"].append({"system": system, "gain": float(gain), "seed": seed, "report": rep})
-                print(f"[{system} gain {gain:g} seed {seed}: {time.perf_counter() - t0:.1f} s]", file=log)
-                print(format_report(rep), file=log)
+                print(f"[{system} gain {gain:g} seed {seed}: {time.perf_counter() - t0:.1f} s]", file=log or sys.stderr)
+                print(format_report(rep), file=log or sys.stderr)
                 doc["summary"] = summarise(doc["runs"])
                 doc["total_seconds"] = time.perf_counter() - t_start
                 (out_dir / "grid.json").write_text(json.dumps(doc, indent=1))
