@@ -141,8 +141,8 @@ def run_hbn(
     train: Sequence[common.Log], test: common.Log, seed: int, paths: Mapping[str, str]
 ) -> Dict[str, Dict[str, Any]]:
     """hbn with its defaults: one fit (``rate`` from the logs), then both filter modes.
-    Returns ``{"hbn-ekf": {...}, "hbn-ekf-blr": {...}}`` with ``x``, ``x_std`` and seconds
-    (the training time is the same fit's for both)."""
+    Returns ``{"hbn-ekf": {...}, "hbn-ekf-blr": {...}}`` with ``x``, ``x_std``, seconds (the
+    training time is the same fit's for both), the guard ``flags`` counts and ``model_rate``."""
     import hbn
 
     t0 = time.perf_counter()
@@ -165,6 +165,7 @@ def run_hbn(
             "train_seconds": t_fit,
             "estimate_seconds": time.perf_counter() - t1,
             "flags": est.flag_counts(),
+            "model_rate": model.rate,
         }
     return out
 

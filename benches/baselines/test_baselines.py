@@ -46,12 +46,12 @@ def test_errors_equal_to_the_std_give_nees_one() -> None:
     c = common.calibration(ref + sign * std, std, ref)
     assert c["mean_nees"] == pytest.approx(1.0, abs=1e-12)
     assert c["coverage_2sigma"] == 1.0
-    # Exactly one standard deviation off (exact in binary floating point) counts as covered.
-    ref, std = np.array([0.0, 1.0, 2.0, 3.0]), np.array([0.5, 1.0, 2.0, 4.0])
-    exact = common.calibration(ref + np.array([1.0, -1.0, 1.0, -1.0]) * std, std, ref)
-    assert exact["coverage_1sigma"] == 1.0 and exact["mean_nees"] == 1.0
     # NLPD of z = 1: ln(2 pi s^2) / 2 + 1/2, averaged.
     assert c["nlpd"] == pytest.approx(np.mean(0.5 * np.log(2 * np.pi * std**2) + 0.5), abs=1e-12)
+    # Exactly one standard deviation off (exact in binary floating point) counts as covered.
+    r4, s4 = np.array([0.0, 1.0, 2.0, 3.0]), np.array([0.5, 1.0, 2.0, 4.0])
+    exact = common.calibration(r4 + np.array([1.0, -1.0, 1.0, -1.0]) * s4, s4, r4)
+    assert exact["coverage_1sigma"] == 1.0 and exact["mean_nees"] == 1.0
 
 
 def test_calibration_counts_and_skips_unscorable_samples() -> None:
@@ -315,6 +315,8 @@ def test_runner_end_to_end_on_simulated_logs(
         assert 0.0 <= m["coverage_1sigma"] <= m["coverage_2sigma"] <= 1.0
         assert m["mean_nees"] > 0 and m["samples"] == 150
         assert m["train_seconds"] > 0 and m["estimate_seconds"] > 0
+        if name.startswith("hbn-"):
+            assert m["model_rate"] == rep["rate"]  # hbn is trained at the logs' rate
     printed = capsys.readouterr()
     if lstm.available():
         assert ms["lstm"]["coverage_1sigma"] is None and ms["lstm"]["mean_nees"] is None
