@@ -165,9 +165,9 @@ def score(x_hat: np.ndarray, x_std: Optional[np.ndarray], x_ref: np.ndarray) -> 
     :func:`calibration` fields; without ``x_std`` (a point estimate) those are ``None``."""
     out: Dict[str, Optional[float]] = {"rmse": rmse(x_hat, x_ref), "nrmse": nrmse(x_hat, x_ref)}
     if x_std is None:
-        out.update({"coverage_1sigma": None, "coverage_2sigma": None, "mean_nees": None, "nlpd": None, "samples": None})
         finite = np.isfinite(np.asarray(x_hat, dtype=np.float64)) & np.isfinite(np.asarray(x_ref, dtype=np.float64))
-        out["samples"] = int(finite.sum())
+        out.update({"coverage_1sigma": None, "coverage_2sigma": None, "mean_nees": None, "nlpd": None})
+        out["samples"] = int(finite.sum())  # those the RMSE used
     else:
         out.update(calibration(x_hat, x_std, x_ref))
     return out

@@ -15,8 +15,10 @@ the timing of hbn's filter (``docs/ekf.md``: the estimate at step ``k`` has used
 * Initial state "from the first measurement": ``s_0 = y_0`` (variance ``R``), ``x_0 = x_{-1}``
   = mean of ``x`` over the 50 training samples whose ``y`` is nearest ``y_0``, with their
   variance (fully correlated), as hbn does, so that the comparison is about the models.
-* No guards beyond what any careful EKF has: a symmetric Joseph-form update, and the update
-  skipped when the innovation variance is not positive or a measurement is not finite.
+* No guards beyond what any careful EKF has: a symmetric Joseph-form update, the update
+  skipped when the innovation variance is not positive or a measurement is not finite, and a
+  missing input replaced by the last one. (hbn adds noise floors from the GPs' leave-one-out
+  error, a state box, Jacobian and covariance bounds: see ``docs/ekf.md``.)
 """
 
 from __future__ import annotations
@@ -138,6 +140,10 @@ def estimate(model: GpEkfModel, u: np.ndarray, y: np.ndarray) -> Tuple[np.ndarra
     P = np.array([[v0, v0, 0.0], [v0, v0, 0.0], [0.0, 0.0, R]])
     x_hat[0], x_std[0] = z[0], math.sqrt(P[0, 0])
     H = np.array([0.0, 0.0, 1.0])
+    u = np.asarray(u, dtype=np.float64).copy()
+    for k in range(1, n):  # a missing input holds the last one
+        if not np.isfinite(u[k]):
+            u[k] = u[k - 1]
     for k in range(1, n):
         u1, u2 = u[k - 1], u[k - 2] if k >= 2 else u[0]
         # Predict: x_k from the transition GP, then s_k from the sensor GP at the new x_k.

@@ -222,6 +222,20 @@ def test_ekf_equals_exact_gaussian_filtering_on_a_linear_model() -> None:
     assert x_hat[0] == m0 and x_std[0] == pytest.approx(math.sqrt(v0))
 
 
+def test_ekf_survives_missing_samples() -> None:
+    model = gp_ekf.GpEkfModel(
+        LinearGP([0.9, 0.0, 0.1, 0.0], 0.0, 1e-3, 1e-3),  # type: ignore[arg-type]
+        LinearGP([0.0, 0.5, 0.5], 0.0, 1e-3, 1e-2),  # type: ignore[arg-type]
+        np.linspace(0, 1, 60), np.linspace(0, 1, 60), 1.0,
+    )  # fmt: skip
+    u = np.full(30, 0.5)
+    y = np.full(30, 0.5)
+    u[10], y[12], y[13] = np.nan, np.nan, np.inf
+    x, s = gp_ekf.estimate(model, u, y)
+    assert np.all(np.isfinite(x)) and np.all(s > 0)
+    assert s[13] > s[11]  # no update: the uncertainty grows
+
+
 def test_initial_x_from_the_nearest_training_measurements() -> None:
     init_y = np.arange(200.0)
     init_x = np.where(init_y < 100, 0.0, 1.0) + 0.001 * init_y
