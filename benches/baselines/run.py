@@ -24,6 +24,8 @@ Usage::
     # systems x gains x seeds: one JSON file and a Markdown table
     python benches/baselines/run.py --grid --systems bouc-wen,maxwell-slip --gains 1,10 \\
         --seeds 1,2 --out-dir grid-out
+    # the tables of saved grids, merged
+    python benches/baselines/run.py --table grid-out/grid.json other/grid.json
 
 The ``hbn`` CLI is ``$HBN_BIN``, else ``target/release/hbn`` of this repository, else ``hbn``
 on the PATH. BLAS, OpenMP and rayon run on one thread unless the environment says otherwise
@@ -437,6 +439,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     src.add_argument("--test", metavar="LOG", help="test MCAP log (needs the state x, for scoring)")
     src.add_argument("--simulate", metavar="SYSTEM", help="generate the logs with `hbn simulate` (thesis protocol)")
     src.add_argument("--grid", action="store_true", help="loop --systems x --gains x --seeds")
+    src.add_argument("--table", nargs="+", type=Path, metavar="GRID_JSON", help="print the Markdown tables of saved grid.json files (merged)")
     ap.add_argument("--u", default=common.DEFAULT_PATHS["u"], help="message path of the input u")
     ap.add_argument("--x", default=common.DEFAULT_PATHS["x"], help="message path of the state x")
     ap.add_argument("--y", default=common.DEFAULT_PATHS["y"], help="message path of the sensor output y")
@@ -458,9 +461,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     methods = [m for m in _csv(a.methods, str) if not (a.no_lstm and m == "lstm")]
     paths = {"u": a.u, "x": a.x, "y": a.y}
     cfg = lstm.LstmConfig(max_steps=a.lstm_steps)
-    modes = sum([bool(a.train or a.test), a.simulate is not None, a.grid])
+    modes = sum([bool(a.train or a.test), a.simulate is not None, a.grid, a.table is not None])
     if modes != 1:
-        ap.error("give exactly one of: --train ... --test LOG, --simulate SYSTEM, --grid")
+        ap.error("give exactly one of: --train ... --test LOG, --simulate SYSTEM, --grid, --table")
+    if a.table is not None:
+        runs = [r for p in a.table for r in json.loads(p.read_text())["runs"]]
+        print(markdown_tables(summarise(runs)), end="")
+        return 0
     if a.grid:
         t0 = time.perf_counter()
         doc = grid(_csv(a.systems, str), _csv(a.gains, float), _csv(a.seeds, int), a.out_dir, steps=a.steps,

@@ -366,7 +366,7 @@ def test_runner_is_deterministic_and_reads_other_message_paths(tiny_logs: Tuple[
         run.evaluate(train, test, methods=["nope"])
 
 
-def test_grid_writes_json_and_a_markdown_table(tmp_path: Path) -> None:
+def test_grid_writes_json_and_a_markdown_table(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     _hbn_or_skip()
     doc = run.grid(["duhem"], [1.0], [1], tmp_path, steps=120, methods=["hbn-ekf", "sk-gp-ekf"], gp_rows=60)
     saved = json.loads((tmp_path / "grid.json").read_text())
@@ -378,6 +378,9 @@ def test_grid_writes_json_and_a_markdown_table(tmp_path: Path) -> None:
     md = (tmp_path / "grid.md").read_text()
     assert md.startswith("| system | gain | runs |")
     assert f"| duhem | 1 | 1 | {hbn_nr:.4f} +- 0.0000 | - | {sk_nr:.4f}" in md
+    # --table re-renders the same tables from the saved JSON.
+    assert run.main(["--table", str(tmp_path / "grid.json")]) == 0
+    assert capsys.readouterr().out == md
 
 
 def test_summary_ratio_uses_the_best_baseline() -> None:
