@@ -20,5 +20,6 @@ fi
 "$VENV/bin/python" -m pip install --quiet numpy scikit-learn matplotlib pytest
 "$VENV/bin/python" -m pip install --quiet --force-reinstall --no-deps ./hbn-py
 
-echo "== Python tests"
+echo "== Python tests (the wheel, then the baselines of benches/baselines; the LSTM skips without torch)"
 HBN_BIN="$ROOT/target/release/hbn" "$VENV/bin/python" -m pytest -q hbn-py/tests
+HBN_BIN="$ROOT/target/release/hbn" "$VENV/bin/python" -m pytest -q benches/baselines
