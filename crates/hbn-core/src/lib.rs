@@ -32,7 +32,6 @@
 )]
 
 pub mod blr;
-#[allow(clippy::indexing_slicing)] // TEMPORARY: ekf.rs is converted in its own commit
 pub mod ekf;
 mod error;
 pub mod gp;
