@@ -26,7 +26,7 @@
 //! [`BLR_MAX_SCAN`] candidates. Time and memory are bounded.
 
 use crate::CoreError;
-use crate::kernel::{MAX_DIM, at, set};
+use crate::kernel::{MAX_DIM, at, clamp_to, set};
 
 /// Capacity of the neighbour buffer.
 pub const BLR_MAX_NEIGHBOURS: usize = 48;
@@ -112,7 +112,8 @@ impl LocalRegression {
         let mut lambda0 = [0.0; P];
         // Intercept prior variance Sigma / Lambda0_00 = the GP's own uncertainty about its mean.
         let latent = gp_latent_var.max(sigma_hat * 1e-12);
-        lambda0[0] = (sigma_hat / latent).clamp(self.kappa, 1e12);
+        // `clamp_to`, not `f64::clamp`: an unvalidated `kappa` above 1e12 or NaN must not panic.
+        lambda0[0] = clamp_to(sigma_hat / latent, self.kappa, 1e12);
         for (l, v) in lambda0.iter_mut().skip(1).zip(nb.input_var).take(d) {
             *l = self.kappa * v;
         }

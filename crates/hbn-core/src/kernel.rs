@@ -206,6 +206,21 @@ pub(crate) fn set(s: &mut [f64], i: usize, v: f64) {
     }
 }
 
+/// `v` clamped to `[lo, hi]` like `f64::clamp` (same result whenever `lo <= hi`), but with no
+/// panic when `lo > hi` or a bound is NaN: then it returns `hi` when `v > hi`, else `lo` when
+/// `v < lo`, else `v` (NaN stays NaN).
+#[inline(always)]
+pub(crate) fn clamp_to(v: f64, lo: f64, hi: f64) -> f64 {
+    let mut x = v;
+    if x < lo {
+        x = lo;
+    }
+    if x > hi {
+        x = hi;
+    }
+    x
+}
+
 #[inline]
 fn check_len(got: usize, expected: usize) -> Result<(), CoreError> {
     if got == expected {

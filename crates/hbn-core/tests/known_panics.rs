@@ -110,3 +110,27 @@ fn substitution_with_short_factor_is_an_error() {
     forward_substitute_packed(&l, &k, &mut v2).expect("prefix");
     assert_eq!(v2, [1.0, 1.0]);
 }
+
+/// Found by the link-time check (`crates/hbn-core/nopanic`): `f64::clamp` panics when its
+/// lower bound exceeds the upper one, and `posterior` clamped the intercept's prior weight to
+/// `[kappa, 1e12]`, so a `kappa` above 1e12 (which `validate()` accepts) or NaN panicked in
+/// the EKF+BLR step. The weight now saturates at 1e12.
+#[test]
+fn posterior_with_huge_or_nan_kappa_does_not_panic() {
+    let s = samples();
+    let nb = neighbourhood(&s);
+    for kappa in [1e13, 1e300, f64::INFINITY, f64::NAN, -1.0] {
+        let r = LocalRegression {
+            kappa,
+            ..LocalRegression::default()
+        };
+        let _ = r.posterior(&nb, &[0.05], 0.2, &[2.0], 1e-4, 1e-4);
+    }
+    let big = LocalRegression {
+        kappa: 1e13,
+        ..LocalRegression::default()
+    };
+    assert!(big.validate().is_ok(), "validate() accepts kappa = 1e13");
+    let p = big.posterior(&nb, &[0.05], 0.2, &[2.0], 1e-4, 1e-4);
+    assert!(p.noise.is_finite() && p.intercept.is_finite());
+}
