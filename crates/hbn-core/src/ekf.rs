@@ -39,6 +39,7 @@
 use crate::CoreError;
 use crate::blr::{LocalRegression, Neighbourhood};
 use crate::gp::{GpView, Want};
+use crate::kernel::clamp_to;
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
 /// Guard flags of one step (a bit set).
@@ -694,12 +695,20 @@ fn bound_covariance(p: Matrix3<f64>, lo: f64, hi: f64, flags: &mut u32) -> Matri
     if inside {
         return sym;
     }
-    match SymmetricEigen::try_new(sym, 1e-14, 64) {
+    // The link-time no-panic proof (`crates/hbn-core/nopanic`) builds with
+    // `--cfg hbn_no_panic_proof`, which replaces this one call by its `None` branch: nalgebra's
+    // iterative eigensolver indexes by loop state and unwraps a 2x2 solve, which the optimiser
+    // cannot prove in bounds, so the proof covers the whole step except this call.
+    #[cfg(not(hbn_no_panic_proof))]
+    let eig = SymmetricEigen::try_new(sym, 1e-14, 64);
+    #[cfg(hbn_no_panic_proof)]
+    let eig: Option<SymmetricEigen<f64, nalgebra::U3>> = None;
+    match eig {
         Some(eig) => {
             let mut vals = eig.eigenvalues;
             let mut changed = false;
             for v in vals.iter_mut() {
-                let c = v.clamp(lo, hi);
+                let c = clamp_to(*v, lo, hi);
                 if c != *v {
                     changed = true;
                     *v = c;
@@ -722,7 +731,7 @@ fn bound_covariance(p: Matrix3<f64>, lo: f64, hi: f64, flags: &mut u32) -> Matri
 
 fn clamp_flag(v: f64, b: (f64, f64), flags: &mut u32) -> f64 {
     let c = if v.is_finite() {
-        v.clamp(b.0, b.1)
+        clamp_to(v, b.0, b.1)
     } else {
         0.5 * (b.0 + b.1)
     };
@@ -734,7 +743,7 @@ fn clamp_flag(v: f64, b: (f64, f64), flags: &mut u32) -> f64 {
 
 fn clamp_jac(v: f64, max: f64, flags: &mut u32) -> f64 {
     let c = if v.is_finite() {
-        v.clamp(-max, max)
+        clamp_to(v, -max, max)
     } else {
         0.0
     };
