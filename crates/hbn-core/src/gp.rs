@@ -19,7 +19,7 @@
 //! (`m^2` independent multiply-adds, no dependency chain) instead of two triangular solves.
 
 use crate::CoreError;
-use crate::kernel::{Kernel, MAX_DIM, Profile, profile_and_slope};
+use crate::kernel::{Kernel, MAX_DIM, Profile, at, profile_and_slope, set};
 
 /// Which outputs of [`GpView::predict`] to compute. The mean is always computed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -190,7 +190,9 @@ impl<'a> GpView<'a> {
         // is one too).
         for factor in factors.iter().filter(|f| !f.is_empty()) {
             for i in 0..n {
-                if factor[i * (i + 1) / 2 + i].partial_cmp(&0.0)
+                if factor
+                    .get(i * (i + 1) / 2 + i)
+                    .and_then(|v| v.partial_cmp(&0.0))
                     != Some(core::cmp::Ordering::Greater)
                 {
                     return Err(CoreError::InvalidSpec(
@@ -281,21 +283,37 @@ impl<'a> GpView<'a> {
         let want_var = want.variance || want.grad_variance;
 
         let mut z = [0.0; MAX_DIM];
-        for j in 0..d {
-            z[j] = (x_raw[j] - self.input_mean[j]) / self.input_scale[j];
+        let std_in = x_raw.iter().zip(self.input_mean).zip(self.input_scale);
+        for (zj, ((x, m), s)) in z.iter_mut().zip(std_in).take(d) {
+            *zj = (x - m) / s;
         }
         let spec = *self.kernel.spec();
         let g_star = spec.direction_of(x_raw);
         let mut u_star = [0.0; MAX_DIM];
         let mut du_dz = [0.0; MAX_DIM * MAX_DIM];
-        self.kernel.features(&z[..d], &mut u_star, &mut du_dz);
+        self.kernel
+            .features(z.get(..d).unwrap_or(&z), &mut u_star, &mut du_dz);
 
-        let (kvec, rest) = scratch.split_at_mut(n);
-        let (cvec, rest) = rest.split_at_mut(if want.grad_variance { n } else { 0 });
-        let (vvec, rest) = rest.split_at_mut(if want_var { n } else { 0 });
+        // The scratch length was checked against `predict_scratch` above, so every split
+        // succeeds; the checked forms keep a panic path out of the step.
+        let too_small = CoreError::ScratchTooSmall {
+            needed,
+            got: scratch.len(),
+        };
+        let (kvec, rest) = scratch.split_at_mut_checked(n).ok_or(too_small)?;
+        let (cvec, rest) = rest
+            .split_at_mut_checked(if want.grad_variance { n } else { 0 })
+            .ok_or(too_small)?;
+        let (vvec, rest) = rest
+            .split_at_mut_checked(if want_var { n } else { 0 })
+            .ok_or(too_small)?;
         // Sparse only: `C k`, then the variance gradient's weights.
-        let (bvec, rest) = rest.split_at_mut(if want_var && sparse { n } else { 0 });
-        let qvec = &mut rest[..if want.grad_variance && sparse { n } else { 0 }];
+        let (bvec, rest) = rest
+            .split_at_mut_checked(if want_var && sparse { n } else { 0 })
+            .ok_or(too_small)?;
+        let qvec = rest
+            .get_mut(..if want.grad_variance && sparse { n } else { 0 })
+            .ok_or(too_small)?;
 
         let acc = Accum {
             features: self.features,
@@ -346,10 +364,10 @@ impl<'a> GpView<'a> {
             // `weights` ends up as d var / d k / (-2): K^{-1} k (exact) or (A^T A - C^T C) k.
             let (var_std, weights) = match self.variance {
                 Variance::Exact { chol_packed } => {
-                    forward_substitute_packed(chol_packed, kvec, vvec);
+                    forward_substitute_packed(chol_packed, kvec, vvec)?;
                     let var = kss - dot(vvec, vvec);
                     if want.grad_variance {
-                        back_substitute_packed(chol_packed, vvec);
+                        back_substitute_packed(chol_packed, vvec)?;
                     }
                     (var, &*vvec)
                 }
@@ -375,11 +393,11 @@ impl<'a> GpView<'a> {
             if want.grad_variance {
                 // dvar/du* = -2 sum_i w_i dk_i/du* = 4 sum_i w_i c_i (u_i - u*).
                 let mut gv_u = [0.0; MAX_DIM];
-                for (i, (w, c)) in weights.iter().zip(cvec.iter()).enumerate() {
+                let rows = self.features.chunks_exact(d.max(1));
+                for ((w, c), row) in weights.iter().zip(cvec.iter()).zip(rows) {
                     let wc = 4.0 * w * c;
-                    let row = &self.features[i * d..i * d + d];
-                    for j in 0..d {
-                        gv_u[j] += wc * (row[j] - u_star[j]);
+                    for ((g, r), u) in gv_u.iter_mut().zip(row).zip(&u_star).take(d) {
+                        *g += wc * (r - u);
                     }
                 }
                 chain_to_raw(
@@ -452,12 +470,12 @@ fn chain_to_raw(
     in_scale: &[f64],
     out: &mut [f64; MAX_DIM],
 ) {
-    for j in 0..d {
+    for (j, (o, s)) in out.iter_mut().zip(in_scale).take(d).enumerate() {
         let mut acc = 0.0;
-        for r in 0..d {
-            acc += g_u[r] * du_dz[r * d + j];
+        for (r, g) in g_u.iter().take(d).enumerate() {
+            acc += g * at(du_dz, r * d + j);
         }
-        out[j] = out_scale * acc / in_scale[j];
+        *o = out_scale * acc / s;
     }
 }
 
@@ -483,24 +501,27 @@ impl Accum<'_> {
         grad_u: &mut [f64; MAX_DIM],
     ) -> f64 {
         let mut us = [0.0; D];
-        us.copy_from_slice(&self.u_star[..D]);
+        for (u, s) in us.iter_mut().zip(self.u_star) {
+            *u = *s;
+        }
         let mut mean = 0.0;
         let mut gsum = [0.0; D];
-        for (i, (row, k_out)) in self
+        for (i, ((row, k_out), &a)) in self
             .features
             .chunks_exact(D)
             .zip(kvec.iter_mut())
+            .zip(self.alpha)
             .enumerate()
         {
             let mut delta = [0.0; D];
             let mut r2 = 0.0;
-            for j in 0..D {
-                delta[j] = row[j] - us[j];
-                r2 += delta[j] * delta[j];
+            for ((dj, r), u) in delta.iter_mut().zip(row).zip(&us) {
+                *dj = r - u;
+                r2 += *dj * *dj;
             }
             let (f, df) = profile_and_slope(self.profile, r2);
             let dir = if self.direction {
-                0.5 * (1.0 + self.g_star * self.directions[i])
+                0.5 * (1.0 + self.g_star * at(self.directions, i))
             } else {
                 1.0
             };
@@ -508,17 +529,18 @@ impl Accum<'_> {
             let c = self.sf2 * dir * df;
             *k_out = k;
             if let Some(cv) = cvec.as_deref_mut() {
-                cv[i] = c;
+                set(cv, i, c);
             }
-            let a = self.alpha[i];
             mean += k * a;
             // dk/du* = c * dr2/du* = -2 c (u_i - u*)
             let w = -2.0 * c * a;
-            for j in 0..D {
-                gsum[j] += w * delta[j];
+            for (g, dj) in gsum.iter_mut().zip(&delta) {
+                *g += w * dj;
             }
         }
-        grad_u[..D].copy_from_slice(&gsum);
+        for (g, s) in grad_u.iter_mut().zip(&gsum) {
+            *g = *s;
+        }
         mean
     }
 }
@@ -528,13 +550,13 @@ impl Accum<'_> {
 #[inline]
 pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len().min(b.len());
-    let (a, b) = (&a[..n], &b[..n]);
+    let (a, b) = (a.get(..n).unwrap_or(&[]), b.get(..n).unwrap_or(&[]));
     let mut acc = [0.0f64; 8];
     let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
     let (ra, rb) = (ca.remainder(), cb.remainder());
     for (x, y) in ca.zip(cb) {
-        for i in 0..8 {
-            acc[i] += x[i] * y[i];
+        for ((s, x), y) in acc.iter_mut().zip(x).zip(y) {
+            *s += x * y;
         }
     }
     let mut s = ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7]));
@@ -544,30 +566,77 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     s
 }
 
-/// Solves `L v = k` for a row-packed lower-triangular `L` (`v` and `k` of length `n`).
-pub fn forward_substitute_packed(l_packed: &[f64], k: &[f64], v: &mut [f64]) {
-    let n = v.len().min(k.len());
-    for i in 0..n {
-        let start = i * (i + 1) / 2;
-        let row = &l_packed[start..start + i + 1];
-        let s = dot(&row[..i], &v[..i]);
-        v[i] = (k[i] - s) / row[i];
+/// Checks that a row-packed triangular factor holds at least `n` rows.
+fn check_packed(packed: &[f64], n: usize) -> Result<(), CoreError> {
+    let expected = n.saturating_mul(n.saturating_add(1)) / 2;
+    if packed.len() < expected {
+        Err(CoreError::DimensionMismatch {
+            expected,
+            got: packed.len(),
+        })
+    } else {
+        Ok(())
     }
 }
 
-/// Solves `L^T w = v` in place for a row-packed lower-triangular `L`.
-pub fn back_substitute_packed(l_packed: &[f64], v: &mut [f64]) {
+/// Row `i` of a row-packed lower-triangular matrix: `(L[i, 0..i], L[i, i])`.
+#[inline(always)]
+fn packed_row(packed: &[f64], i: usize) -> Option<(&[f64], f64)> {
+    let start = i * (i + 1) / 2;
+    let row = packed.get(start..start + i + 1)?;
+    let (diag, off) = row.split_last()?;
+    Some((off, *diag))
+}
+
+/// Solves `L v = k` for a row-packed lower-triangular `L` (`v` and `k` of length `n`; the first
+/// `min(v.len(), k.len())` rows are solved).
+///
+/// Errors with [`CoreError::DimensionMismatch`] when `l_packed` holds fewer than
+/// `n (n + 1) / 2` values (then `v` is left unspecified).
+pub fn forward_substitute_packed(
+    l_packed: &[f64],
+    k: &[f64],
+    v: &mut [f64],
+) -> Result<(), CoreError> {
+    let n = v.len().min(k.len());
+    check_packed(l_packed, n)?;
+    let short = CoreError::DimensionMismatch {
+        expected: n * (n + 1) / 2,
+        got: l_packed.len(),
+    };
+    for (i, &ki) in k.iter().take(n).enumerate() {
+        let (off, diag) = packed_row(l_packed, i).ok_or(short)?;
+        let (solved, rest) = v.split_at_mut_checked(i).ok_or(short)?;
+        let vi = rest.first_mut().ok_or(short)?;
+        let s = dot(off, solved);
+        *vi = (ki - s) / diag;
+    }
+    Ok(())
+}
+
+/// Solves `L^T w = v` in place for a row-packed lower-triangular `L` (`n = v.len()` rows).
+///
+/// Errors with [`CoreError::DimensionMismatch`] when `l_packed` holds fewer than
+/// `n (n + 1) / 2` values (then `v` is left unchanged).
+pub fn back_substitute_packed(l_packed: &[f64], v: &mut [f64]) -> Result<(), CoreError> {
     let n = v.len();
+    check_packed(l_packed, n)?;
+    let short = CoreError::DimensionMismatch {
+        expected: n * (n + 1) / 2,
+        got: l_packed.len(),
+    };
     for j in (0..n).rev() {
-        let start = j * (j + 1) / 2;
-        let row = &l_packed[start..start + j + 1];
-        let wj = v[j] / row[j];
-        v[j] = wj;
+        let (off, diag) = packed_row(l_packed, j).ok_or(short)?;
+        let (head, rest) = v.split_at_mut_checked(j).ok_or(short)?;
+        let vj = rest.first_mut().ok_or(short)?;
+        let wj = *vj / diag;
+        *vj = wj;
         // v[0..j] -= wj * L[j, 0..j]
-        for (vi, lji) in v[..j].iter_mut().zip(&row[..j]) {
+        for (vi, lji) in head.iter_mut().zip(off) {
             *vi -= wj * lji;
         }
     }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -637,8 +706,8 @@ mod tests {
                 }
             }
             let mut v = [0.0; 6];
-            forward_substitute_packed(&packed, &self.y, &mut v);
-            back_substitute_packed(&packed, &mut v);
+            forward_substitute_packed(&packed, &self.y, &mut v).unwrap();
+            back_substitute_packed(&packed, &mut v).unwrap();
             let mut feats = [0.0; 18];
             for i in 0..6 {
                 let mut u = [0.0; MAX_DIM];
@@ -749,8 +818,8 @@ mod tests {
             }
             let mean: f64 = (0..6).map(|i| kv[i] * owned.alpha[i]).sum();
             let mut w = [0.0; 6];
-            forward_substitute_packed(&owned.packed, &kv, &mut w);
-            back_substitute_packed(&owned.packed, &mut w);
+            forward_substitute_packed(&owned.packed, &kv, &mut w).unwrap();
+            back_substitute_packed(&owned.packed, &mut w).unwrap();
             let var = k.eval(&zs, gs, &zs, gs) - (0..6).map(|i| kv[i] * w[i]).sum::<f64>();
             assert!((p.mean - mean).abs() < 1e-12, "{spec:?}");
             assert!((p.variance - var).abs() < 1e-12, "{spec:?}");

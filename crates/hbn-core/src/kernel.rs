@@ -168,8 +168,12 @@ impl KernelSpec {
                     } else {
                         -1.5 + 3.0 * i as f64 / (m - 1) as f64
                     };
-                    theta[self.warp_a_offset() + j * m + i] = a;
-                    theta[self.warp_b_offset() + j * m + i] = libm::log(1.0 / m as f64);
+                    set(theta, self.warp_a_offset() + j * m + i, a);
+                    set(
+                        theta,
+                        self.warp_b_offset() + j * m + i,
+                        libm::log(1.0 / m as f64),
+                    );
                 }
             }
         }
@@ -186,6 +190,35 @@ fn sign(v: f64) -> f64 {
     } else {
         0.0
     }
+}
+
+/// `s[i]`, or 0 out of range (never after validation: the callers checked the lengths).
+#[inline(always)]
+pub(crate) fn at(s: &[f64], i: usize) -> f64 {
+    s.get(i).copied().unwrap_or(0.0)
+}
+
+/// `s[i] = v`, ignored out of range (never after validation).
+#[inline(always)]
+pub(crate) fn set(s: &mut [f64], i: usize, v: f64) {
+    if let Some(x) = s.get_mut(i) {
+        *x = v;
+    }
+}
+
+/// `v` clamped to `[lo, hi]` like `f64::clamp` (same result whenever `lo <= hi`), but with no
+/// panic when `lo > hi` or a bound is NaN: then it returns `hi` when `v > hi`, else `lo` when
+/// `v < lo`, else `v` (NaN stays NaN).
+#[inline(always)]
+pub(crate) fn clamp_to(v: f64, lo: f64, hi: f64) -> f64 {
+    let mut x = v;
+    if x < lo {
+        x = lo;
+    }
+    if x > hi {
+        x = hi;
+    }
+    x
 }
 
 #[inline]
@@ -290,7 +323,7 @@ impl<'a> Kernel<'a> {
     /// Signal variance `s_f^2`.
     #[inline]
     pub fn signal_variance(&self) -> f64 {
-        libm::exp(self.theta[0])
+        libm::exp(at(self.theta, 0))
     }
 
     /// Warps one standardised input: `p = phi(x)`, plus parameter and input derivatives.
@@ -304,25 +337,29 @@ impl<'a> Kernel<'a> {
             dp_dx: [1.0; MAX_DIM],
             g,
         };
-        for j in 0..d.min(x_std.len()) {
-            let x = x_std[j];
+        let rows = out
+            .p
+            .iter_mut()
+            .zip(out.dp_dx.iter_mut())
+            .zip(out.dp_da.iter_mut().zip(out.dp_db.iter_mut()));
+        for (j, (&x, ((p_out, dx_out), (da, db)))) in x_std.iter().zip(rows).take(d).enumerate() {
             if m == 0 {
-                out.p[j] = x;
+                *p_out = x;
                 continue;
             }
             let (mut p, mut dx) = (0.0, 0.0);
             for i in 0..m {
-                let a = self.theta[self.spec.warp_a_offset() + j * m + i];
-                let b = libm::exp(self.theta[self.spec.warp_b_offset() + j * m + i]);
+                let a = at(self.theta, self.spec.warp_a_offset() + j * m + i);
+                let b = libm::exp(at(self.theta, self.spec.warp_b_offset() + j * m + i));
                 let t = libm::tanh(x + a);
                 let sech2 = 1.0 - t * t;
                 p += b * t;
                 dx += b * sech2;
-                out.dp_da[j][i] = b * sech2;
-                out.dp_db[j][i] = b * t;
+                set(da, i, b * sech2);
+                set(db, i, b * t);
             }
-            out.p[j] = p;
-            out.dp_dx[j] = dx;
+            *p_out = p;
+            *dx_out = dx;
         }
         out
     }
@@ -333,24 +370,24 @@ impl<'a> Kernel<'a> {
         let d = self.spec.dim;
         match self.spec.metric {
             Metric::Isotropic => {
-                let s = libm::exp(-self.theta[1]);
-                for j in 0..d {
-                    u[j] = p[j] * s;
+                let s = libm::exp(-at(self.theta, 1));
+                for (uj, pj) in u.iter_mut().zip(p).take(d) {
+                    *uj = pj * s;
                 }
             }
             Metric::Ard => {
-                for j in 0..d {
-                    u[j] = p[j] * libm::exp(-self.theta[1 + j]);
+                for (j, (uj, pj)) in u.iter_mut().zip(p).take(d).enumerate() {
+                    *uj = pj * libm::exp(-at(self.theta, 1 + j));
                 }
             }
             Metric::Mahalanobis => {
-                let s = libm::exp(-0.5 * self.theta[1]);
-                for r in 0..d {
+                let s = libm::exp(-0.5 * at(self.theta, 1));
+                for (r, ur) in u.iter_mut().take(d).enumerate() {
                     let mut acc = 0.0;
-                    for c in 0..d {
-                        acc += self.whiten[r * d + c] * p[c];
+                    for (c, pc) in p.iter().take(d).enumerate() {
+                        acc += at(self.whiten, r * d + c) * pc;
                     }
-                    u[r] = acc * s;
+                    *ur = acc * s;
                 }
             }
         }
@@ -362,31 +399,31 @@ impl<'a> Kernel<'a> {
         let d = self.spec.dim;
         match self.spec.metric {
             Metric::Isotropic => {
-                let s = libm::exp(-2.0 * self.theta[1]);
-                for j in 0..d {
-                    out[j] = v[j] * s;
+                let s = libm::exp(-2.0 * at(self.theta, 1));
+                for (oj, vj) in out.iter_mut().zip(v).take(d) {
+                    *oj = vj * s;
                 }
             }
             Metric::Ard => {
-                for j in 0..d {
-                    out[j] = v[j] * libm::exp(-2.0 * self.theta[1 + j]);
+                for (j, (oj, vj)) in out.iter_mut().zip(v).take(d).enumerate() {
+                    *oj = vj * libm::exp(-2.0 * at(self.theta, 1 + j));
                 }
             }
             Metric::Mahalanobis => {
                 // M = W^T W / c
-                let s = libm::exp(-self.theta[1]);
+                let s = libm::exp(-at(self.theta, 1));
                 let mut wv = [0.0; MAX_DIM];
-                for r in 0..d {
-                    for c in 0..d {
-                        wv[r] += self.whiten[r * d + c] * v[c];
+                for (r, wvr) in wv.iter_mut().take(d).enumerate() {
+                    for (c, vc) in v.iter().take(d).enumerate() {
+                        *wvr += at(self.whiten, r * d + c) * vc;
                     }
                 }
-                for c in 0..d {
+                for (c, oc) in out.iter_mut().take(d).enumerate() {
                     let mut acc = 0.0;
-                    for r in 0..d {
-                        acc += self.whiten[r * d + c] * wv[r];
+                    for (r, wvr) in wv.iter().take(d).enumerate() {
+                        acc += at(self.whiten, r * d + c) * wvr;
                     }
-                    out[c] = acc * s;
+                    *oc = acc * s;
                 }
             }
         }
@@ -410,13 +447,13 @@ impl<'a> Kernel<'a> {
         self.apply_metric(&prep.p, u);
         let d = self.spec.dim;
         // du/dx = L diag(phi'(x)): column c of L scaled by phi'_c.
-        for c in 0..d {
+        for (c, &dp) in prep.dp_dx.iter().take(d).enumerate() {
             let mut e = [0.0; MAX_DIM];
-            e[c] = prep.dp_dx[c];
+            set(&mut e, c, dp);
             let mut col = [0.0; MAX_DIM];
             self.apply_metric(&e, &mut col);
-            for r in 0..d {
-                du_dx[r * d + c] = col[r];
+            for (r, &v) in col.iter().take(d).enumerate() {
+                set(du_dx, r * d + c, v);
             }
         }
     }
@@ -440,14 +477,14 @@ impl<'a> Kernel<'a> {
     fn r2_and_mdelta(&self, p1: &Prepared, p2: &Prepared) -> (f64, [f64; MAX_DIM]) {
         let d = self.spec.dim;
         let mut delta = [0.0; MAX_DIM];
-        for j in 0..d {
-            delta[j] = p1.p[j] - p2.p[j];
+        for ((dj, a), b) in delta.iter_mut().zip(&p1.p).zip(&p2.p).take(d) {
+            *dj = a - b;
         }
         let mut md = [0.0; MAX_DIM];
         self.metric_times(&delta, &mut md);
         let mut r2 = 0.0;
-        for j in 0..d {
-            r2 += delta[j] * md[j];
+        for (dj, mj) in delta.iter().zip(&md).take(d) {
+            r2 += dj * mj;
         }
         (r2.max(0.0), md)
     }
@@ -460,9 +497,9 @@ impl<'a> Kernel<'a> {
         let (r2, md) = self.r2_and_mdelta(&p1, &p2);
         let (f, df) = profile_and_slope(self.spec.profile, r2);
         let scale = self.signal_variance() * self.spec.direction_factor(g1, g2);
-        for j in 0..self.spec.dim.min(out.len()) {
+        for ((o, mj), dpj) in out.iter_mut().zip(&md).zip(&p1.dp_dx).take(self.spec.dim) {
             // dr2/dx1_j = 2 (M delta)_j phi'_j(x1_j)
-            out[j] = scale * df * 2.0 * md[j] * p1.dp_dx[j];
+            *o = scale * df * 2.0 * mj * dpj;
         }
         scale * f
     }
@@ -478,24 +515,31 @@ impl<'a> Kernel<'a> {
         let dir = spec.direction_factor(p1.g, p2.g);
         let k = sf2 * f * dir;
         let c = sf2 * dir * df; // dk/dr2
-        out[0] = k;
+        set(out, 0, k);
         match spec.metric {
-            Metric::Isotropic => out[1] = c * (-2.0 * r2),
-            Metric::Mahalanobis => out[1] = c * (-r2),
+            Metric::Isotropic => set(out, 1, c * (-2.0 * r2)),
+            Metric::Mahalanobis => set(out, 1, c * (-r2)),
             Metric::Ard => {
-                for j in 0..d {
-                    let delta = p1.p[j] - p2.p[j];
-                    out[1 + j] = c * (-2.0 * delta * delta * libm::exp(-2.0 * self.theta[1 + j]));
+                for (j, (a, b)) in p1.p.iter().zip(&p2.p).take(d).enumerate() {
+                    let delta = a - b;
+                    let v = c * (-2.0 * delta * delta * libm::exp(-2.0 * at(self.theta, 1 + j)));
+                    set(out, 1 + j, v);
                 }
             }
         }
         let m = spec.warp_units;
-        for j in 0..d {
-            for i in 0..m {
-                let dr2_da = 2.0 * md[j] * (p1.dp_da[j][i] - p2.dp_da[j][i]);
-                let dr2_db = 2.0 * md[j] * (p1.dp_db[j][i] - p2.dp_db[j][i]);
-                out[spec.warp_a_offset() + j * m + i] = c * dr2_da;
-                out[spec.warp_b_offset() + j * m + i] = c * dr2_db;
+        let warp = md
+            .iter()
+            .zip(p1.dp_da.iter().zip(&p2.dp_da))
+            .zip(p1.dp_db.iter().zip(&p2.dp_db));
+        for (j, ((mdj, (a1, a2)), (b1, b2))) in warp.take(d).enumerate() {
+            for (i, ((a1, a2), (b1, b2))) in
+                a1.iter().zip(a2).zip(b1.iter().zip(b2)).take(m).enumerate()
+            {
+                let dr2_da = 2.0 * mdj * (a1 - a2);
+                let dr2_db = 2.0 * mdj * (b1 - b2);
+                set(out, spec.warp_a_offset() + j * m + i, c * dr2_da);
+                set(out, spec.warp_b_offset() + j * m + i, c * dr2_db);
             }
         }
         k

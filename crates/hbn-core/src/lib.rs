@@ -13,7 +13,23 @@
 #![cfg_attr(not(feature = "std"), no_std)]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
-#![allow(clippy::needless_range_loop)] // index loops read like the matrix algebra they implement
+#![allow(clippy::needless_range_loop)]
+// index loops read like the matrix algebra they implement
+// Panic-freedom by construction: no `unwrap`, `expect`, `panic!`, `unreachable!` or unchecked
+// indexing/slicing outside tests. Lengths are checked with `get`, iterators, `zip` and
+// `split_at` on checked lengths; `tests/no_panic` proves the step links with no panic path.
+#![cfg_attr(
+    not(test),
+    deny(
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic,
+        clippy::unreachable,
+        clippy::todo,
+        clippy::unimplemented,
+        clippy::indexing_slicing
+    )
+)]
 
 pub mod blr;
 pub mod ekf;

@@ -1,0 +1,55 @@
+//! `#[no_panic]` wrappers around hbn-core's run-time entry points, for the link-time check in
+//! `tests/link.rs`. `no_panic` makes a function fail to link when the optimiser cannot prove
+//! that it never unwinds; it needs optimisation (run the test with `--release`) and concrete
+//! types, so these are thin, monomorphic wrappers.
+#![no_std]
+#![forbid(unsafe_code)]
+
+use hbn_core::blr::{LocalRegression, Neighbourhood, Posterior};
+use hbn_core::gp::{GpView, Prediction, Want};
+use hbn_core::{CoreError, Estimator, StepOutput};
+use no_panic::no_panic;
+
+/// The estimator step: `Estimator::step`, the function issue 12 asks to prove panic-free.
+#[no_panic]
+pub fn step(est: &mut Estimator<'_, '_>, u: f64, y: f64) -> StepOutput {
+    est.step(u, y)
+}
+
+/// Forgetting the state (the next step initialises).
+#[no_panic]
+pub fn reset(est: &mut Estimator<'_, '_>) {
+    est.reset()
+}
+
+/// One GP prediction (what the step calls twice).
+#[no_panic]
+pub fn predict(
+    gp: &GpView<'_>,
+    x: &[f64],
+    want: Want,
+    scratch: &mut [f64],
+) -> Result<Prediction, CoreError> {
+    gp.predict(x, want, scratch)
+}
+
+/// The local regression of EKF+BLR, with any `max_neighbours` (validated or not).
+#[no_panic]
+pub fn posterior(
+    blr: &LocalRegression,
+    nb: &Neighbourhood<'_>,
+    z: &[f64],
+    mean: f64,
+    grad: &[f64],
+    latent: f64,
+    noise: f64,
+) -> Posterior {
+    blr.posterior(nb, z, mean, grad, latent, noise)
+}
+
+/// The packed triangular solves, with arbitrary lengths.
+#[no_panic]
+pub fn substitute(l: &[f64], k: &[f64], v: &mut [f64]) -> Result<(), CoreError> {
+    hbn_core::gp::forward_substitute_packed(l, k, v)?;
+    hbn_core::gp::back_substitute_packed(l, v)
+}

@@ -1,0 +1,144 @@
+//! Links and runs the `#[no_panic]` wrappers: that this test binary links at all is the proof
+//! that `Estimator::step` (and the GP prediction, the local regression and the packed solves)
+//! contain no reachable panic after optimisation. The run itself checks the wrappers behave.
+
+use hbn_core::blr::{LocalRegression, Neighbourhood, NeighbourhoodParts};
+use hbn_core::gp::{GpParts, GpView, Variance, Want};
+use hbn_core::kernel::{Kernel, KernelSpec};
+use hbn_core::{EkfConfig, Estimator, HbnView, Mode};
+
+/// A 2-point GP on `d` inputs with an identity Cholesky factor.
+struct Gp {
+    theta: Vec<f64>,
+    mean: Vec<f64>,
+    scale: Vec<f64>,
+    feats: Vec<f64>,
+    alpha: Vec<f64>,
+    chol: Vec<f64>,
+    spec: KernelSpec,
+}
+
+impl Gp {
+    fn new(d: usize) -> Self {
+        let spec = KernelSpec::se_ard(d);
+        Gp {
+            theta: vec![0.0; spec.n_params()],
+            mean: vec![0.0; d],
+            scale: vec![1.0; d],
+            feats: (0..2 * d).map(|i| 0.1 * i as f64).collect(),
+            alpha: vec![0.5, -0.25],
+            chol: vec![1.0, 0.2, 1.0],
+            spec,
+        }
+    }
+    fn view(&self) -> GpView<'_> {
+        GpView::new(GpParts {
+            kernel: Kernel::new(self.spec, &self.theta, &[]).unwrap(),
+            input_mean: &self.mean,
+            input_scale: &self.scale,
+            output_mean: 0.0,
+            output_scale: 1.0,
+            features: &self.feats,
+            directions: &[],
+            alpha: &self.alpha,
+            variance: Variance::Exact {
+                chol_packed: &self.chol,
+            },
+            noise_var: 0.01,
+        })
+        .unwrap()
+    }
+}
+
+struct Local {
+    inputs: Vec<f64>,
+    targets: Vec<f64>,
+}
+
+impl Local {
+    fn new(d: usize) -> Self {
+        Local {
+            inputs: (0..10 * d).map(|i| (i % 7) as f64 * 0.01).collect(),
+            targets: (0..10).map(|i| i as f64 * 0.1).collect(),
+        }
+    }
+    fn view(&self, d: usize, one: &'static [f64]) -> Neighbourhood<'_> {
+        Neighbourhood::new(
+            d,
+            NeighbourhoodParts {
+                inputs: &self.inputs,
+                targets: &self.targets,
+                cell_keys: &[0],
+                cell_start: &[0, 10],
+                origin: &one[..d],
+                half_window: &[1.0; 4][..d],
+                input_var: &[1.0; 4][..d],
+            },
+        )
+        .unwrap()
+    }
+}
+
+fn config(mode: Mode) -> EkfConfig {
+    EkfConfig {
+        mode,
+        q_floor: 1e-10,
+        r_floor: 1e-10,
+        qx_model_floor: 0.0,
+        r_model_floor: 0.0,
+        p_min: 1e-14,
+        p_max: 4.0,
+        jac_max: 20.0,
+        innovation_min: 1e-12,
+        nis_gate: 0.0,
+        x_bounds: (-1.0, 2.0),
+        y_bounds: (-1.0, 2.0),
+        x0_mean: 0.5,
+        x0_var: 0.1,
+    }
+}
+
+#[test]
+fn step_links_without_panic_paths_and_stays_finite() {
+    let (tr, se) = (Gp::new(4), Gp::new(3));
+    let (tl, sl) = (Local::new(4), Local::new(3));
+    static ZERO: [f64; 4] = [0.0; 4];
+    let view = HbnView {
+        transition: tr.view(),
+        sensor: se.view(),
+        transition_local: Some(tl.view(4, &ZERO)),
+        sensor_local: Some(sl.view(3, &ZERO)),
+        blr: LocalRegression::default(),
+    };
+    for mode in [Mode::Ekf, Mode::EkfBlr] {
+        let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
+        let mut est = Estimator::new(view, config(mode), &mut scratch).unwrap();
+        let inputs = [0.1, f64::NAN, 1e300, -f64::INFINITY, 0.3, 0.0, -1e-300];
+        for k in 0..1000 {
+            let u = inputs[k % inputs.len()];
+            let y = inputs[(k * 3 + 1) % inputs.len()];
+            let out = hbn_core_nopanic::step(&mut est, u, y);
+            assert!(out.x.is_finite() && out.x_std.is_finite(), "{out:?}");
+            if k == 500 {
+                hbn_core_nopanic::reset(&mut est);
+            }
+        }
+    }
+    let gp = tr.view();
+    let mut scratch = [0.0; 16];
+    assert!(hbn_core_nopanic::predict(&gp, &[0.1; 4], Want::ALL, &mut scratch).is_ok());
+    assert!(hbn_core_nopanic::predict(&gp, &[0.1; 3], Want::ALL, &mut scratch).is_err());
+    assert!(hbn_core_nopanic::predict(&gp, &[0.1; 4], Want::ALL, &mut scratch[..2]).is_err());
+    let nb = tl.view(4, &ZERO);
+    for m in [0, 1, 48, 64, usize::MAX] {
+        let blr = LocalRegression {
+            max_neighbours: m,
+            ..LocalRegression::default()
+        };
+        let p = hbn_core_nopanic::posterior(&blr, &nb, &[0.02; 4], 0.1, &[1.0; 4], 0.1, 0.1);
+        assert!(p.n <= 48);
+    }
+    let mut v = [0.0; 3];
+    assert!(hbn_core_nopanic::substitute(&[1.0, 0.0, 1.0], &[1.0; 3], &mut v).is_err());
+    assert!(hbn_core_nopanic::substitute(&[1.0, 0.0, 1.0, 0.0, 0.0, 1.0], &[1.0; 3], &mut v).is_ok());
+}

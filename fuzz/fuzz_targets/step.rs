@@ -1,0 +1,4 @@
+#![no_main]
+//! Fuzz target `step`: see `fuzz/src/entries.rs`.
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| hbn_fuzz::step(data));
