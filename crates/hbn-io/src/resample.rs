@@ -57,15 +57,15 @@ pub fn resample(signals: &[RawSignal], opts: &ResampleOptions) -> Result<Aligned
     if !(opts.rate_hz.is_finite() && opts.rate_hz > 0.0) {
         return Err(IoError::BadOption {
             name: "rate_hz",
-            value: opts.rate_hz.to_string(),
-            reason: "the resampling rate must be a finite number of Hz > 0".into(),
+            value: opts.rate_hz,
+            requirement: "the resampling rate must be a finite number of Hz > 0",
         });
     }
     if !(opts.max_gap_s.is_finite() && opts.max_gap_s > 0.0) {
         return Err(IoError::BadOption {
             name: "max_gap_s",
-            value: opts.max_gap_s.to_string(),
-            reason: "the largest allowed gap must be a finite number of seconds > 0".into(),
+            value: opts.max_gap_s,
+            requirement: "the largest allowed gap must be a finite number of seconds > 0",
         });
     }
     if signals.is_empty() {
@@ -137,10 +137,9 @@ pub fn resample(signals: &[RawSignal], opts: &ResampleOptions) -> Result<Aligned
     }
     let steps = (span_s * opts.rate_hz * (1.0 + 1e-12)).floor();
     if !(steps.is_finite() && steps < 1e9) {
-        return Err(IoError::BadOption {
-            name: "rate_hz",
-            value: opts.rate_hz.to_string(),
-            reason: format!("{span_s:.3} s at this rate gives more than 1e9 grid points"),
+        return Err(IoError::GridTooLarge {
+            span_s,
+            rate_hz: opts.rate_hz,
         });
     }
     let npts = steps as usize + 1;
