@@ -394,3 +394,11 @@ fn run_lbfgs(
         Termination::of(state.get_termination_status()),
     ))
 }
+
+impl GaussianProcess {
+    /// Forgets the wall-clock seconds in the training report, so that the saved GP (and an HBN
+    /// model holding it) depends only on its data and parameters.
+    pub fn forget_timing(&mut self) {
+        self.report.seconds = 0.0;
+    }
+}
