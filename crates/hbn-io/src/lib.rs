@@ -30,8 +30,8 @@ mod write;
 pub use error::IoError;
 pub use path::{PathElem, SignalPath};
 pub use read::{
-    RawSignal, ReadOptions, ReadProgress, TimeSource, TopicInfo, list_topics, read_signals,
-    read_signals_observed,
+    RawSignal, ReadOptions, ReadProgress, TimeSource, TopicInfo, UnknownTimeSource, list_topics,
+    read_signals, read_signals_observed,
 };
 pub use resample::{Aligned, ResampleOptions, native_rate_hz, resample};
 pub use write::{

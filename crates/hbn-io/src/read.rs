@@ -25,6 +25,47 @@ pub enum TimeSource {
     HeaderStamp,
 }
 
+impl TimeSource {
+    /// Every clock, in the order of their names.
+    pub const ALL: [TimeSource; 2] = [TimeSource::LogTime, TimeSource::HeaderStamp];
+
+    /// `log` or `header` (what [`std::str::FromStr`] accepts).
+    pub const fn name(self) -> &'static str {
+        match self {
+            TimeSource::LogTime => "log",
+            TimeSource::HeaderStamp => "header",
+        }
+    }
+}
+
+impl std::fmt::Display for TimeSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A clock name other than `log` and `header`.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("unknown time source {given:?}; choose \"log\" or \"header\"")]
+pub struct UnknownTimeSource {
+    /// The text given.
+    pub given: String,
+}
+
+impl std::str::FromStr for TimeSource {
+    type Err = UnknownTimeSource;
+    /// Parses `log` or `header` (case-insensitive).
+    fn from_str(s: &str) -> Result<Self, UnknownTimeSource> {
+        let t = s.trim();
+        TimeSource::ALL
+            .into_iter()
+            .find(|ts| t.eq_ignore_ascii_case(ts.name()))
+            .ok_or_else(|| UnknownTimeSource {
+                given: s.to_owned(),
+            })
+    }
+}
+
 /// Options for reading.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ReadOptions {

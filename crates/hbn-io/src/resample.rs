@@ -13,11 +13,14 @@ pub struct ResampleOptions {
 }
 
 impl ResampleOptions {
-    /// Options with the given rate and the default `max_gap_s` of 0.5 s.
+    /// The default largest gap between two samples of a signal (s).
+    pub const DEFAULT_MAX_GAP_S: f64 = 0.5;
+
+    /// Options with the given rate and the default `max_gap_s` ([`Self::DEFAULT_MAX_GAP_S`]).
     pub fn new(rate_hz: f64) -> Self {
         ResampleOptions {
             rate_hz,
-            max_gap_s: 0.5,
+            max_gap_s: Self::DEFAULT_MAX_GAP_S,
         }
     }
 }

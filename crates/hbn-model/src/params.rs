@@ -411,6 +411,15 @@ impl CheckedHbnParams {
         self
     }
 
+    /// Replaces the rate (e.g. by the rate a log was resampled to), checking it.
+    pub fn with_rate(mut self, rate_hz: f64) -> Result<Self, ConfigError> {
+        let mut p = self.0.clone();
+        p.rate_hz = rate_hz;
+        p.check_ref()?;
+        self.0 = p;
+        Ok(self)
+    }
+
     /// GP parameters for one kernel structure (valid by construction).
     pub(crate) fn gp_params(&self, spec: KernelSpec) -> GpParams {
         let p = &self.0;

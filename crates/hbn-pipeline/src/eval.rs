@@ -1,0 +1,113 @@
+//! Scoring a model on a log that also records the state: every EKF mode and the open-loop GP
+//! simulation against the logged reference (what `hbn eval` prints and plots).
+
+use std::path::Path;
+
+use hbn_core::Mode;
+use hbn_model::metrics::{nrmse, rmse};
+use hbn_model::{Estimate, HbnModel};
+use serde_json::{Map, Value, json};
+
+use crate::error::{LogOption, PipelineError};
+use crate::estimate::{SignalChoice, model_grid};
+use crate::log::{LogData, LogOptions, Observer, load_log};
+
+/// A method scored by [`evaluate_log`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Method {
+    /// A filter mode.
+    Filter(Mode),
+    /// Open-loop GP simulation from `u` alone.
+    OpenLoop,
+}
+
+impl Method {
+    /// `ekf`, `ekf_blr` or `open_loop` (keys of the JSON result).
+    pub const fn key(self) -> &'static str {
+        match self {
+            Method::Filter(Mode::Ekf) => "ekf",
+            Method::Filter(Mode::EkfBlr) => "ekf_blr",
+            Method::OpenLoop => "open_loop",
+        }
+    }
+}
+
+/// Scores of one method.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Score {
+    /// The method.
+    pub method: Method,
+    /// RMSE against the logged state.
+    pub rmse: f64,
+    /// RMSE / range of the logged state.
+    pub nrmse: f64,
+}
+
+/// An evaluation: the log on the model's grid, the estimates and the scores.
+#[derive(Clone, Debug)]
+pub struct Evaluation {
+    /// `u`, `x` (reference) and `y`, columns 0, 1, 2.
+    pub log: LogData,
+    /// One estimate per mode evaluated, in order.
+    pub estimates: Vec<(Mode, Estimate)>,
+    /// The open-loop simulation.
+    pub open_loop: Vec<f64>,
+    /// One score per mode, then the open loop.
+    pub scores: Vec<Score>,
+}
+
+impl Evaluation {
+    /// JSON: `{"rmse": {..}, "nrmse": {..}, "samples": N, "rate_hz": ..}`.
+    pub fn to_json(&self) -> Value {
+        let mut r = Map::new();
+        let mut n = Map::new();
+        for s in &self.scores {
+            r.insert(s.method.key().into(), json!(s.rmse));
+            n.insert(s.method.key().into(), json!(s.nrmse));
+        }
+        json!({"rmse": r, "nrmse": n, "samples": self.log.len(), "rate_hz": self.log.rate_hz()})
+    }
+}
+
+/// Reads `u`, `x`, `y` from `file` at the model's rate, runs each of `modes` and the open-loop
+/// simulation, and scores them against the logged `x`.
+pub fn evaluate_log(
+    model: &HbnModel,
+    file: &Path,
+    signals: &SignalChoice,
+    modes: &[Mode],
+    log_options: LogOptions,
+    observe: &mut Observer<'_>,
+) -> Result<Evaluation, PipelineError> {
+    let opts = model_grid(model, log_options)?;
+    let paths = [
+        signals.resolve(model, LogOption::Input)?,
+        signals.resolve(model, LogOption::State)?,
+        signals.resolve(model, LogOption::Output)?,
+    ];
+    let log = load_log(file, &paths, Some(model.rate_hz()), &opts, observe)?;
+    let (u, x_ref, y) = (log.column(0), log.column(1), log.column(2));
+    let mut scores = Vec::new();
+    let mut estimates = Vec::new();
+    for &mode in modes {
+        let est = model.estimate(u, y, mode)?;
+        scores.push(Score {
+            method: Method::Filter(mode),
+            rmse: rmse(&est.x, x_ref),
+            nrmse: nrmse(&est.x, x_ref),
+        });
+        estimates.push((mode, est));
+    }
+    let open_loop = model.simulate_open_loop(u)?;
+    scores.push(Score {
+        method: Method::OpenLoop,
+        rmse: rmse(&open_loop, x_ref),
+        nrmse: nrmse(&open_loop, x_ref),
+    });
+    Ok(Evaluation {
+        log,
+        estimates,
+        open_loop,
+        scores,
+    })
+}
