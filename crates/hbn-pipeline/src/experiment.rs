@@ -41,7 +41,7 @@ impl Default for ExperimentConfig {
         Self {
             systems: vec![SystemKind::MaxwellSlip, SystemKind::GeneralizedPi],
             seeds: vec![1, 2, 3],
-            noise_gains: vec![1.0],
+            noise_gains: vec![0.0, 0.5, 1.0],
             train_steps: 500,
             repeats: 10,
             test_steps: 1000,
