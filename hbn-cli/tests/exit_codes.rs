@@ -427,3 +427,50 @@ fn bad_models_fail_cleanly() {
         assert_fails(dir, &["inspect", model], &[model, needle]);
     }
 }
+
+/// Every training parameter and log option is checked once, by the library, before any file
+/// is opened: a bad value fails with exit code 1 and a message naming the flag to change (the
+/// log does not even exist).
+#[test]
+fn every_parameter_check_names_its_flag() {
+    let d = tempfile::tempdir().expect("tempdir");
+    let dir = d.path();
+    let train = |extra: &[&'static str]| -> Vec<&'static str> {
+        let mut a = vec!["train", "--log", "absent.mcap", "--out", "model.hbn"];
+        a.extend_from_slice(extra);
+        a
+    };
+    for (args, flag) in [
+        (train(&["--max-points", "1"]), "--max-points"),
+        (train(&["--starts", "0"]), "--starts"),
+        (train(&["--max-iters", "0"]), "--max-iters"),
+        (train(&["--noise-floor", "0"]), "--noise-floor"),
+        (train(&["--noise-floor", "nan"]), "--noise-floor"),
+        (train(&["--blr-window", "0.7"]), "--blr-window"),
+        (train(&["--blr-window", "0"]), "--blr-window"),
+        (train(&["--rate", "0"]), "--rate"),
+        (train(&["--rate", "-5"]), "--rate"),
+        (train(&["--max-gap", "0"]), "--max-gap"),
+        (train(&["--max-gap", "inf"]), "--max-gap"),
+    ] {
+        let out = hbn(dir, &args);
+        let err = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert!(err.contains(flag), "{args:?}: stderr lacks {flag}: {err}");
+        assert!(
+            !err.contains("absent.mcap"),
+            "{args:?} read the log first: {err}"
+        );
+    }
+    // Names the CLI parses itself are usage errors that name the flag too.
+    for (args, flag) in [
+        (train(&["--kernel", "rbf"]), "--kernel"),
+        (train(&["--subset", "all"]), "--subset"),
+        (train(&["--time-source", "gps"]), "--time-source"),
+    ] {
+        let out = hbn(dir, &args);
+        let err = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(flag), "{args:?}: stderr lacks {flag}: {err}");
+    }
+}
