@@ -124,22 +124,14 @@ pub fn model_text(model: &HbnModel, file: &std::path::Path) -> String {
         s.trajectories,
         s.rows,
     );
-    for (role, gp, kernel) in [
-        (GpRole::Transition, model.transition(), p.transition_kernel),
-        (GpRole::Sensor, model.sensor(), p.sensor_kernel),
-    ] {
+    for role in GpRole::ALL {
         if role == GpRole::Sensor {
             t.push('\n');
         }
-        t.push_str(&gp_text(role.name(), gp, kernel));
-        let ends: Vec<String> = s
-            .starts
-            .iter()
-            .filter(|st| st.gp == role)
-            .map(|st| st.termination.to_string())
-            .collect();
+        t.push_str(&gp_text(role.name(), model.gp(role), p.kernel(role)));
+        let ends = crate::report::terminations(s, role);
         if !ends.is_empty() {
-            t.push_str(&format!("  start endings      {}\n", ends.join(", ")));
+            t.push_str(&format!("  start endings      {ends}\n"));
         }
     }
     t.push_str("\nBLR index (EKF+BLR)\n");

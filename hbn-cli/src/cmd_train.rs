@@ -73,23 +73,15 @@ pub fn print_summary(
         s.rows,
         s.seconds
     );
-    for (role, gp, k) in [
-        (GpRole::Transition, model.transition(), p.transition_kernel),
-        (GpRole::Sensor, model.sensor(), p.sensor_kernel),
-    ] {
-        let starts: Vec<String> = s
-            .starts
-            .iter()
-            .filter(|st| st.gp == role)
-            .map(|st| st.termination.to_string())
-            .collect();
+    for role in GpRole::ALL {
+        let gp = model.gp(role);
         text.push_str(&format!(
             "  {:<10} GP: {:>4} support points, LML {:>10.2}, kernel {}; starts: {}\n",
             role.name(),
             gp.n_support(),
             gp.log_marginal_likelihood(),
-            k,
-            starts.join(", ")
+            p.kernel(role),
+            report::terminations(s, role)
         ));
     }
     if s.warnings.is_empty() {

@@ -72,6 +72,15 @@ pub fn error(e: PipelineError, time_source: TimeSource) -> anyhow::Error {
     }
 }
 
+/// Why each optimiser start of one GP stopped, comma-separated.
+pub fn terminations(summary: &hbn_model::TrainingSummary, role: hbn_model::GpRole) -> String {
+    summary
+        .terminations(role)
+        .map(|t| t.to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// Renders workflow events: notices on stderr and progress bars (both off with `--quiet`).
 #[derive(Default)]
 pub struct Renderer {

@@ -29,6 +29,9 @@ pub enum GpRole {
 }
 
 impl GpRole {
+    /// Both GPs, transition first.
+    pub const ALL: [GpRole; 2] = [GpRole::Transition, GpRole::Sensor];
+
     /// `transition` or `sensor`.
     pub const fn name(self) -> &'static str {
         match self {
@@ -91,6 +94,16 @@ pub struct StartSummary {
     pub lml: Option<f64>,
     /// Why the start stopped.
     pub termination: Termination,
+}
+
+impl TrainingSummary {
+    /// Why each optimiser start of one GP stopped, in order.
+    pub fn terminations(&self, role: GpRole) -> impl Iterator<Item = &Termination> {
+        self.starts
+            .iter()
+            .filter(move |s| s.gp == role)
+            .map(|s| &s.termination)
+    }
 }
 
 /// What training did.
@@ -312,6 +325,13 @@ impl HbnModel {
     /// Signal names, paths and units.
     pub fn signals(&self) -> &Signals {
         &self.params.signals
+    }
+    /// One of the GPs.
+    pub fn gp(&self, role: GpRole) -> &GaussianProcess {
+        match role {
+            GpRole::Transition => &self.transition,
+            GpRole::Sensor => &self.sensor,
+        }
     }
     /// Transition GP.
     pub fn transition(&self) -> &GaussianProcess {

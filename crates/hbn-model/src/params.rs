@@ -445,6 +445,14 @@ fn subset_name(p: SubsetPolicy) -> &'static str {
 }
 
 impl HbnParams {
+    /// The kernel of one GP.
+    pub fn kernel(&self, role: crate::GpRole) -> KernelChoice {
+        match role {
+            crate::GpRole::Transition => self.transition_kernel,
+            crate::GpRole::Sensor => self.sensor_kernel,
+        }
+    }
+
     /// Checks every field once; training then trusts them. Each error names the [`Param`].
     pub fn check(self) -> Result<CheckedHbnParams, ConfigError> {
         self.check_ref()?;
@@ -630,7 +638,8 @@ mod tests {
     /// One bad value per checked parameter: the check names that parameter.
     #[test]
     fn every_check_names_its_parameter() {
-        let bad: [(Param, fn(&mut HbnParams)); 9] = [
+        type Spoil = fn(&mut HbnParams);
+        let bad: [(Param, Spoil); 9] = [
             (Param::Rate, |p| p.rate_hz = 0.0),
             (Param::Rate, |p| p.rate_hz = f64::NAN),
             (Param::MaxPoints, |p| p.max_points = 1),

@@ -81,12 +81,8 @@ pub fn estimate_log(
     outputs: &Outputs,
     observe: &mut Observer<'_>,
 ) -> Result<LogEstimate, PipelineError> {
-    let opts = model_grid(model, log_options)?;
-    let paths = [
-        signals.resolve(model, LogOption::Input)?,
-        signals.resolve(model, LogOption::Output)?,
-    ];
-    let log = load_log(file, &paths, Some(model.rate_hz()), &opts, observe)?;
+    let which = [LogOption::Input, LogOption::Output];
+    let log = read_at_model_rate(model, file, signals, &which, log_options, observe)?;
     let estimate = model.estimate(log.column(0), log.column(1), mode)?;
     let out = LogEstimate {
         log,
@@ -97,11 +93,16 @@ pub fn estimate_log(
     Ok(out)
 }
 
-/// Checks the options for reading at the model's rate.
-pub(crate) fn model_grid(
+/// Reads the signals `which` (in that order) of `file` for `model`, on the model's grid.
+/// `log_options.rate_hz` must be unset or the model's rate.
+pub fn read_at_model_rate(
     model: &HbnModel,
+    file: &Path,
+    signals: &SignalChoice,
+    which: &[LogOption],
     log_options: LogOptions,
-) -> Result<crate::log::CheckedLogOptions, PipelineError> {
+    observe: &mut Observer<'_>,
+) -> Result<LogData, PipelineError> {
     let opts = log_options.check()?;
     if let Some(r) = opts.rate_hz
         && r != model.rate_hz()
@@ -114,7 +115,11 @@ pub(crate) fn model_grid(
         }
         .into());
     }
-    Ok(opts)
+    let paths = which
+        .iter()
+        .map(|&w| signals.resolve(model, w))
+        .collect::<Result<Vec<_>, _>>()?;
+    load_log(file, &paths, Some(model.rate_hz()), &opts, observe)
 }
 
 impl LogEstimate {

@@ -9,8 +9,8 @@ use hbn_model::{Estimate, HbnModel};
 use serde_json::{Map, Value, json};
 
 use crate::error::{LogOption, PipelineError};
-use crate::estimate::{SignalChoice, model_grid};
-use crate::log::{LogData, LogOptions, Observer, load_log};
+use crate::estimate::{SignalChoice, read_at_model_rate};
+use crate::log::{LogData, LogOptions, Observer};
 
 /// A method scored by [`evaluate_log`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -79,13 +79,8 @@ pub fn evaluate_log(
     log_options: LogOptions,
     observe: &mut Observer<'_>,
 ) -> Result<Evaluation, PipelineError> {
-    let opts = model_grid(model, log_options)?;
-    let paths = [
-        signals.resolve(model, LogOption::Input)?,
-        signals.resolve(model, LogOption::State)?,
-        signals.resolve(model, LogOption::Output)?,
-    ];
-    let log = load_log(file, &paths, Some(model.rate_hz()), &opts, observe)?;
+    let which = [LogOption::Input, LogOption::State, LogOption::Output];
+    let log = read_at_model_rate(model, file, signals, &which, log_options, observe)?;
     let (u, x_ref, y) = (log.column(0), log.column(1), log.column(2));
     let mut scores = Vec::new();
     let mut estimates = Vec::new();

@@ -165,7 +165,7 @@ fn estimation_runs_at_the_model_rate_only() {
     let d = tempfile::tempdir().unwrap();
     let train = sim(d.path(), "train.mcap", 100.0, 1, 1);
     let trained = train_from_logs(
-        &[train.clone()],
+        std::slice::from_ref(&train),
         &TrainSignals::default(),
         LogOptions::default(),
         small(),
