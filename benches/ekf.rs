@@ -5,8 +5,9 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use hbn::core::{Estimator, Mode};
-use hbn::model::experiment::{ExperimentConfig, test_trajectory, training_set};
-use hbn::model::{HbnModel, HbnParams, Sequence};
+use hbn::model::{HbnModel, HbnParams};
+use hbn::pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
+use hbn::pipeline::sequences;
 use hbn::sim::SystemKind;
 use std::hint::black_box;
 
@@ -19,14 +20,7 @@ fn bench_step(c: &mut Criterion) {
         ..ExperimentConfig::default()
     };
     let runs = training_set(system, 1.0, 1, &cfg).unwrap();
-    let seqs: Vec<Sequence<'_>> = runs
-        .iter()
-        .map(|t| Sequence {
-            u: &t.u,
-            x: &t.x,
-            y: &t.y,
-        })
-        .collect();
+    let seqs = sequences(&runs);
     let test = test_trajectory(system, 1.0, 9, &cfg).unwrap();
     let cases = [
         ("sparse_m64", Some(64usize), 500usize),

@@ -218,8 +218,8 @@ def _bound_cov(p: np.ndarray, lo: float, hi: float) -> np.ndarray:
 
 
 def initial_state(model: Dict[str, Any], y0: float) -> Optional[Tuple[float, float]]:
-    """``HbnModel::initial_state``: mean and variance of x over the 50 training samples whose y
-    is nearest ``y0`` (ties by index)."""
+    """``HbnModel::initial_state`` (``hbn_core::InitPrior``): mean and variance of x over the 50
+    training samples whose y is nearest ``y0`` (ties by index)."""
     pairs = np.asarray(model.get("init_pairs", []), dtype=float).reshape(-1, 2)
     if not math.isfinite(y0) or len(pairs) == 0:
         return None
@@ -332,8 +332,8 @@ class NumpyEkf:
 def numpy_estimate(model: Dict[str, Any], u: np.ndarray, y: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     """Runs the numpy EKF over a sequence: ``(x, x_std)``."""
     ekf = NumpyEkf(model)
-    finite = [v for v in y if math.isfinite(v)]
-    init = initial_state(model, float(finite[0])) if finite else None
+    # The prior of x_0 comes from the first measurement (the training prior if it is not finite).
+    init = initial_state(model, float(y[0])) if len(y) else None
     if init is not None:
         ekf.cfg["x0_mean"], ekf.cfg["x0_var"] = init
     n = len(u)

@@ -1,9 +1,12 @@
 //! Proof that the estimator step allocates nothing: a counting global allocator, armed only on
 //! this thread and only around the step loop, must see zero allocations over 20,000 steps in
-//! each mode (EKF and EKF+BLR), with exact and with sparse GPs.
+//! each mode (EKF and EKF+BLR), with exact and with sparse GPs, for the borrowing core
+//! `Estimator` and for the owned `hbn::Filter` (after construction; its first step, the prior
+//! from the first measurement, included).
 
 mod common;
 
+use hbn::Filter;
 use hbn::core::{Estimator, Mode};
 use hbn::sim::SystemKind;
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -52,6 +55,10 @@ fn the_step_never_allocates() {
     let sparse = common::train_model_kind(SystemKind::BoucWen, 1.0, 120, Some(32), 3).0;
     assert!(!exact.transition().is_sparse() && sparse.transition().is_sparse());
     assert!(!exact.sensor().is_sparse() && sparse.sensor().is_sparse());
+    let (exact, sparse) = (std::sync::Arc::new(exact), std::sync::Arc::new(sparse));
+    // Include the guard paths: NaN inputs and measurements now and then.
+    let u = |k: usize| if k % 5001 == 17 { f64::NAN } else { test.u[k] };
+    let y = |k: usize| if k % 7001 == 23 { f64::NAN } else { test.y[k] };
     for (model, mode) in [
         (&exact, Mode::Ekf),
         (&exact, Mode::EkfBlr),
@@ -59,21 +66,45 @@ fn the_step_never_allocates() {
         (&sparse, Mode::EkfBlr),
     ] {
         let view = model.view().unwrap();
+        let kind = if model.transition().is_sparse() {
+            "sparse"
+        } else {
+            "exact"
+        };
         let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
         let mut est = Estimator::new(view, model.ekf_config(mode), &mut scratch).unwrap();
+        let mut filter = Filter::new(model.clone(), mode).unwrap();
         let mut checksum = 0.0;
         ALLOCATIONS.store(0, Ordering::SeqCst);
         ARMED.with(|a| a.set(true));
         for k in 0..test.u.len() {
-            // Include the guard paths: NaN inputs and measurements now and then.
-            let u = if k % 5001 == 17 { f64::NAN } else { test.u[k] };
-            let y = if k % 7001 == 23 { f64::NAN } else { test.y[k] };
-            let out = est.step(u, y);
+            let out = est.step(u(k), y(k));
             checksum += out.x + out.x_std + out.nis;
         }
         ARMED.with(|a| a.set(false));
         let n = ALLOCATIONS.load(Ordering::SeqCst);
-        assert_eq!(n, 0, "{mode:?}: {n} allocations in {} steps", test.u.len());
+        assert_eq!(
+            n,
+            0,
+            "{kind} {mode:?}: {n} allocations in {} steps",
+            test.u.len()
+        );
+        ARMED.with(|a| a.set(true));
+        for k in 0..test.u.len() {
+            let out = filter.step(u(k), y(k));
+            checksum += out.x + out.x_std + out.obs_min.max(0.0);
+            if k == 10_000 {
+                filter.reset();
+            }
+        }
+        ARMED.with(|a| a.set(false));
+        let n = ALLOCATIONS.load(Ordering::SeqCst);
+        assert_eq!(
+            n,
+            0,
+            "Filter {kind} {mode:?}: {n} allocations in {} steps",
+            test.u.len()
+        );
         assert!(checksum.is_finite());
     }
     // The counter works: an allocation while armed is seen.

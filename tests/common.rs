@@ -1,9 +1,10 @@
-//! Shared helpers of the end-to-end tests: the thesis protocol of `hbn_model::experiment`,
+//! Shared helpers of the end-to-end tests: the thesis protocol of `hbn_pipeline::experiment`,
 //! in small.
 #![allow(dead_code)]
 
-use hbn::model::experiment::{ExperimentConfig, test_trajectory, training_set};
-use hbn::model::{HbnModel, HbnParams, Sequence};
+use hbn::model::{HbnModel, HbnParams};
+use hbn::pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
+use hbn::pipeline::sequences;
 use hbn::sim::{SystemKind, Trajectory};
 
 fn config(max_points: usize, seed: u64, test_steps: usize) -> ExperimentConfig {
@@ -50,15 +51,7 @@ pub fn train_model_kind(
     let mut cfg = config(max_points, seed, 0);
     cfg.params.n_inducing = n_inducing;
     let runs = training_set(system, noise_gain, seed, &cfg).unwrap();
-    let seqs: Vec<Sequence<'_>> = runs
-        .iter()
-        .map(|t| Sequence {
-            u: &t.u,
-            x: &t.x,
-            y: &t.y,
-        })
-        .collect();
-    (HbnModel::fit(&seqs, &cfg.params).unwrap(), runs)
+    (HbnModel::fit(&sequences(&runs), &cfg.params).unwrap(), runs)
 }
 
 /// A fresh test run of `steps` samples.

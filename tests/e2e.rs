@@ -1,51 +1,17 @@
-//! End to end: simulate -> MCAP log -> read and resample -> train -> estimate -> accuracy bound.
+//! End to end through the library pipeline: simulate -> MCAP log -> read and resample ->
+//! train -> estimate -> accuracy bound.
 
 mod common;
 
 use hbn::core::Mode;
-use hbn::io::{
-    Encoding, ReadOptions, ResampleOptions, ScalarTopic, SignalPath, read_signals, resample,
-    write_scalar_log,
-};
+use hbn::io::Encoding;
 use hbn::model::metrics::nrmse;
-use hbn::model::{HbnModel, HbnParams, Sequence};
-use hbn::sim::{InputKind, SimConfig, SystemKind, Trajectory, generate_input, simulate};
-use std::path::Path;
-
-fn write_log(path: &Path, t: &Trajectory, encoding: Encoding) {
-    let t_ns: Vec<u64> = (0..t.u.len())
-        .map(|k| 1_000_000_000 + k as u64 * 10_000_000)
-        .collect();
-    let topics = [
-        ScalarTopic {
-            topic: "/input",
-            values: &t.u,
-        },
-        ScalarTopic {
-            topic: "/state",
-            values: &t.x,
-        },
-        ScalarTopic {
-            topic: "/sensor",
-            values: &t.y,
-        },
-    ];
-    write_scalar_log(path, &t_ns, &topics, encoding).unwrap();
-}
-
-fn read_log(path: &Path) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
-    let paths: Vec<SignalPath> = ["/input.data", "/state.data", "/sensor.data"]
-        .iter()
-        .map(|p| p.parse().unwrap())
-        .collect();
-    let raw = read_signals(path, &paths, &ReadOptions::default()).unwrap();
-    let a = resample(&raw, &ResampleOptions::new(100.0)).unwrap();
-    (
-        a.columns[0].clone(),
-        a.columns[1].clone(),
-        a.columns[2].clone(),
-    )
-}
+use hbn::model::{HbnModel, HbnParams};
+use hbn::pipeline::{
+    LogOptions, Method, SignalChoice, SimLog, TrainSignals, evaluate_log, simulate_log,
+    train_from_logs,
+};
+use hbn::sim::{SimConfig, SystemKind};
 
 /// At noise gain 1 the EKF beats open-loop GP simulation and stays below a stated bound, on
 /// systems of different families; EKF+BLR stays close to it.
@@ -61,34 +27,39 @@ fn simulate_log_train_estimate_beats_open_loop() {
     .enumerate()
     {
         let seed = 10 + i as u64;
-        let u_train = generate_input(InputKind::RandomRamps, 600, 0.02, seed).unwrap();
-        let mut seqs_owned = Vec::new();
-        for r in 0..3 {
-            let t = simulate(
-                &SimConfig {
+        let log = |name: String, sim_seed, input_seed, steps, encoding| {
+            let path = dir.path().join(name);
+            let spec = SimLog {
+                config: SimConfig {
                     system,
                     noise_gain: 1.0,
                     rate_hz: 100.0,
-                    seed: seed * 10 + r,
+                    seed: sim_seed,
                 },
-                &u_train,
-            )
-            .unwrap();
-            let path = dir.path().join(format!("{system}-train{r}.mcap"));
-            write_log(
-                &path,
-                &t,
-                if r % 2 == 0 {
+                steps,
+                input_seed,
+                max_increment: 0.02,
+                encoding,
+            };
+            simulate_log(&spec, &path).unwrap();
+            path
+        };
+        // One training input, three noisy runs, alternating JSON and ROS 2 encodings.
+        let train: Vec<_> = (0..3u64)
+            .map(|r| {
+                let enc = if r % 2 == 0 {
                     Encoding::Json
                 } else {
                     Encoding::Ros2
-                },
-            );
-            seqs_owned.push(read_log(&path));
-        }
-        let seqs: Vec<Sequence<'_>> = seqs_owned
-            .iter()
-            .map(|(u, x, y)| Sequence { u, x, y })
+                };
+                log(
+                    format!("{system}-train{r}.mcap"),
+                    seed * 10 + r,
+                    seed,
+                    600,
+                    enc,
+                )
+            })
             .collect();
         let params = HbnParams {
             max_points: 300,
@@ -97,15 +68,40 @@ fn simulate_log_train_estimate_beats_open_loop() {
             seed,
             ..HbnParams::default()
         };
-        let model = HbnModel::fit(&seqs, &params).unwrap();
+        let model = train_from_logs(
+            &train,
+            &TrainSignals::default(),
+            LogOptions::default(),
+            params,
+            &mut |_| {},
+        )
+        .unwrap()
+        .model;
+        assert_eq!(model.rate_hz(), 100.0);
 
-        let test = common::test_run(system, 1.0, 1500, seed);
-        let path = dir.path().join(format!("{system}-test.mcap"));
-        write_log(&path, &test, Encoding::Ros2);
-        let (u, x, y) = read_log(&path);
-        let ekf = nrmse(&model.estimate(&u, &y, Mode::Ekf).unwrap().x, &x);
-        let blr = nrmse(&model.estimate(&u, &y, Mode::EkfBlr).unwrap().x, &x);
-        let open = nrmse(&model.simulate_open_loop(&u).unwrap(), &x);
+        // The experiment protocol's test run for this seed, as a ROS 2 log.
+        let test = log(
+            format!("{system}-test.mcap"),
+            seed.wrapping_add(0xBEEF),
+            seed.wrapping_add(0x7E57),
+            1500,
+            Encoding::Ros2,
+        );
+        let ev = evaluate_log(
+            &model,
+            &test,
+            &SignalChoice::default(),
+            &Mode::ALL,
+            LogOptions::default(),
+            &mut |_| {},
+        )
+        .unwrap();
+        let score = |m| ev.scores.iter().find(|s| s.method == m).unwrap().nrmse;
+        let (ekf, blr, open) = (
+            score(Method::Filter(Mode::Ekf)),
+            score(Method::Filter(Mode::EkfBlr)),
+            score(Method::OpenLoop),
+        );
         eprintln!("{system}: ekf {ekf:.4} ekf+blr {blr:.4} open loop {open:.4}");
         assert!(ekf < open, "{system}: EKF {ekf} not below open loop {open}");
         assert!(ekf < 0.08, "{system}: EKF nRMSE {ekf} above the bound 0.08");

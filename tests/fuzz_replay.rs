@@ -44,6 +44,13 @@ replay_test!(mcap_ingest, cdr, ros2msg, signal_path, model_load, step);
 fn every_target_is_replayed() {
     assert_eq!(
         entries::TARGETS,
-        ["mcap_ingest", "cdr", "ros2msg", "signal_path", "model_load", "step"]
+        [
+            "mcap_ingest",
+            "cdr",
+            "ros2msg",
+            "signal_path",
+            "model_load",
+            "step"
+        ]
     );
 }

@@ -1,7 +1,7 @@
 """Plots docs/data/noise_sweep.json (written by the `sweep` example) to docs/img/noise_sweep.png
 and prints the Markdown table of docs/results.md.
 
-    cargo run --release -p hbn-model --example sweep -- docs/data/noise_sweep.json
+    cargo run --release -p hbn-pipeline --example sweep -- docs/data/noise_sweep.json
     python3 docs/data/plot_sweep.py
 """
 import json

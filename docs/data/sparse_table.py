@@ -1,5 +1,5 @@
 """Prints the "Sparse or exact" table of docs/results.md from docs/data/sparse_vs_exact.json
-(written by `cargo run --release -p hbn-model --example sparse_vs_exact`). Standard library only.
+(written by `cargo run --release -p hbn-pipeline --example sparse_vs_exact`). Standard library only.
 
     python3 docs/data/sparse_table.py [docs/data/sparse_vs_exact.json]
 """

@@ -67,7 +67,7 @@ pub fn mcap_ingest(data: &[u8]) {
     let mut paths: Vec<SignalPath> = MCAP_PATHS
         .iter()
         .filter_map(|p| p.parse::<SignalPath>().ok())
-        .filter(|p| topics.iter().any(|t| *t == p.topic))
+        .filter(|p| topics.contains(&p.topic))
         .collect();
     if paths.is_empty() {
         // Still read: a missing topic must be an error, not a panic.
@@ -77,10 +77,7 @@ pub fn mcap_ingest(data: &[u8]) {
             .collect();
     }
     for time_source in [TimeSource::LogTime, TimeSource::HeaderStamp] {
-        let opts = ReadOptions {
-            time_source,
-            progress: false,
-        };
+        let opts = ReadOptions { time_source };
         let Ok(signals) = hbn_io::read_signals(&file, &paths, &opts) else {
             continue;
         };
@@ -257,7 +254,7 @@ pub fn step(data: &[u8]) {
     use hbn_core::blr::{LocalRegression, Neighbourhood, NeighbourhoodParts};
     use hbn_core::gp::{GpParts, GpView, Variance};
     use hbn_core::kernel::{Kernel, KernelSpec, Metric, Profile};
-    use hbn_core::{EkfConfig, Estimator, HbnView, Mode};
+    use hbn_core::{EkfConfig, Estimator, HbnView, InitPrior, Mode};
 
     let mut b = Bytes(data);
     struct Owned {
@@ -387,12 +384,17 @@ pub fn step(data: &[u8]) {
     let (Some(transition), Some(sensor)) = (view(&tr), view(&se)) else {
         return;
     };
+    // The prior of x_0 from the first measurement: arbitrary (y, x) pairs, sorted by y.
+    let mut pairs: Vec<[f64; 2]> = (0..b.byte() % 8).map(|_| [b.f64(), b.f64()]).collect();
+    pairs.sort_by(|a, c| a[0].total_cmp(&c[0]));
+    let init = InitPrior::new(&pairs, 1 + usize::from(b.byte() % 4), b.f64().abs()).ok();
     let model = HbnView {
         transition,
         sensor,
         transition_local: nb(&tl, 4, &STARTS[tl.4]),
         sensor_local: nb(&sl, 3, &STARTS[sl.4]),
         blr,
+        init,
     };
     let mut scratch = vec![0.0; Estimator::scratch_len(&model)];
     let Ok(mut est) = Estimator::new(model, config, &mut scratch) else {

@@ -3,9 +3,26 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
-use hbn_io::SignalPath;
-use hbn_model::KernelChoice;
-use hbn_sim::SystemKind;
+use hbn_core::Mode;
+use hbn_gp::SubsetPolicy;
+use hbn_io::{SignalPath, TimeSource};
+use hbn_model::{HbnParams, KernelChoice};
+use hbn_pipeline::LogOptions;
+use hbn_sim::{SimConfig, SystemKind};
+
+// Every default below is read from the library's parameter types (`HbnParams::default`,
+// `LogOptions::default`, `Mode::default`, `SimConfig::new`); none is written here.
+fn params() -> HbnParams {
+    HbnParams::default()
+}
+
+fn log_options() -> LogOptions {
+    LogOptions::default()
+}
+
+fn experiment() -> hbn_pipeline::experiment::ExperimentConfig {
+    hbn_pipeline::experiment::ExperimentConfig::default()
+}
 
 /// Gaussian-process models of hysteretic soft-robot systems and a real-time EKF.
 ///
@@ -67,6 +84,24 @@ pub enum TimeSourceArg {
     Header,
 }
 
+impl From<TimeSource> for TimeSourceArg {
+    fn from(t: TimeSource) -> Self {
+        match t {
+            TimeSource::LogTime => TimeSourceArg::Log,
+            TimeSource::HeaderStamp => TimeSourceArg::Header,
+        }
+    }
+}
+
+impl From<TimeSourceArg> for TimeSource {
+    fn from(t: TimeSourceArg) -> Self {
+        match t {
+            TimeSourceArg::Log => TimeSource::LogTime,
+            TimeSourceArg::Header => TimeSource::HeaderStamp,
+        }
+    }
+}
+
 /// Estimation mode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum ModeArg {
@@ -74,6 +109,51 @@ pub enum ModeArg {
     Ekf,
     /// EKF with local Bayesian linear regression (Jacobians and noise).
     EkfBlr,
+}
+
+impl From<Mode> for ModeArg {
+    fn from(m: Mode) -> Self {
+        match m {
+            Mode::Ekf => ModeArg::Ekf,
+            Mode::EkfBlr => ModeArg::EkfBlr,
+        }
+    }
+}
+
+impl From<ModeArg> for Mode {
+    fn from(m: ModeArg) -> Self {
+        match m {
+            ModeArg::Ekf => Mode::Ekf,
+            ModeArg::EkfBlr => Mode::EkfBlr,
+        }
+    }
+}
+
+/// How training reduces large data sets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SubsetArg {
+    /// Greedy farthest-point sampling (deterministic, covers the input space evenly).
+    FarthestPoint,
+    /// A random subset drawn with --seed.
+    Random,
+}
+
+impl From<SubsetPolicy> for SubsetArg {
+    fn from(p: SubsetPolicy) -> Self {
+        match p {
+            SubsetPolicy::FarthestPoint => SubsetArg::FarthestPoint,
+            SubsetPolicy::Random => SubsetArg::Random,
+        }
+    }
+}
+
+impl From<SubsetArg> for SubsetPolicy {
+    fn from(p: SubsetArg) -> Self {
+        match p {
+            SubsetArg::FarthestPoint => SubsetPolicy::FarthestPoint,
+            SubsetArg::Random => SubsetPolicy::Random,
+        }
+    }
 }
 
 /// Estimation modes to evaluate.
@@ -165,7 +245,7 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub input_seed: Option<u64>,
     /// Sample rate (Hz).
-    #[arg(long, default_value_t = 100.0, value_parser = parse_positive)]
+    #[arg(long, default_value_t = SimConfig::new(SystemKind::BoucWen).rate_hz, value_parser = parse_positive)]
     pub rate: f64,
     /// Message encoding.
     #[arg(long, value_enum, default_value_t = EncodingArg::Json)]
@@ -182,11 +262,32 @@ pub struct SimulateArgs {
 #[derive(Clone, Debug, Args)]
 pub struct ReadArgs {
     /// Clock to place samples at.
-    #[arg(long, value_enum, default_value_t = TimeSourceArg::Log)]
+    #[arg(long, value_enum, default_value_t = log_options().time_source.into())]
     pub time_source: TimeSourceArg,
     /// Largest allowed gap between two samples of a signal (seconds).
-    #[arg(long, default_value_t = 0.5, value_parser = parse_positive)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = log_options().max_gap_s)]
     pub max_gap: f64,
+}
+
+impl Default for ReadArgs {
+    fn default() -> Self {
+        let o = log_options();
+        Self {
+            time_source: o.time_source.into(),
+            max_gap: o.max_gap_s,
+        }
+    }
+}
+
+impl ReadArgs {
+    /// The library's log options with these values (and the grid rate, if given).
+    pub fn options(&self, rate_hz: Option<f64>) -> LogOptions {
+        LogOptions {
+            time_source: self.time_source.into(),
+            max_gap_s: self.max_gap,
+            rate_hz,
+        }
+    }
 }
 
 /// `hbn train`.
@@ -203,16 +304,16 @@ pub struct TrainArgs {
     #[arg(long = "log", required = true)]
     pub logs: Vec<PathBuf>,
     /// Input signal u (Foxglove message path).
-    #[arg(long, default_value = "/input.data", value_parser = parse_path)]
+    #[arg(long, default_value = hbn_pipeline::DEFAULT_INPUT, value_parser = parse_path)]
     pub input: SignalPath,
     /// State signal x (the reference the model learns).
-    #[arg(long, default_value = "/state.data", value_parser = parse_path)]
+    #[arg(long, default_value = hbn_pipeline::DEFAULT_STATE, value_parser = parse_path)]
     pub state: SignalPath,
     /// Sensor output signal y.
-    #[arg(long, default_value = "/sensor.data", value_parser = parse_path)]
+    #[arg(long, default_value = hbn_pipeline::DEFAULT_OUTPUT, value_parser = parse_path)]
     pub output: SignalPath,
     /// Resampling rate (Hz); default: the input's native rate in the first log.
-    #[arg(long, value_parser = parse_positive)]
+    #[arg(long, allow_negative_numbers = true)]
     pub rate: Option<f64>,
     /// Kernel of both GPs (default matern52).
     #[arg(long, value_parser = parse_kernel)]
@@ -228,19 +329,28 @@ pub struct TrainArgs {
     #[arg(long, value_parser = parse_inducing, value_name = "M|exact")]
     pub inducing: Option<Inducing>,
     /// Most support points per exact GP (with --inducing exact).
-    #[arg(long, default_value_t = 500)]
+    #[arg(long, default_value_t = params().max_points)]
     pub max_points: usize,
+    /// How to choose the support points when a log has more samples.
+    #[arg(long, value_enum, default_value_t = params().subset_policy.into())]
+    pub subset: SubsetArg,
     /// Optimiser starts per GP.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = params().n_starts)]
     pub starts: usize,
     /// L-BFGS iterations per start.
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = params().max_iters)]
     pub max_iters: u64,
     /// Seed of random starts and subsets.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = params().seed)]
     pub seed: u64,
+    /// Lower bound of each GP's noise variance (standardised units).
+    #[arg(long, allow_negative_numbers = true, default_value_t = params().noise_floor)]
+    pub noise_floor: f64,
+    /// Do not standardise GP inputs and outputs.
+    #[arg(long, default_value_t = !params().normalize)]
+    pub no_normalize: bool,
     /// BLR window as a fraction of each coordinate's range.
-    #[arg(long, default_value_t = 0.025, value_parser = parse_positive)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = params().blr_window)]
     pub blr_window: f64,
     /// Log reading options.
     #[command(flatten)]
@@ -266,7 +376,7 @@ pub struct EstimateArgs {
     #[arg(long)]
     pub log: PathBuf,
     /// Estimation mode.
-    #[arg(long, value_enum, default_value_t = ModeArg::Ekf)]
+    #[arg(long, value_enum, default_value_t = Mode::default().into())]
     pub mode: ModeArg,
     /// Input signal (default: the path the model was trained with).
     #[arg(long, value_parser = parse_path)]
@@ -368,28 +478,29 @@ pub struct DemoArgs {
 pub struct ExperimentArgs {
     /// Systems (comma-separated).
     #[arg(long, value_delimiter = ',', value_parser = parse_system,
-          default_value = "maxwell-slip,generalized-pi")]
+          default_values_t = experiment().systems)]
     pub systems: Vec<SystemKind>,
     /// Noise gains (comma-separated).
-    #[arg(long, value_delimiter = ',', value_parser = parse_non_negative, default_value = "0,0.5,1")]
+    #[arg(long, value_delimiter = ',', value_parser = parse_non_negative,
+          default_values_t = experiment().noise_gains)]
     pub gains: Vec<f64>,
     /// Seeds (comma-separated), one run each.
-    #[arg(long, value_delimiter = ',', default_value = "1,2,3")]
+    #[arg(long, value_delimiter = ',', default_values_t = experiment().seeds)]
     pub seeds: Vec<u64>,
     /// Samples of the training input.
-    #[arg(long, default_value_t = 500)]
+    #[arg(long, default_value_t = experiment().train_steps)]
     pub train_steps: usize,
     /// Repetitions of the training input (fresh noise each).
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = experiment().repeats)]
     pub repeats: usize,
     /// Samples of the test input.
-    #[arg(long, default_value_t = 1000)]
+    #[arg(long, default_value_t = experiment().test_steps)]
     pub test_steps: usize,
     /// Inducing points per GP (sparse GPs on every sample), or `exact` (the default).
     #[arg(long, value_parser = parse_inducing, value_name = "M|exact")]
     pub inducing: Option<Inducing>,
     /// Most support points per GP.
-    #[arg(long, default_value_t = 500)]
+    #[arg(long, default_value_t = params().max_points)]
     pub max_points: usize,
     /// Write all rows as JSON.
     #[arg(long)]

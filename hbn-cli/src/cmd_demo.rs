@@ -8,8 +8,8 @@ use anyhow::Context;
 use crate::Ui;
 use crate::cli::{
     DemoArgs, EncodingArg, EstimateArgs, EvalArgs, EvalModeArg, ModeArg, ReadArgs, SimulateArgs,
-    TimeSourceArg, TrainArgs,
 };
+use clap::Parser;
 
 /// Training logs of the demo.
 pub const TRAIN_LOGS: usize = 3;
@@ -23,17 +23,14 @@ pub fn run(ui: &mut Ui<'_>, args: &DemoArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir)
         .with_context(|| format!("cannot create the directory `{}`", dir.display()))?;
     let p = |name: &str| -> PathBuf { dir.join(name) };
-    let read = ReadArgs {
-        time_source: TimeSourceArg::Log,
-        max_gap: 0.5,
-    };
+    let read = ReadArgs::default();
     let sim = |seed: u64, input_seed: u64, out: PathBuf| SimulateArgs {
         system: args.system,
         steps: STEPS,
         seed,
         noise_gain: args.noise_gain,
         input_seed: Some(input_seed),
-        rate: 100.0,
+        rate: hbn_sim::SimConfig::new(args.system).rate_hz,
         encoding: EncodingArg::Json,
         max_increment: hbn_sim::DEFAULT_MAX_INCREMENT,
         out,
@@ -63,24 +60,26 @@ pub fn run(ui: &mut Ui<'_>, args: &DemoArgs) -> anyhow::Result<()> {
 
     ui.line("\n== 2. train")?;
     let model = p("model.hbn");
-    let train = TrainArgs {
-        logs,
-        input: "/input.data".parse()?,
-        state: "/state.data".parse()?,
-        output: "/sensor.data".parse()?,
-        rate: None,
-        kernel: None,
-        transition_kernel: None,
-        sensor_kernel: None,
-        inducing: None,
-        max_points: 300,
-        starts: 2,
-        max_iters: 100,
-        seed: args.seed,
-        blr_window: 0.025,
-        read: read.clone(),
-        out: model.clone(),
-    };
+    // The library defaults, with fewer support points so the demo takes seconds.
+    let mut train = crate::cli::Cli::try_parse_from([
+        "hbn",
+        "train",
+        "--max-points",
+        "300",
+        "--seed",
+        &args.seed.to_string(),
+        "--out",
+        &model.to_string_lossy(),
+        "--log",
+        "-",
+    ])
+    .map_err(anyhow::Error::new)
+    .and_then(|c| match c.command {
+        crate::Command::Train(t) => Ok(t),
+        _ => Err(anyhow::anyhow!("internal: not a train command")),
+    })?;
+    train.logs = logs;
+    train.read = read.clone();
     crate::cmd_train::run(ui, &train)?;
 
     ui.line("\n== 3. estimate")?;

@@ -2,11 +2,12 @@
 
 use anyhow::{Context, bail};
 use hbn_model::HbnParams;
-use hbn_model::experiment::{self, ExperimentConfig, ExperimentRow};
+use hbn_pipeline::experiment::{self, ExperimentConfig, ExperimentRow};
 
 use crate::Ui;
 use crate::cli::ExperimentArgs;
 use crate::plot::{self, GainLine};
+use crate::report::{self, Renderer};
 
 /// A method's label and its nRMSE in a row.
 type Method = (&'static str, fn(&ExperimentRow) -> f64);
@@ -83,21 +84,15 @@ pub fn run(ui: &mut Ui<'_>, args: &ExperimentArgs) -> anyhow::Result<Vec<Experim
             ..HbnParams::default()
         },
     };
-    let total = (cfg.systems.len() * cfg.seeds.len() * cfg.noise_gains.len()) as u64;
-    let pb = crate::progress::bar(ui.quiet, total, "experiment");
-    let rows = experiment::run(&cfg, &mut |r| {
-        pb.inc(1);
-        pb.set_message(format!(
-            "{} gain {} seed {}: nRMSE EKF {:.4}",
-            r.system, r.noise_gain, r.seed, r.nrmse_ekf
-        ));
-    });
-    pb.finish_and_clear();
-    let rows = rows.context("experiment failed")?;
+    let mut render = Renderer::default();
+    let rows = experiment::run(&cfg, &mut |e| render.event(ui, e));
+    render.finish();
+    let rows = rows
+        .map_err(|e| report::error(e, hbn_io::TimeSource::LogTime))
+        .context("experiment failed")?;
     if let Some(f) = &args.json {
         let text = serde_json::to_string_pretty(&rows).context("cannot format JSON")?;
-        hbn_io::write_atomic(f, text.as_bytes())
-            .with_context(|| format!("cannot write `{}`", f.display()))?;
+        hbn_fs::write_atomic(f, text.as_bytes())?;
     }
     if let Some(f) = &args.plot {
         plot::experiment_plot(f, &panels(&rows))?;

@@ -1,7 +1,7 @@
 //! `hbn inspect`: what a model file contains.
 
 use hbn_gp::GaussianProcess;
-use hbn_model::{HbnModel, KernelChoice, LocalData};
+use hbn_model::{GpRole, HbnModel, KernelChoice, LocalData};
 use serde_json::{Value, json};
 
 use crate::Ui;
@@ -30,7 +30,6 @@ fn gp_json(gp: &GaussianProcess, kernel: KernelChoice) -> Value {
             "jitter_evaluations": r.jitter_evaluations,
             "max_jitter": r.max_jitter,
             "final_jitter": r.final_jitter,
-            "seconds": r.seconds,
         }
     })
 }
@@ -62,7 +61,7 @@ pub fn model_json(model: &HbnModel) -> Value {
         "summary": {
             "trajectories": s.trajectories,
             "rows": s.rows,
-            "seconds": s.seconds,
+            "starts": s.starts,
         },
         "observability": s.observability,
         "warnings": s.warnings,
@@ -97,7 +96,7 @@ fn gp_text(name: &str, gp: &GaussianProcess, kernel: KernelChoice) -> String {
         s.push_str(&format!(" (subset: {p:?})"));
     }
     s.push_str(&format!(
-        "\n  training LML      {:.3}\n  starts            {} ({} failed, best {}), {} evaluations, {:.2} s\n  \
+        "\n  training LML      {:.3}\n  starts            {} ({} failed, best {}), {} evaluations\n  \
          jitter            {} evaluations needed it (max {:.1e}), final {:.1e}\n",
         gp.log_marginal_likelihood(),
         r.starts.len(),
@@ -105,7 +104,6 @@ fn gp_text(name: &str, gp: &GaussianProcess, kernel: KernelChoice) -> String {
         r.best_start
             .map_or_else(|| "-".to_owned(), |b| (b + 1).to_string()),
         r.evaluations,
-        r.seconds,
         r.jitter_evaluations,
         r.max_jitter,
         r.final_jitter,
@@ -122,7 +120,7 @@ pub fn model_text(model: &HbnModel, file: &std::path::Path) -> String {
         |i: &hbn_model::SignalInfo| i.path.clone().unwrap_or_else(|| "(not from a log)".into());
     let mut t = format!(
         "model `{}`\nsignals\n  input  {} = {}\n  state  {} = {}\n  output {} = {}\nrate {:.1} Hz\n\
-         trained on {} trajectories, {} rows per GP, {:.1} s\n\n",
+         trained on {} trajectories, {} rows per GP\n\n",
         file.display(),
         sig.input.name,
         path(&sig.input),
@@ -133,15 +131,17 @@ pub fn model_text(model: &HbnModel, file: &std::path::Path) -> String {
         model.rate_hz(),
         s.trajectories,
         s.rows,
-        s.seconds,
     );
-    t.push_str(&gp_text(
-        "transition",
-        model.transition(),
-        p.transition_kernel,
-    ));
-    t.push('\n');
-    t.push_str(&gp_text("sensor", model.sensor(), p.sensor_kernel));
+    for role in GpRole::ALL {
+        if role == GpRole::Sensor {
+            t.push('\n');
+        }
+        t.push_str(&gp_text(role.name(), model.gp(role), p.kernel(role)));
+        let ends = crate::report::terminations(s, role);
+        if !ends.is_empty() {
+            t.push_str(&format!("  start endings      {ends}\n"));
+        }
+    }
     t.push_str("\nBLR index (EKF+BLR)\n");
     for (n, l) in [
         ("transition", model.transition_local()),

@@ -1,104 +1,59 @@
-//! `hbn train`: fit the HBN to logs.
+//! `hbn train`: fit the HBN to logs ([`hbn_pipeline::train_from_logs`]).
 
-use anyhow::{Context, bail};
-use hbn_model::{HbnModel, HbnParams, KernelChoice, Sequence, SignalInfo, Signals};
+use anyhow::Context;
+use hbn_model::{GpRole, HbnModel, HbnParams};
+use hbn_pipeline::{TrainSignals, train_from_logs};
 
 use crate::Ui;
 use crate::cli::TrainArgs;
-use crate::logdata::{self, ReadSettings};
+use crate::report::{self, Renderer};
 
-fn info(name: &str, path: &hbn_io::SignalPath) -> SignalInfo {
-    SignalInfo {
-        name: name.into(),
-        path: Some(path.to_string()),
-        unit: None,
+impl TrainArgs {
+    /// The training parameters: the library defaults with the flags applied.
+    pub fn params(&self) -> HbnParams {
+        let d = HbnParams::default();
+        let kernel = self.kernel.unwrap_or(d.transition_kernel);
+        HbnParams {
+            transition_kernel: self.transition_kernel.unwrap_or(kernel),
+            sensor_kernel: self
+                .sensor_kernel
+                .unwrap_or(self.kernel.unwrap_or(d.sensor_kernel)),
+            n_inducing: self.inducing.map_or(d.n_inducing, |i| i.0),
+            max_points: self.max_points,
+            subset_policy: self.subset.into(),
+            n_starts: self.starts,
+            max_iters: self.max_iters,
+            seed: self.seed,
+            normalize: !self.no_normalize,
+            noise_floor: self.noise_floor,
+            blr_window: self.blr_window,
+            ..d
+        }
     }
 }
 
 /// Trains, saves and summarises; returns the model.
 pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<HbnModel> {
     crate::check_output(&args.out, "model file")?;
-    if args.logs.is_empty() {
-        bail!("give at least one --log");
-    }
-    if args.starts == 0 {
-        bail!("--starts must be at least 1");
-    }
-    if args.max_points < 3 {
-        bail!("--max-points must be at least 3, got {}", args.max_points);
-    }
-    let settings = ReadSettings::from(&args.read);
-    let paths = [args.input.clone(), args.state.clone(), args.output.clone()];
-    let mut rate = args.rate;
-    let mut logs = Vec::with_capacity(args.logs.len());
-    for file in &args.logs {
-        let data = logdata::load(ui, file, &paths, rate, &settings)?;
-        rate = Some(data.aligned.rate_hz);
-        if data.len() < 10 {
-            bail!(
-                "`{}` has only {} aligned samples at {:.1} Hz; record a longer log",
-                file.display(),
-                data.len(),
-                data.aligned.rate_hz
-            );
-        }
-        logs.push(data);
-    }
-    let rate_hz = rate.unwrap_or(100.0);
-    let default_kernel = args.kernel.unwrap_or_default();
-    let params = HbnParams {
-        rate_hz,
-        transition_kernel: args.transition_kernel.unwrap_or(default_kernel),
-        sensor_kernel: args.sensor_kernel.unwrap_or(default_kernel),
-        n_inducing: args
-            .inducing
-            .map_or(HbnParams::default().n_inducing, |i| i.0),
-        max_points: args.max_points,
-        n_starts: args.starts,
-        max_iters: args.max_iters,
-        seed: args.seed,
-        blr_window: args.blr_window,
-        signals: Signals {
-            input: info("u", &args.input),
-            state: info("x", &args.state),
-            output: info("y", &args.output),
-        },
-        ..HbnParams::default()
+    let signals = TrainSignals {
+        input: args.input.clone(),
+        state: args.state.clone(),
+        output: args.output.clone(),
     };
-    let seqs: Vec<Sequence<'_>> = logs
-        .iter()
-        .map(|d| Sequence {
-            u: d.column(0),
-            x: d.column(1),
-            y: d.column(2),
-        })
-        .collect();
-    let samples: usize = logs.iter().map(|d| d.len()).sum();
-    let pb = crate::progress::bar(ui.quiet, 2 * args.starts as u64, "training");
-    pb.set_message(format!("{samples} samples at {rate_hz:.1} Hz"));
-    let result = HbnModel::fit_observed(&seqs, &params, &mut |which, p| {
-        pb.inc(1);
-        let best = p
-            .best_lml
-            .map_or_else(|| "-".to_owned(), |l| format!("{l:.1}"));
-        pb.set_message(format!(
-            "{which} GP start {}/{} (best LML {best})",
-            p.start + 1,
-            p.n_starts
-        ));
+    let opts = args.read.options(args.rate);
+    let mut render = Renderer::default();
+    let trained = train_from_logs(&args.logs, &signals, opts, args.params(), &mut |e| {
+        render.event(ui, e)
     });
-    pb.finish_and_clear();
-    let mut model = result.context("training failed")?;
-    model.set_signals(params.signals.clone());
+    render.finish();
+    let trained = trained.map_err(|e| report::error(e, opts.time_source))?;
+    let model = trained.model;
     model
         .save(&args.out)
         .with_context(|| format!("cannot save the model to `{}`", args.out.display()))?;
+    let samples = trained.logs.iter().map(|l| l.len()).sum();
     print_summary(ui, &model, samples, &args.out)?;
     Ok(model)
-}
-
-fn kernel_name(k: KernelChoice) -> String {
-    k.to_string()
 }
 
 /// Prints the training summary.
@@ -119,20 +74,20 @@ pub fn print_summary(
         s.rows,
         s.seconds
     );
-    for (name, gp, k) in [
-        ("transition", model.transition(), p.transition_kernel),
-        ("sensor", model.sensor(), p.sensor_kernel),
-    ] {
+    for role in GpRole::ALL {
+        let gp = model.gp(role);
         let (points, score) = if gp.is_sparse() {
             ("inducing points", "bound")
         } else {
             ("support points", "LML")
         };
         text.push_str(&format!(
-            "  {name:<10} GP: {:>4} {points}, {score} {:>10.2}, kernel {}\n",
+            "  {:<10} GP: {:>4} {points}, {score} {:>10.2}, kernel {}; starts: {}\n",
+            role.name(),
             gp.n_support(),
             gp.log_marginal_likelihood(),
-            kernel_name(k)
+            p.kernel(role),
+            report::terminations(s, role)
         ));
     }
     if s.warnings.is_empty() {

@@ -4,8 +4,11 @@
 //! writing code. The binary is a thin wrapper over [`run`]; tests call [`run_with`] to capture
 //! stdout and notices.
 //!
-//! Every output file is written atomically at the end of a command (a temporary file in the
-//! target directory, then a rename), so a failing command leaves no partial output behind.
+//! The commands are thin shells over `hbn-pipeline` (reading logs, training, estimating,
+//! writing outputs): this crate parses flags into the library's parameter types (whose
+//! defaults it shows), renders the library's events and errors with flag names, and plots.
+//! Every output file is written with hbn-fs's atomic writer, so a failing command leaves no
+//! partial output behind.
 #![forbid(unsafe_code)]
 #![cfg_attr(
     not(test),
@@ -20,9 +23,9 @@ pub mod cmd_experiment;
 pub mod cmd_inspect;
 pub mod cmd_simulate;
 pub mod cmd_train;
-pub mod logdata;
 pub mod plot;
 pub mod progress;
+pub mod report;
 
 use std::ffi::OsString;
 use std::io::Write;

@@ -1,12 +1,13 @@
 //! PNG plots (plotters, bitmap backend) with an embedded font (DejaVu Sans via `ab_glyph`), so
-//! no system font libraries are needed. Written atomically: rendered to a temporary `.png` in
-//! the target directory, then renamed.
+//! no system font libraries are needed. Rendered in memory, then written with the one atomic
+//! writer of hbn-fs.
 
 use std::ops::Range;
 use std::path::Path;
 use std::sync::OnceLock;
 
 use anyhow::{Context, anyhow};
+use image::ImageEncoder;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -29,39 +30,30 @@ fn pe<E: std::fmt::Display>(e: E) -> anyhow::Error {
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
 
-/// Renders a `size` PNG to `file` atomically with `draw`.
+/// Renders a `size` PNG with `draw` in memory, encodes it, and writes it to `file` with the
+/// one atomic writer ([`hbn_fs::write_atomic`]).
 pub fn render_png(
     file: &Path,
     size: (u32, u32),
     draw: impl FnOnce(&Area<'_>) -> anyhow::Result<()>,
 ) -> anyhow::Result<()> {
     ensure_font()?;
-    let dir = match file.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_owned(),
-        _ => std::path::PathBuf::from("."),
-    };
-    let tmp = tempfile::Builder::new()
-        .prefix(".hbn-plot-")
-        .suffix(".png")
-        .tempfile_in(&dir)
-        .with_context(|| format!("cannot create a temporary file in `{}`", dir.display()))?;
+    let (w, h) = size;
+    let mut rgb = vec![0u8; w as usize * h as usize * 3];
     {
-        let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
+        let root = BitMapBackend::with_buffer(&mut rgb, size).into_drawing_area();
         root.fill(&WHITE).map_err(pe)?;
         draw(&root)?;
         root.present()
             .map_err(pe)
             .with_context(|| format!("cannot render `{}`", file.display()))?;
     }
-    // Temporary files are created owner-only; a plot is an ordinary document.
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        let _ = std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(0o644));
-    }
-    tmp.persist(file)
-        .map_err(|e| e.error)
-        .with_context(|| format!("cannot write `{}`", file.display()))?;
+    let mut png = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut png)
+        .write_image(&rgb, w, h, image::ColorType::Rgb8)
+        .map_err(pe)
+        .with_context(|| format!("cannot encode `{}`", file.display()))?;
+    hbn_fs::write_atomic(file, &png)?;
     Ok(())
 }
 

@@ -427,3 +427,44 @@ fn bad_models_fail_cleanly() {
         assert_fails(dir, &["inspect", model], &[model, needle]);
     }
 }
+
+/// Every training parameter and log option is checked once, by the library, before any file
+/// is opened: a bad value fails with exit code 1 and a message naming the flag to change (the
+/// log does not even exist).
+#[test]
+fn every_parameter_check_names_its_flag() {
+    let d = tempfile::tempdir().expect("tempdir");
+    let dir = d.path();
+    let train = |extra: &[&'static str]| -> Vec<&'static str> {
+        let mut a = vec!["train", "--log", "absent.mcap", "--out", "model.hbn"];
+        a.extend_from_slice(extra);
+        a
+    };
+    // Names the CLI parses itself (kernels, subset policies, clocks) are usage errors (exit
+    // code 2); values the library checks exit with 1. Both name the flag.
+    for (args, flag, code) in [
+        (train(&["--max-points", "1"]), "--max-points", 1),
+        (train(&["--starts", "0"]), "--starts", 1),
+        (train(&["--max-iters", "0"]), "--max-iters", 1),
+        (train(&["--noise-floor", "0"]), "--noise-floor", 1),
+        (train(&["--noise-floor", "nan"]), "--noise-floor", 1),
+        (train(&["--blr-window", "0.7"]), "--blr-window", 1),
+        (train(&["--blr-window", "0"]), "--blr-window", 1),
+        (train(&["--rate", "0"]), "--rate", 1),
+        (train(&["--rate", "-5"]), "--rate", 1),
+        (train(&["--max-gap", "0"]), "--max-gap", 1),
+        (train(&["--max-gap", "inf"]), "--max-gap", 1),
+        (train(&["--kernel", "rbf"]), "--kernel", 2),
+        (train(&["--subset", "all"]), "--subset", 2),
+        (train(&["--time-source", "gps"]), "--time-source", 2),
+    ] {
+        let out = hbn(dir, &args);
+        let err = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(code), "{args:?}: {err}");
+        assert!(err.contains(flag), "{args:?}: stderr lacks {flag}: {err}");
+        assert!(
+            !err.contains("absent.mcap"),
+            "{args:?} read the log first: {err}"
+        );
+    }
+}

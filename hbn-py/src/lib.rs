@@ -1,82 +1,349 @@
 //! Python bindings of hbn (`hbn._hbn`).
 //!
-//! This crate only converts types and releases the GIL: every algorithm lives in the workspace
-//! crates (`hbn-gp`, `hbn-model`, `hbn-sim`, `hbn-io`). The scikit-learn style classes are in the
-//! pure-Python package `hbn` (`python/hbn/__init__.py`), which validates array shapes and calls
-//! the `*Core` classes and functions here.
+//! This crate only converts types and releases the GIL: every algorithm, default and check lives
+//! in the workspace crates (`hbn-pipeline` for logs, `hbn-model` for the model, its parameters
+//! and the streaming filter, `hbn-gp`, `hbn-sim`). The scikit-learn style classes are in the
+//! pure-Python package `hbn` (`python/hbn/__init__.py`), which calls the `*Core` classes and
+//! functions here.
 //!
-//! Errors: bad data or settings and files that are not models become `ValueError`; file-system
-//! errors become `OSError` (`FileNotFoundError`, `PermissionError`, ... where the OS error says
-//! so). Heavy calls run with the GIL released, inside `catch_unwind`, so a bug surfaces as a
-//! `RuntimeError` rather than a panic.
+//! Errors are classes under `hbn.HbnError` (created at import, each also deriving from the
+//! builtin it refines, so `except ValueError` / `except FileNotFoundError` keep working):
+//! `HbnIOError` (OSError; `HbnFileNotFoundError` also FileNotFoundError), `DataError`,
+//! `ModelFileError`, `ConfigError` (ValueError; `.keyword` names the argument to change) and
+//! `TrainingError` (RuntimeError). Heavy calls run with the GIL released, inside
+//! `catch_unwind`, so a bug surfaces as a `RuntimeError` rather than a panic.
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::str::FromStr;
+use std::sync::Arc;
 
-use hbn_core::{Mode, Want};
+use hbn_core::{Flags, Mode, Want};
 use hbn_gp::{GaussianProcess, GpError, GpParams, RawHyperparameters, SparseParams};
-use hbn_io::{IoError, ReadOptions, ResampleOptions, SignalPath};
-use hbn_model::{HbnModel, HbnParams, KernelChoice, ModelError, Sequence, Signals};
-use hbn_sim::{SimConfig, SystemKind};
+use hbn_io::{IoError, SignalPath};
+use hbn_model::{
+    Estimate, Filter, FilterOutput, HbnModel, HbnParams, KernelChoice, ModelError, Param,
+    ParamValue, Sequence, SignalInfo, Signals,
+};
+use hbn_pipeline::{
+    LogOption, LogOptions, OptionError, Outputs, PipelineError, SignalChoice, TrainSignals,
+};
+use hbn_sim::{SimConfig, SimError, SystemKind};
 use numpy::{PyArray1, PyReadonlyArray1};
 use pyo3::exceptions::{
-    PyFileExistsError, PyFileNotFoundError, PyIsADirectoryError, PyOSError, PyPermissionError,
-    PyRuntimeError, PyValueError,
+    PyException, PyFileNotFoundError, PyOSError, PyRuntimeError, PyTypeError, PyValueError,
 };
 use pyo3::prelude::*;
+use pyo3::sync::PyOnceLock;
+use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple, PyType};
 
 // ---------------------------------------------------------------------------------------------
-// Error conversion
+// Names: the Python keyword of every setting
 // ---------------------------------------------------------------------------------------------
 
-fn os_error(kind: std::io::ErrorKind, msg: String) -> PyErr {
-    use std::io::ErrorKind as K;
-    match kind {
-        K::NotFound => PyFileNotFoundError::new_err(msg),
-        K::PermissionDenied => PyPermissionError::new_err(msg),
-        K::IsADirectory => PyIsADirectoryError::new_err(msg),
-        K::AlreadyExists => PyFileExistsError::new_err(msg),
-        _ => PyOSError::new_err(msg),
+/// The keyword argument of a training parameter.
+fn param_keyword(p: Param) -> &'static str {
+    match p {
+        Param::Rate => "rate",
+        Param::Kernel => "kernel",
+        Param::TransitionKernel => "transition_kernel",
+        Param::SensorKernel => "sensor_kernel",
+        Param::Inducing => "n_inducing",
+        Param::MaxPoints => "max_points",
+        Param::SubsetPolicy => "subset",
+        Param::Starts => "n_restarts",
+        Param::MaxIters => "max_iter",
+        Param::Seed => "seed",
+        Param::Normalize => "normalize",
+        Param::NoiseFloor => "noise_floor",
+        Param::BlrWindow => "blr_window",
+        Param::Blr => "blr",
     }
 }
 
-fn gp_err(e: GpError) -> PyErr {
-    match &e {
-        GpError::Io { source, .. } => os_error(source.kind(), e.to_string()),
-        _ => PyValueError::new_err(e.to_string()),
+/// The keyword argument of a log option.
+fn option_keyword(o: LogOption) -> &'static str {
+    match o {
+        LogOption::Rate => "rate",
+        LogOption::MaxGap => "max_gap",
+        LogOption::TimeSource => "time_source",
+        LogOption::Logs => "paths",
+        LogOption::Input => "input",
+        LogOption::State => "state",
+        LogOption::Output => "output",
+        LogOption::Mode => "mode",
     }
 }
 
-fn model_err(e: ModelError) -> PyErr {
-    match &e {
-        ModelError::Io { source, .. } => os_error(source.kind(), e.to_string()),
-        ModelError::Gp {
-            source: GpError::Io { source, .. },
-            ..
-        } => os_error(source.kind(), e.to_string()),
-        _ => PyValueError::new_err(e.to_string()),
+/// The keyword argument of a GP parameter (`hbn.GaussianProcess`).
+fn gp_keyword(name: &str) -> &str {
+    match name {
+        "n_starts" => "n_restarts",
+        "max_iters" => "max_iter",
+        "length_scales" => "lengthscales",
+        other => other,
     }
 }
 
-fn io_err(e: IoError) -> PyErr {
-    match &e {
-        IoError::Open { source, .. } => os_error(source.kind(), e.to_string()),
-        _ => PyValueError::new_err(e.to_string()),
+/// Training parameters settable by keyword: every [`Param`] but the BLR prior.
+fn keyword_params() -> impl Iterator<Item = Param> {
+    Param::ALL.into_iter().filter(|&p| p != Param::Blr)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Exceptions
+// ---------------------------------------------------------------------------------------------
+
+struct Classes {
+    base: Py<PyType>,
+    io: Py<PyType>,
+    not_found: Py<PyType>,
+    data: Py<PyType>,
+    model_file: Py<PyType>,
+    config: Py<PyType>,
+    training: Py<PyType>,
+}
+
+static CLASSES: PyOnceLock<Classes> = PyOnceLock::new();
+
+fn make_class(
+    py: Python<'_>,
+    name: &str,
+    bases: Vec<Bound<'_, PyAny>>,
+    doc: &str,
+) -> PyResult<Py<PyType>> {
+    let dict = PyDict::new(py);
+    dict.set_item("__doc__", doc)?;
+    dict.set_item("__module__", "hbn")?;
+    let typ = py.get_type::<PyType>();
+    let cls = typ.call1((name, PyTuple::new(py, bases)?, dict))?;
+    Ok(cls.cast_into::<PyType>()?.unbind())
+}
+
+fn classes(py: Python<'_>) -> PyResult<&Classes> {
+    CLASSES.get_or_try_init(py, || {
+        let exc = py.get_type::<PyException>().into_any();
+        let base = make_class(py, "HbnError", vec![exc], "Base class of every hbn error.")?;
+        let b = || base.bind(py).clone().into_any();
+        let io = make_class(
+            py,
+            "HbnIOError",
+            vec![b(), py.get_type::<PyOSError>().into_any()],
+            "A file could not be read or written (also an OSError).",
+        )?;
+        let not_found = make_class(
+            py,
+            "HbnFileNotFoundError",
+            vec![
+                io.bind(py).clone().into_any(),
+                py.get_type::<PyFileNotFoundError>().into_any(),
+            ],
+            "A file does not exist (also a FileNotFoundError).",
+        )?;
+        let value = || py.get_type::<PyValueError>().into_any();
+        let data = make_class(
+            py,
+            "DataError",
+            vec![b(), value()],
+            "Bad training or estimation data, or a log that cannot be used (also a ValueError).",
+        )?;
+        let model_file = make_class(
+            py,
+            "ModelFileError",
+            vec![b(), value()],
+            "A file that is not an hbn model or GP of a supported version (also a ValueError).",
+        )?;
+        let config = make_class(
+            py,
+            "ConfigError",
+            vec![b(), value()],
+            "An invalid argument; `keyword` names it (also a ValueError).",
+        )?;
+        let training = make_class(
+            py,
+            "TrainingError",
+            vec![b(), py.get_type::<PyRuntimeError>().into_any()],
+            "Training failed numerically (also a RuntimeError).",
+        )?;
+        Ok(Classes {
+            base,
+            io,
+            not_found,
+            data,
+            model_file,
+            config,
+            training,
+        })
+    })
+}
+
+/// What kind of Python exception a library error becomes.
+enum Kind {
+    Io(std::io::ErrorKind),
+    Data,
+    ModelFile,
+    Config(String),
+    Training,
+    Internal,
+}
+
+/// A library error on its way to Python: its kind and message.
+struct Fail {
+    kind: Kind,
+    message: String,
+}
+
+impl Fail {
+    fn new(kind: Kind, message: impl Into<String>) -> Self {
+        Self {
+            kind,
+            message: message.into(),
+        }
+    }
+
+    fn config(keyword: &str, problem: impl std::fmt::Display) -> Self {
+        Self::new(
+            Kind::Config(keyword.to_owned()),
+            format!("invalid {keyword}=: {problem}"),
+        )
+    }
+
+    fn into_py(self, py: Python<'_>) -> PyErr {
+        let c = match classes(py) {
+            Ok(c) => c,
+            Err(e) => return e,
+        };
+        let (cls, keyword) = match &self.kind {
+            Kind::Io(std::io::ErrorKind::NotFound) => (&c.not_found, None),
+            Kind::Io(_) => (&c.io, None),
+            Kind::Data => (&c.data, None),
+            Kind::ModelFile => (&c.model_file, None),
+            Kind::Config(k) => (&c.config, Some(k.clone())),
+            Kind::Training => (&c.training, None),
+            Kind::Internal => return PyRuntimeError::new_err(self.message),
+        };
+        let err = PyErr::from_type(cls.bind(py).clone(), (self.message,));
+        if let Some(k) = keyword {
+            let _ = err.value(py).setattr("keyword", k);
+        }
+        err
     }
 }
 
-fn value_err(e: impl std::fmt::Display) -> PyErr {
-    PyValueError::new_err(e.to_string())
+impl From<IoError> for Fail {
+    fn from(e: IoError) -> Self {
+        let kind = match &e {
+            IoError::Open { source, .. } => Kind::Io(source.kind()),
+            IoError::BadOption { name, .. } => Kind::Config(
+                if *name == "max_gap_s" {
+                    "max_gap"
+                } else {
+                    "rate"
+                }
+                .into(),
+            ),
+            IoError::GridTooLarge { .. } => Kind::Config("rate".into()),
+            IoError::BadPath { .. } => Kind::Config("signals".into()),
+            _ => Kind::Data,
+        };
+        Fail::new(kind, e.to_string())
+    }
 }
 
-/// Runs `f` with the GIL released; a panic becomes `RuntimeError` instead of crossing into Python.
+impl From<GpError> for Fail {
+    fn from(e: GpError) -> Self {
+        match &e {
+            GpError::Io { source, .. } => Fail::new(Kind::Io(source.kind()), e.to_string()),
+            GpError::Format { .. } => Fail::new(Kind::ModelFile, e.to_string()),
+            GpError::InvalidParameter { name, reason } => Fail::config(gp_keyword(name), reason),
+            GpError::Core(c) => Fail::config("kernel", c),
+            GpError::NotPositiveDefinite { .. } | GpError::OptimizationFailed { .. } => {
+                Fail::new(Kind::Training, e.to_string())
+            }
+            _ => Fail::new(Kind::Data, e.to_string()),
+        }
+    }
+}
+
+impl From<ModelError> for Fail {
+    fn from(e: ModelError) -> Self {
+        match e {
+            ModelError::Config(c) => Fail::config(param_keyword(c.param), &c.problem),
+            ModelError::Gp { which, source } => {
+                let inner = Fail::from(source);
+                Fail::new(inner.kind, format!("{which} GP: {}", inner.message))
+            }
+            ModelError::Io { ref source, .. } => Fail::new(Kind::Io(source.kind()), e.to_string()),
+            ModelError::ModelFile { .. } | ModelError::Core(_) => {
+                Fail::new(Kind::ModelFile, e.to_string())
+            }
+            ModelError::Data(_) => Fail::new(Kind::Data, e.to_string()),
+        }
+    }
+}
+
+impl From<OptionError> for Fail {
+    fn from(e: OptionError) -> Self {
+        Fail::config(option_keyword(e.option), &e.problem)
+    }
+}
+
+impl From<PipelineError> for Fail {
+    fn from(e: PipelineError) -> Self {
+        let hint = |f: Fail, h: &str| Fail::new(f.kind, format!("{}{h}", f.message));
+        match e {
+            PipelineError::Option(o) => o.into(),
+            PipelineError::Config(c) => Fail::config(param_keyword(c.param), &c.problem),
+            PipelineError::Model(m) => m.into(),
+            PipelineError::Read { ref source, .. } => {
+                let h = match source {
+                    IoError::TimeBackwards { .. } => " (or read with time_source=\"log\")",
+                    IoError::Gap { .. } | IoError::TooFewSamples { .. } => {
+                        " (arguments max_gap=, rate=)"
+                    }
+                    _ => "",
+                };
+                let kind = match source {
+                    IoError::Open { source, .. } => Kind::Io(source.kind()),
+                    _ => Kind::Data,
+                };
+                hint(Fail::new(kind, e.to_string()), h)
+            }
+            PipelineError::UnknownRate { .. } => {
+                hint(Fail::new(Kind::Data, e.to_string()), " (rate=)")
+            }
+            PipelineError::SignalPath { option, .. } => Fail::config(option_keyword(option), &e),
+            PipelineError::Write { ref source, .. } => {
+                let kind = match source {
+                    IoError::Open { source, .. } => Kind::Io(source.kind()),
+                    _ => Kind::Data,
+                };
+                Fail::new(kind, e.to_string())
+            }
+            PipelineError::Sim(s) => s.into(),
+            other => Fail::new(Kind::Data, other.to_string()),
+        }
+    }
+}
+
+impl From<SimError> for Fail {
+    fn from(e: SimError) -> Self {
+        match &e {
+            SimError::UnknownSystem { .. } => Fail::config("system", &e),
+            SimError::InvalidParameter { name, .. } => Fail::config(name, &e),
+            _ => Fail::new(Kind::Data, e.to_string()),
+        }
+    }
+}
+
+/// Runs `f` with the GIL released; a panic becomes `RuntimeError` instead of crossing into
+/// Python; a library error becomes its hbn exception class.
 fn detached<T, F>(py: Python<'_>, f: F) -> PyResult<T>
 where
-    F: FnOnce() -> PyResult<T> + Send,
+    F: FnOnce() -> Result<T, Fail> + Send,
     T: Send,
 {
-    py.detach(|| match catch_unwind(AssertUnwindSafe(f)) {
+    let r = py.detach(|| match catch_unwind(AssertUnwindSafe(f)) {
         Ok(r) => r,
         Err(payload) => {
             let what = payload
@@ -84,32 +351,240 @@ where
                 .map(|s| (*s).to_owned())
                 .or_else(|| payload.downcast_ref::<String>().cloned())
                 .unwrap_or_else(|| "unknown panic".to_owned());
-            Err(PyRuntimeError::new_err(format!(
-                "internal error in hbn (please report it): {what}"
-            )))
+            Err(Fail::new(
+                Kind::Internal,
+                format!("internal error in hbn (please report it): {what}"),
+            ))
         }
-    })
+    });
+    r.map_err(|f| f.into_py(py))
 }
+
+/// Converts a library error with the GIL held.
+fn raise<E: Into<Fail>>(py: Python<'_>, e: E) -> PyErr {
+    e.into().into_py(py)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Conversions
+// ---------------------------------------------------------------------------------------------
 
 fn slice<'a>(a: &'a PyReadonlyArray1<'_, f64>, name: &str) -> PyResult<&'a [f64]> {
     a.as_slice()
         .map_err(|e| PyValueError::new_err(format!("{name}: {e}")))
 }
 
-fn kernel_choice(kernel: &str) -> PyResult<KernelChoice> {
-    KernelChoice::from_str(kernel).map_err(model_err)
+fn parse_mode(py: Python<'_>, mode: Option<&str>) -> PyResult<Mode> {
+    match mode {
+        None => Ok(Mode::default()),
+        Some(m) => {
+            Mode::from_str(m).map_err(|e| raise(py, Fail::config("mode", format!("{m:?}: {e}"))))
+        }
+    }
 }
 
-fn parse_mode(mode: &str) -> PyResult<Mode> {
-    Mode::from_str(mode).map_err(|e| PyValueError::new_err(format!("{mode:?}: {e}")))
+fn parse_path(py: Python<'_>, option: LogOption, text: &str) -> PyResult<SignalPath> {
+    hbn_pipeline::parse_signal(option, text).map_err(|e| raise(py, e))
 }
 
-fn mode_name(mode: Mode) -> &'static str {
-    mode.name()
+/// Log options: the library defaults with the given arguments applied.
+fn log_options(
+    py: Python<'_>,
+    rate: Option<f64>,
+    time_source: Option<&str>,
+    max_gap: Option<f64>,
+) -> PyResult<LogOptions> {
+    let mut o = LogOptions::default();
+    if let Some(t) = time_source {
+        o.time_source = hbn_pipeline::parse_time_source(t).map_err(|e| raise(py, e))?;
+    }
+    if let Some(g) = max_gap {
+        o.max_gap_s = g;
+    }
+    o.rate_hz = rate;
+    Ok(o)
 }
 
-fn json<T: serde::Serialize>(v: &T) -> PyResult<String> {
-    serde_json::to_string(v).map_err(value_err)
+/// A Python value as a parameter value (ints stay ints, bools stay bools).
+fn param_value(v: &Bound<'_, PyAny>) -> Option<ParamValue> {
+    if v.is_instance_of::<PyBool>() {
+        v.extract().ok().map(ParamValue::Bool)
+    } else if v.is_instance_of::<PyInt>() {
+        v.extract().ok().map(ParamValue::Int)
+    } else if v.is_instance_of::<PyFloat>() {
+        v.extract().ok().map(ParamValue::Real)
+    } else if v.is_instance_of::<PyString>() {
+        v.extract().ok().map(ParamValue::Text)
+    } else {
+        v.extract::<f64>().ok().map(ParamValue::Real)
+    }
+}
+
+/// Training parameters: [`HbnParams::default`] with the keyword arguments applied (by
+/// [`HbnParams::set`]); unknown keywords are a `TypeError`, like Python's own.
+fn hbn_params(py: Python<'_>, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<HbnParams> {
+    let mut p = HbnParams::default();
+    let Some(kwargs) = kwargs else {
+        return Ok(p);
+    };
+    for (k, v) in kwargs.iter() {
+        let key: String = k.extract()?;
+        if v.is_none() {
+            continue;
+        }
+        let Some(param) = keyword_params().find(|&p| param_keyword(p) == key) else {
+            let known: Vec<&str> = keyword_params().map(param_keyword).collect();
+            return Err(PyTypeError::new_err(format!(
+                "unexpected keyword argument {key:?}; training parameters: {}",
+                known.join(", ")
+            )));
+        };
+        let value = param_value(&v).ok_or_else(|| {
+            raise(
+                py,
+                Fail::config(
+                    &key,
+                    format!(
+                        "cannot use {} here",
+                        v.get_type()
+                            .name()
+                            .map(|n| n.to_string())
+                            .unwrap_or_default()
+                    ),
+                ),
+            )
+        })?;
+        p.set(param, value)
+            .map_err(|e| raise(py, Fail::config(param_keyword(e.param), &e.problem)))?;
+    }
+    Ok(p)
+}
+
+fn value_to_py<'py>(py: Python<'py>, v: &ParamValue) -> PyResult<Bound<'py, PyAny>> {
+    Ok(match v {
+        ParamValue::Int(i) => i.into_pyobject(py)?.into_any(),
+        ParamValue::Real(r) => r.into_pyobject(py)?.into_any(),
+        ParamValue::Bool(b) => PyBool::new(py, *b).to_owned().into_any(),
+        ParamValue::Text(t) => t.into_pyobject(py)?.into_any(),
+    })
+}
+
+/// A JSON value as Python objects (dicts, lists, numbers, strings, None).
+fn json_to_py<'py>(py: Python<'py>, v: &serde_json::Value) -> PyResult<Bound<'py, PyAny>> {
+    use serde_json::Value;
+    Ok(match v {
+        Value::Null => py.None().into_bound(py),
+        Value::Bool(b) => PyBool::new(py, *b).to_owned().into_any(),
+        Value::Number(n) => match (n.as_u64(), n.as_i64()) {
+            (Some(u), _) => u.into_pyobject(py)?.into_any(),
+            (None, Some(i)) => i.into_pyobject(py)?.into_any(),
+            _ => n.as_f64().unwrap_or(f64::NAN).into_pyobject(py)?.into_any(),
+        },
+        Value::String(s) => s.into_pyobject(py)?.into_any(),
+        Value::Array(a) => {
+            let l = PyList::empty(py);
+            for x in a {
+                l.append(json_to_py(py, x)?)?;
+            }
+            l.into_any()
+        }
+        Value::Object(m) => {
+            let d = PyDict::new(py);
+            for (k, x) in m {
+                d.set_item(k, json_to_py(py, x)?)?;
+            }
+            d.into_any()
+        }
+    })
+}
+
+/// A serialisable value as Python objects.
+fn to_py<'py, T: serde::Serialize>(py: Python<'py>, v: &T) -> PyResult<Bound<'py, PyAny>> {
+    let value = serde_json::to_value(v)
+        .map_err(|e| PyRuntimeError::new_err(format!("internal error in hbn: {e}")))?;
+    json_to_py(py, &value)
+}
+
+/// Training parameters as a dict by keyword (the shorthand `kernel` left out), plus `blr` and
+/// `signals`.
+fn params_dict<'py>(py: Python<'py>, p: &HbnParams) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    for param in keyword_params().filter(|&p| p != Param::Kernel) {
+        if let Some(v) = p.get(param) {
+            d.set_item(param_keyword(param), value_to_py(py, &v)?)?;
+        }
+    }
+    d.set_item("blr", to_py(py, &p.blr)?)?;
+    d.set_item("signals", to_py(py, &p.signals)?)?;
+    Ok(d)
+}
+
+fn signal_info(
+    v: Option<Bound<'_, PyAny>>,
+    default: SignalInfo,
+    key: &str,
+) -> PyResult<SignalInfo> {
+    let Some(v) = v.filter(|v| !v.is_none()) else {
+        return Ok(default);
+    };
+    if let Ok(path) = v.extract::<String>() {
+        return Ok(SignalInfo {
+            path: Some(path),
+            ..default
+        });
+    }
+    let d = v.cast_into::<PyDict>().map_err(|_| {
+        PyValueError::new_err(format!(
+            "signals[{key:?}] must be a message path string or a dict"
+        ))
+    })?;
+    let get = |k: &str| -> PyResult<Option<String>> {
+        match d.get_item(k)? {
+            Some(x) if !x.is_none() => Ok(Some(x.extract()?)),
+            _ => Ok(None),
+        }
+    };
+    Ok(SignalInfo {
+        name: get("name")?.unwrap_or(default.name),
+        path: get("path")?,
+        unit: get("unit")?,
+    })
+}
+
+/// `{"u": path-or-dict, "x": ..., "y": ...}` as signal descriptions.
+fn signals_from(d: Option<&Bound<'_, PyDict>>) -> PyResult<Signals> {
+    let def = Signals::default();
+    let Some(d) = d else { return Ok(def) };
+    for k in d.keys() {
+        let k: String = k.extract()?;
+        if !["u", "x", "y"].contains(&k.as_str()) {
+            return Err(PyValueError::new_err(format!(
+                "signals: unknown key {k:?}; use u, x and y"
+            )));
+        }
+    }
+    Ok(Signals {
+        input: signal_info(d.get_item("u")?, def.input, "u")?,
+        state: signal_info(d.get_item("x")?, def.state, "x")?,
+        output: signal_info(d.get_item("y")?, def.output, "y")?,
+    })
+}
+
+type Arr<'py> = Bound<'py, PyArray1<f64>>;
+
+fn estimate_dict(py: Python<'_>, est: Estimate) -> PyResult<Bound<'_, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("x", PyArray1::from_vec(py, est.x))?;
+    d.set_item("x_std", PyArray1::from_vec(py, est.x_std))?;
+    d.set_item("y_pred", PyArray1::from_vec(py, est.y_pred))?;
+    d.set_item("innovation", PyArray1::from_vec(py, est.innovation))?;
+    d.set_item("nis", PyArray1::from_vec(py, est.nis))?;
+    d.set_item("q_x", PyArray1::from_vec(py, est.q_x))?;
+    d.set_item("r", PyArray1::from_vec(py, est.r))?;
+    d.set_item("flags", PyArray1::from_vec(py, est.flags))?;
+    d.set_item("obs_min", PyArray1::from_vec(py, est.obs_min))?;
+    d.set_item("obs_max", PyArray1::from_vec(py, est.obs_max))?;
+    Ok(d)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -125,7 +600,8 @@ pub struct GaussianProcessCore {
 
 #[pymethods]
 impl GaussianProcessCore {
-    /// Fits a GP to row-major inputs `x` (`len(y) x dim`) and targets `y`.
+    /// Fits a GP to row-major inputs `x` (`len(y) x dim`) and targets `y`; `None` settings take
+    /// the library defaults (`default_gp_params()`).
     #[staticmethod]
     #[allow(clippy::too_many_arguments)]
     #[pyo3(signature = (x, dim, y, kernel, lengthscales, signal_variance, noise_variance,
@@ -140,24 +616,25 @@ impl GaussianProcessCore {
         lengthscales: Option<Vec<f64>>,
         signal_variance: Option<f64>,
         noise_variance: Option<f64>,
-        optimize: bool,
-        normalize: bool,
-        n_starts: usize,
-        max_iters: u64,
-        max_points: usize,
-        seed: u64,
+        optimize: Option<bool>,
+        normalize: Option<bool>,
+        n_starts: Option<usize>,
+        max_iters: Option<u64>,
+        max_points: Option<usize>,
+        seed: Option<u64>,
         n_inducing: Option<usize>,
         inducing_points: Option<PyReadonlyArray1<'_, f64>>,
         optimize_inducing: bool,
     ) -> PyResult<Self> {
-        let choice = kernel_choice(kernel)?;
+        let choice =
+            KernelChoice::from_str(kernel).map_err(|e| raise(py, Fail::config("kernel", e)))?;
         let mut params = GpParams::new(choice.spec(dim, [0, 1]));
-        params.optimize = optimize;
-        params.normalize = normalize;
-        params.n_starts = n_starts;
-        params.max_iters = max_iters;
-        params.max_points = max_points;
-        params.seed = seed;
+        params.optimize = optimize.unwrap_or(params.optimize);
+        params.normalize = normalize.unwrap_or(params.normalize);
+        params.n_starts = n_starts.unwrap_or(params.n_starts);
+        params.max_iters = max_iters.unwrap_or(params.max_iters);
+        params.max_points = max_points.unwrap_or(params.max_points);
+        params.seed = seed.unwrap_or(params.seed);
         if let Some(m) = n_inducing {
             params.sparse = Some(SparseParams {
                 inducing_inputs: match &inducing_points {
@@ -176,7 +653,7 @@ impl GaussianProcessCore {
             });
         }
         let (x, y) = (slice(&x, "X")?.to_vec(), slice(&y, "y")?.to_vec());
-        let inner = detached(py, move || hbn_gp::fit(&params, &x, &y).map_err(gp_err))?;
+        let inner = detached(py, move || Ok(hbn_gp::fit(&params, &x, &y)?))?;
         Ok(Self {
             inner,
             kernel: choice.to_string(),
@@ -192,11 +669,7 @@ impl GaussianProcessCore {
         x: PyReadonlyArray1<'_, f64>,
         variance: bool,
         grad: bool,
-    ) -> PyResult<(
-        Bound<'py, PyArray1<f64>>,
-        Option<Bound<'py, PyArray1<f64>>>,
-        Option<Bound<'py, PyArray1<f64>>>,
-    )> {
+    ) -> PyResult<(Arr<'py>, Option<Arr<'py>>, Option<Arr<'py>>)> {
         let x = slice(&x, "X")?.to_vec();
         let want = Want {
             variance,
@@ -205,7 +678,7 @@ impl GaussianProcessCore {
         };
         let d = self.inner.kernel().dim;
         let (mean, var, g) = detached(py, || {
-            let preds = self.inner.predict_many(&x, want).map_err(gp_err)?;
+            let preds = self.inner.predict_many(&x, want)?;
             let mean: Vec<f64> = preds.iter().map(|p| p.mean).collect();
             let var: Vec<f64> = preds.iter().map(|p| p.variance).collect();
             let g: Vec<f64> = preds
@@ -271,32 +744,32 @@ impl GaussianProcessCore {
     fn kernel(&self) -> String {
         self.kernel.clone()
     }
-    /// Training report as JSON.
-    fn report_json(&self) -> PyResult<String> {
-        json(self.inner.report())
+    /// Training report as a dict.
+    fn report<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_py(py, self.inner.report())
     }
     /// Training warnings.
     fn warnings(&self) -> Vec<String> {
         self.inner.report().warnings()
     }
     /// The model as JSON (the format of `save`).
-    fn to_json(&self) -> PyResult<String> {
-        self.inner.to_json().map_err(gp_err)
+    fn to_json(&self, py: Python<'_>) -> PyResult<String> {
+        self.inner.to_json().map_err(|e| raise(py, e))
     }
     /// Parses `to_json` output.
     #[staticmethod]
-    fn from_json(text: &str) -> PyResult<Self> {
-        let inner = GaussianProcess::from_json(text, "<string>").map_err(gp_err)?;
+    fn from_json(py: Python<'_>, text: &str) -> PyResult<Self> {
+        let inner = GaussianProcess::from_json(text, "<string>").map_err(|e| raise(py, e))?;
         Ok(Self::wrap(inner))
     }
     /// Writes the model atomically.
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
-        detached(py, || self.inner.save(&path).map_err(gp_err))
+        detached(py, || Ok(self.inner.save(&path)?))
     }
     /// Loads a model written by `save`.
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
-        let inner = detached(py, move || GaussianProcess::load(&path).map_err(gp_err))?;
+        let inner = detached(py, move || Ok(GaussianProcess::load(&path)?))?;
         Ok(Self::wrap(inner))
     }
 }
@@ -309,105 +782,179 @@ impl GaussianProcessCore {
 }
 
 // ---------------------------------------------------------------------------------------------
-// HBN model
+// HBN model and the streaming filter
 // ---------------------------------------------------------------------------------------------
 
 /// Native HBN model (`hbn_model::HbnModel`). Use `hbn.HysteresisModel` instead.
 #[pyclass(name = "HysteresisModelCore", module = "hbn._hbn", frozen)]
 pub struct HysteresisModelCore {
-    inner: HbnModel,
+    inner: Arc<HbnModel>,
 }
 
-type Arr<'py> = Bound<'py, PyArray1<f64>>;
+impl HysteresisModelCore {
+    fn wrap(model: HbnModel) -> Self {
+        Self {
+            inner: Arc::new(model),
+        }
+    }
+}
 
 #[pymethods]
 impl HysteresisModelCore {
-    /// Fits both GPs to trajectories (lists of equal-length `u`, `x`, `y` arrays).
+    /// Fits both GPs to trajectories (lists of equal-length `u`, `x`, `y` arrays) sampled at
+    /// `rate` Hz; `params` are keyword arguments applied over the library defaults.
     #[staticmethod]
-    #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (u, x, y, rate, kernel, max_points, n_starts, max_iters, seed, blr_window, signals_json, n_inducing=None))]
+    #[pyo3(signature = (u, x, y, rate, signals, params))]
     fn fit(
         py: Python<'_>,
         u: Vec<PyReadonlyArray1<'_, f64>>,
         x: Vec<PyReadonlyArray1<'_, f64>>,
         y: Vec<PyReadonlyArray1<'_, f64>>,
-        rate: f64,
-        kernel: &str,
-        max_points: usize,
-        n_starts: usize,
-        max_iters: u64,
-        seed: u64,
-        blr_window: f64,
-        signals_json: Option<&str>,
-        n_inducing: Option<usize>,
+        rate: Option<f64>,
+        signals: Option<&Bound<'_, PyDict>>,
+        params: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
-        let choice = kernel_choice(kernel)?;
-        let signals: Signals = match signals_json {
-            Some(text) => serde_json::from_str(text)
-                .map_err(|e| PyValueError::new_err(format!("signals: {e}")))?,
-            None => Signals::default(),
-        };
+        let mut p = hbn_params(py, params)?;
+        if let Some(r) = rate {
+            p.rate_hz = r;
+        }
+        p.signals = signals_from(signals)?;
         if u.len() != x.len() || u.len() != y.len() {
-            return Err(PyValueError::new_err(format!(
-                "u, x and y must hold the same number of trajectories (got {}, {}, {})",
-                u.len(),
-                x.len(),
-                y.len()
-            )));
+            return Err(raise(
+                py,
+                Fail::new(
+                    Kind::Data,
+                    format!(
+                        "u, x and y must hold the same number of trajectories (got {}, {}, {})",
+                        u.len(),
+                        x.len(),
+                        y.len()
+                    ),
+                ),
+            ));
         }
         let own = |v: &[PyReadonlyArray1<'_, f64>], n: &str| -> PyResult<Vec<Vec<f64>>> {
             v.iter().map(|a| Ok(slice(a, n)?.to_vec())).collect()
         };
         let (u, x, y) = (own(&u, "u")?, own(&x, "x")?, own(&y, "y")?);
-        let params = HbnParams {
-            rate_hz: rate,
-            transition_kernel: choice,
-            sensor_kernel: choice,
-            n_inducing,
-            max_points,
-            n_starts,
-            max_iters,
-            seed,
-            blr_window,
-            signals,
-            ..HbnParams::default()
-        };
         let inner = detached(py, move || {
             let seqs: Vec<Sequence<'_>> = (0..u.len())
-                .map(|i| Sequence {
-                    u: &u[i],
-                    x: &x[i],
-                    y: &y[i],
-                })
+                .map(|i| Sequence::new(&u[i], &x[i], &y[i]))
                 .collect();
-            HbnModel::fit(&seqs, &params).map_err(model_err)
+            Ok(HbnModel::fit(&seqs, &p)?)
         })?;
-        Ok(Self { inner })
+        Ok(Self::wrap(inner))
     }
 
-    /// Runs the filter; returns a dict of per-sample arrays.
+    /// Trains from MCAP logs exactly like `hbn train` (`hbn_pipeline::train_from_logs`): the
+    /// same logs, paths and parameters give the same model file.
+    #[staticmethod]
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (paths, input, state, output, rate, time_source, max_gap, params))]
+    fn from_logs(
+        py: Python<'_>,
+        paths: Vec<PathBuf>,
+        input: Option<&str>,
+        state: Option<&str>,
+        output: Option<&str>,
+        rate: Option<f64>,
+        time_source: Option<&str>,
+        max_gap: Option<f64>,
+        params: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let p = hbn_params(py, params)?;
+        let opts = log_options(py, rate, time_source, max_gap)?;
+        let d = TrainSignals::default();
+        let signals = TrainSignals {
+            input: match input {
+                Some(t) => parse_path(py, LogOption::Input, t)?,
+                None => d.input,
+            },
+            state: match state {
+                Some(t) => parse_path(py, LogOption::State, t)?,
+                None => d.state,
+            },
+            output: match output {
+                Some(t) => parse_path(py, LogOption::Output, t)?,
+                None => d.output,
+            },
+        };
+        let trained = detached(py, move || {
+            Ok(hbn_pipeline::train_from_logs(
+                &paths,
+                &signals,
+                opts,
+                p,
+                &mut |_| {},
+            )?)
+        })?;
+        Ok(Self::wrap(trained.model))
+    }
+
+    /// Runs the filter over a sequence; returns a dict of per-sample arrays.
+    #[pyo3(signature = (u, y, mode))]
     fn estimate<'py>(
         &self,
         py: Python<'py>,
         u: PyReadonlyArray1<'_, f64>,
         y: PyReadonlyArray1<'_, f64>,
-        mode: &str,
-    ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
-        let mode = parse_mode(mode)?;
+        mode: Option<&str>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let mode = parse_mode(py, mode)?;
         let (u, y) = (slice(&u, "u")?.to_vec(), slice(&y, "y")?.to_vec());
-        let est = detached(py, || self.inner.estimate(&u, &y, mode).map_err(model_err))?;
-        let d = pyo3::types::PyDict::new(py);
-        d.set_item("x", PyArray1::from_vec(py, est.x))?;
-        d.set_item("x_std", PyArray1::from_vec(py, est.x_std))?;
-        d.set_item("y_pred", PyArray1::from_vec(py, est.y_pred))?;
-        d.set_item("innovation", PyArray1::from_vec(py, est.innovation))?;
-        d.set_item("nis", PyArray1::from_vec(py, est.nis))?;
-        d.set_item("q_x", PyArray1::from_vec(py, est.q_x))?;
-        d.set_item("r", PyArray1::from_vec(py, est.r))?;
-        d.set_item("flags", PyArray1::from_vec(py, est.flags))?;
-        d.set_item("obs_min", PyArray1::from_vec(py, est.obs_min))?;
-        d.set_item("obs_max", PyArray1::from_vec(py, est.obs_max))?;
-        Ok(d)
+        let est = detached(py, || Ok(self.inner.estimate(&u, &y, mode)?))?;
+        estimate_dict(py, est)
+    }
+
+    /// Reads `u` and `y` from a log at the model's rate, runs the filter, optionally writes
+    /// CSV and MCAP (like `hbn estimate`); returns `(t, dict of per-sample arrays)`.
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (path, mode, input, output, csv, mcap, time_source, max_gap))]
+    fn estimate_log<'py>(
+        &self,
+        py: Python<'py>,
+        path: PathBuf,
+        mode: Option<&str>,
+        input: Option<&str>,
+        output: Option<&str>,
+        csv: Option<PathBuf>,
+        mcap: Option<PathBuf>,
+        time_source: Option<&str>,
+        max_gap: Option<f64>,
+    ) -> PyResult<(Arr<'py>, Bound<'py, PyDict>)> {
+        let mode = parse_mode(py, mode)?;
+        let opts = log_options(py, None, time_source, max_gap)?;
+        let signals = SignalChoice {
+            input: input
+                .map(|t| parse_path(py, LogOption::Input, t))
+                .transpose()?,
+            state: None,
+            output: output
+                .map(|t| parse_path(py, LogOption::Output, t))
+                .transpose()?,
+        };
+        let outputs = Outputs { csv, mcap };
+        let est = detached(py, || {
+            Ok(hbn_pipeline::estimate_log(
+                &self.inner,
+                &path,
+                &signals,
+                mode,
+                opts,
+                &outputs,
+                &mut |_| {},
+            )?)
+        })?;
+        let t = PyArray1::from_vec(py, est.log.aligned.t_s);
+        Ok((t, estimate_dict(py, est.estimate)?))
+    }
+
+    /// A streaming filter over this model (sharing it, not copying it).
+    #[pyo3(signature = (mode))]
+    fn filter(&self, py: Python<'_>, mode: Option<&str>) -> PyResult<FilterCore> {
+        let mode = parse_mode(py, mode)?;
+        let inner = Filter::new(self.inner.clone(), mode).map_err(|e| raise(py, e))?;
+        Ok(FilterCore { inner })
     }
 
     /// Open-loop GP simulation from `u` alone.
@@ -417,30 +964,40 @@ impl HysteresisModelCore {
         u: PyReadonlyArray1<'_, f64>,
     ) -> PyResult<Arr<'py>> {
         let u = slice(&u, "u")?.to_vec();
-        let x = detached(py, || self.inner.simulate_open_loop(&u).map_err(model_err))?;
+        let x = detached(py, || Ok(self.inner.simulate_open_loop(&u)?))?;
         Ok(PyArray1::from_vec(py, x))
     }
 
-    /// Default filter settings of a mode as JSON.
-    fn ekf_config_json(&self, mode: &str) -> PyResult<String> {
-        json(&self.inner.ekf_config(parse_mode(mode)?))
+    /// Default filter settings of a mode, as a dict.
+    #[pyo3(signature = (mode))]
+    fn ekf_config<'py>(&self, py: Python<'py>, mode: Option<&str>) -> PyResult<Bound<'py, PyAny>> {
+        let mode = parse_mode(py, mode)?;
+        to_py(py, &self.inner.ekf_config(mode))
+    }
+    /// Prior `(mean, variance)` of `x_0` given the first measurement, or `None`.
+    fn initial_state(&self, y0: f64) -> Option<(f64, f64)> {
+        self.inner.initial_state(y0)
     }
     /// Sample rate (Hz).
     #[getter]
     fn rate(&self) -> f64 {
         self.inner.rate_hz()
     }
-    /// Signals (names, log paths, units) as JSON.
-    fn signals_json(&self) -> PyResult<String> {
-        json(self.inner.signals())
+    /// Signals (names, log paths, units) as a dict.
+    fn signals<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_py(py, self.inner.signals())
     }
-    /// Training parameters as JSON.
-    fn params_json(&self) -> PyResult<String> {
-        json(self.inner.params())
+    /// Training parameters as a dict by keyword argument.
+    fn params<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        params_dict(py, self.inner.params())
     }
-    /// Training summary as JSON.
-    fn summary_json(&self) -> PyResult<String> {
-        json(self.inner.summary())
+    /// Training summary as a dict.
+    fn summary<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let s = self.inner.summary();
+        let d = to_py(py, s)?;
+        // Wall-clock time is not saved in model files; report it while it is known.
+        d.set_item("seconds", s.seconds)?;
+        Ok(d)
     }
     /// The transition GP.
     fn transition(&self) -> GaussianProcessCore {
@@ -451,25 +1008,114 @@ impl HysteresisModelCore {
         GaussianProcessCore::wrap(self.inner.sensor().clone())
     }
     /// The model as JSON (the format of `save`, shared with the CLI).
-    fn to_json(&self) -> PyResult<String> {
-        self.inner.to_json().map_err(model_err)
+    fn to_json(&self, py: Python<'_>) -> PyResult<String> {
+        self.inner.to_json().map_err(|e| raise(py, e))
     }
     /// Parses `to_json` output.
     #[staticmethod]
-    fn from_json(text: &str) -> PyResult<Self> {
-        Ok(Self {
-            inner: HbnModel::from_json(text, "<string>").map_err(model_err)?,
-        })
+    fn from_json(py: Python<'_>, text: &str) -> PyResult<Self> {
+        Ok(Self::wrap(
+            HbnModel::from_json(text, "<string>").map_err(|e| raise(py, e))?,
+        ))
     }
     /// Writes the model atomically (the CLI's `hbn train --out` format).
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
-        detached(py, || self.inner.save(&path).map_err(model_err))
+        detached(py, || Ok(self.inner.save(&path)?))
     }
     /// Loads a model written by `save` or by `hbn train`.
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
-        let inner = detached(py, move || HbnModel::load(&path).map_err(model_err))?;
-        Ok(Self { inner })
+        let inner = detached(py, move || Ok(HbnModel::load(&path)?))?;
+        Ok(Self::wrap(inner))
+    }
+}
+
+/// Native streaming filter (`hbn_model::Filter`). Use `hbn.Filter` instead.
+#[pyclass(name = "FilterCore", module = "hbn._hbn")]
+pub struct FilterCore {
+    inner: Filter,
+}
+
+#[pymethods]
+impl FilterCore {
+    /// One sample: input `u` and measurement `y` (NaN allowed: held or skipped, flagged).
+    fn step(&mut self, u: f64, y: f64) -> FilterStep {
+        FilterStep::from(self.inner.step(u, y))
+    }
+    /// Forgets the state; the next step initialises again.
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+    /// The estimation mode.
+    #[getter]
+    fn mode(&self) -> &'static str {
+        self.inner.mode().name()
+    }
+    /// Samples since the last (re)initialisation.
+    #[getter]
+    fn steps(&self) -> u64 {
+        self.inner.state().map_or(0, |s| s.steps)
+    }
+}
+
+/// The output of one filter step.
+#[pyclass(name = "FilterOutput", module = "hbn", frozen, get_all)]
+pub struct FilterStep {
+    /// Estimate of the state.
+    x: f64,
+    /// Its standard deviation.
+    x_std: f64,
+    /// Predicted measurement before the update.
+    y_pred: f64,
+    /// Innovation `y - y_pred` (0 when the update was skipped).
+    innovation: f64,
+    /// Innovation variance.
+    innovation_var: f64,
+    /// Normalised innovation squared.
+    nis: f64,
+    /// Process noise variance used for x.
+    q_x: f64,
+    /// Measurement noise variance used.
+    r: f64,
+    /// Guard flags (bits; see `flag_names()`).
+    flags: u32,
+    /// Smallest eigenvalue of the observability Gramian (NaN for the first samples).
+    obs_min: f64,
+    /// Largest eigenvalue of the observability Gramian.
+    obs_max: f64,
+}
+
+impl From<FilterOutput> for FilterStep {
+    fn from(o: FilterOutput) -> Self {
+        Self {
+            x: o.x,
+            x_std: o.x_std,
+            y_pred: o.y_pred,
+            innovation: o.innovation,
+            innovation_var: o.innovation_var,
+            nis: o.nis,
+            q_x: o.q_x,
+            r: o.r,
+            flags: o.flags.0,
+            obs_min: o.obs_min,
+            obs_max: o.obs_max,
+        }
+    }
+}
+
+#[pymethods]
+impl FilterStep {
+    /// Names of the guard flags that fired.
+    fn flag_names(&self) -> Vec<&'static str> {
+        Flags(self.flags).names().collect()
+    }
+    fn __repr__(&self) -> String {
+        format!(
+            "FilterOutput(x={}, x_std={}, flags={:?})",
+            self.x,
+            self.x_std,
+            self.flag_names()
+        )
     }
 }
 
@@ -478,26 +1124,26 @@ impl HysteresisModelCore {
 // ---------------------------------------------------------------------------------------------
 
 /// Simulates a hysteretic system under a random bounded-increment input: `(u, x, y)`.
+/// `None` settings take the simulator's defaults.
 #[pyfunction]
 #[pyo3(signature = (system, steps, seed, noise_gain, rate))]
 fn simulate<'py>(
     py: Python<'py>,
     system: &str,
     steps: usize,
-    seed: u64,
-    noise_gain: f64,
-    rate: f64,
+    seed: Option<u64>,
+    noise_gain: Option<f64>,
+    rate: Option<f64>,
 ) -> PyResult<(Arr<'py>, Arr<'py>, Arr<'py>)> {
-    let kind = SystemKind::from_str(system).map_err(value_err)?;
+    let kind = SystemKind::from_str(system).map_err(|e| raise(py, e))?;
+    let d = SimConfig::new(kind);
     let cfg = SimConfig {
         system: kind,
-        noise_gain,
-        rate_hz: rate,
-        seed,
+        noise_gain: noise_gain.unwrap_or(d.noise_gain),
+        rate_hz: rate.unwrap_or(d.rate_hz),
+        seed: seed.unwrap_or(d.seed),
     };
-    let t = detached(py, move || {
-        hbn_sim::simulate_random(&cfg, steps).map_err(value_err)
-    })?;
+    let t = detached(py, move || Ok(hbn_sim::simulate_random(&cfg, steps)?))?;
     Ok((
         PyArray1::from_vec(py, t.u),
         PyArray1::from_vec(py, t.x),
@@ -545,56 +1191,97 @@ fn systems() -> Vec<&'static str> {
     SystemKind::ALL.iter().map(|k| k.name()).collect()
 }
 
-/// Reads signals from an MCAP log and resamples them on one grid: `(t, columns, rate)`.
+/// Reads signals from an MCAP log and resamples them on one grid (`hbn_pipeline::load_log`,
+/// the pipeline of the CLI): `(t, columns, rate)`.
 #[pyfunction]
-#[pyo3(signature = (path, signals, rate))]
+#[pyo3(signature = (path, signals, rate, time_source, max_gap))]
 #[allow(clippy::type_complexity)]
 fn read_mcap<'py>(
     py: Python<'py>,
     path: PathBuf,
     signals: Vec<String>,
     rate: Option<f64>,
+    time_source: Option<&str>,
+    max_gap: Option<f64>,
 ) -> PyResult<(Arr<'py>, Vec<Arr<'py>>, f64)> {
     let paths = signals
         .iter()
-        .map(|s| SignalPath::from_str(s).map_err(io_err))
+        .map(|s| parse_path(py, LogOption::Input, s))
         .collect::<PyResult<Vec<_>>>()?;
     if paths.is_empty() {
-        return Err(PyValueError::new_err("signals: give at least one signal"));
+        return Err(raise(
+            py,
+            Fail::config("signals", "give at least one signal"),
+        ));
     }
-    let aligned = detached(py, move || {
-        let raw = hbn_io::read_signals(&path, &paths, &ReadOptions::default()).map_err(io_err)?;
-        let rate = match rate {
-            Some(r) => r,
-            None => hbn_io::native_rate_hz(&raw[0]).ok_or_else(|| {
-                PyValueError::new_err(format!(
-                    "`{}` has fewer than 2 samples or no time step; pass rate=",
-                    signals[0]
-                ))
-            })?,
-        };
-        hbn_io::resample(&raw, &ResampleOptions::new(rate)).map_err(io_err)
+    let opts = log_options(py, rate, time_source, max_gap)?;
+    let log = detached(py, move || {
+        let opts = opts.check()?;
+        Ok(hbn_pipeline::load_log(
+            &path,
+            &paths,
+            opts.rate_hz,
+            &opts,
+            &mut |_| {},
+        )?)
     })?;
-    let rate = aligned.rate_hz;
-    let cols = aligned
+    let rate = log.rate_hz();
+    let cols = log
+        .aligned
         .columns
         .into_iter()
         .map(|c| PyArray1::from_vec(py, c))
         .collect();
-    Ok((PyArray1::from_vec(py, aligned.t_s), cols, rate))
+    Ok((PyArray1::from_vec(py, log.aligned.t_s), cols, rate))
 }
+
+/// One channel: `(topic, message_count, message_encoding, schema_name)`.
+type TopicRow = (String, u64, String, Option<String>);
 
 /// Topics of an MCAP log: `[(topic, message_count, message_encoding, schema_name)]`.
 #[pyfunction]
-fn list_topics(
-    py: Python<'_>,
-    path: PathBuf,
-) -> PyResult<Vec<(String, u64, String, Option<String>)>> {
-    let topics = detached(py, move || hbn_io::list_topics(&path).map_err(io_err))?;
+fn list_topics(py: Python<'_>, path: PathBuf) -> PyResult<Vec<TopicRow>> {
+    let topics = detached(py, move || Ok(hbn_io::list_topics(&path)?))?;
     Ok(topics
         .into_iter()
         .map(|t| (t.topic, t.message_count, t.message_encoding, t.schema_name))
         .collect())
+}
+
+/// The training parameters' defaults, by keyword argument (`hbn_model::HbnParams::default`).
+#[pyfunction]
+fn default_params(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    params_dict(py, &HbnParams::default())
+}
+
+/// The log reading defaults (`hbn_pipeline::LogOptions::default`): `time_source`, `max_gap`,
+/// `rate` (None: the log's native rate), and the default signal paths.
+#[pyfunction]
+fn default_log_options(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let o = LogOptions::default();
+    let d = PyDict::new(py);
+    d.set_item("time_source", o.time_source.name())?;
+    d.set_item("max_gap", o.max_gap_s)?;
+    d.set_item("rate", o.rate_hz)?;
+    d.set_item("input", hbn_pipeline::DEFAULT_INPUT)?;
+    d.set_item("state", hbn_pipeline::DEFAULT_STATE)?;
+    d.set_item("output", hbn_pipeline::DEFAULT_OUTPUT)?;
+    d.set_item("mode", Mode::default().name())?;
+    Ok(d)
+}
+
+/// The GP fitting defaults (`hbn_gp::GpParams::new`), by keyword argument.
+#[pyfunction]
+fn default_gp_params(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let p = GpParams::new(hbn_core::KernelSpec::se_ard(1));
+    let d = PyDict::new(py);
+    d.set_item("optimize", p.optimize)?;
+    d.set_item("normalize", p.normalize)?;
+    d.set_item("n_restarts", p.n_starts)?;
+    d.set_item("max_iter", p.max_iters)?;
+    d.set_item("max_points", p.max_points)?;
+    d.set_item("seed", p.seed)?;
+    Ok(d)
 }
 
 /// Kernel names accepted by `kernel=`.
@@ -606,28 +1293,42 @@ fn kernel_names() -> &'static str {
 /// Estimation mode names.
 #[pyfunction]
 fn mode_names() -> Vec<&'static str> {
-    vec![mode_name(Mode::Ekf), mode_name(Mode::EkfBlr)]
+    Mode::ALL.iter().map(|m| m.name()).collect()
 }
 
 /// Names of the estimator's guard flags, in bit order (bit `i` is element `i`).
 #[pyfunction]
 fn flag_names() -> Vec<&'static str> {
-    hbn_core::Flags::NAMES.to_vec()
+    Flags::NAMES.to_vec()
 }
 
 /// The native extension of the `hbn` package.
 #[pymodule]
 fn _hbn(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
     m.add_class::<GaussianProcessCore>()?;
     m.add_class::<HysteresisModelCore>()?;
+    m.add_class::<FilterCore>()?;
+    m.add_class::<FilterStep>()?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(systems, m)?)?;
     m.add_function(wrap_pyfunction!(score, m)?)?;
     m.add_function(wrap_pyfunction!(read_mcap, m)?)?;
     m.add_function(wrap_pyfunction!(list_topics, m)?)?;
+    m.add_function(wrap_pyfunction!(default_params, m)?)?;
+    m.add_function(wrap_pyfunction!(default_log_options, m)?)?;
+    m.add_function(wrap_pyfunction!(default_gp_params, m)?)?;
     m.add_function(wrap_pyfunction!(kernel_names, m)?)?;
     m.add_function(wrap_pyfunction!(mode_names, m)?)?;
     m.add_function(wrap_pyfunction!(flag_names, m)?)?;
+    let c = classes(py)?;
+    m.add("HbnError", c.base.bind(py))?;
+    m.add("HbnIOError", c.io.bind(py))?;
+    m.add("HbnFileNotFoundError", c.not_found.bind(py))?;
+    m.add("DataError", c.data.bind(py))?;
+    m.add("ModelFileError", c.model_file.bind(py))?;
+    m.add("ConfigError", c.config.bind(py))?;
+    m.add("TrainingError", c.training.bind(py))?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("MODEL_FORMAT_VERSION", hbn_model::MODEL_FORMAT_VERSION)?;
     m.add("DEFAULT_INDUCING", hbn_model::DEFAULT_INDUCING)?;

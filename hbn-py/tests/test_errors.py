@@ -32,13 +32,13 @@ def test_gp_bad_data():
 
 def test_model_bad_data():
     d = hbn.simulate("duhem", 50, seed=1)
-    with pytest.raises(ValueError, match="equal lengths"):
+    with pytest.raises(hbn.DataError, match="equal lengths"):
         hbn.HysteresisModel.fit(d["u"], d["x"][:-1], d["y"])
     x = d["x"].copy()
     x[7] = np.nan
     with pytest.raises(ValueError, match=r"x\[7\]"):
         hbn.HysteresisModel.fit(d["u"], x, d["y"])
-    with pytest.raises(ValueError, match="unknown kernel"):
+    with pytest.raises(hbn.ConfigError, match="kernel"):
         hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], kernel="nope")
     with pytest.raises(ValueError, match="rate"):
         hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], rate=-1.0)
@@ -61,7 +61,7 @@ def test_simulate_bad_inputs():
 
 def test_file_errors(tmp_path):
     missing = tmp_path / "missing.hbn"
-    with pytest.raises(FileNotFoundError, match="missing.hbn"):
+    with pytest.raises(hbn.HbnFileNotFoundError, match="missing.hbn"):
         hbn.HysteresisModel.load(missing)
     with pytest.raises(FileNotFoundError):
         hbn.GaussianProcess.load(missing)
@@ -71,7 +71,7 @@ def test_file_errors(tmp_path):
         hbn.HysteresisModel.load(tmp_path)  # a directory
     bad = tmp_path / "bad.hbn"
     bad.write_text('{"format": "something-else", "version": 1}')
-    with pytest.raises(ValueError, match="not an hbn model"):
+    with pytest.raises(hbn.ModelFileError, match="not an hbn model"):
         hbn.HysteresisModel.load(bad)
     bad.write_text("hello")
     with pytest.raises(ValueError, match="not an hbn model"):
@@ -86,7 +86,7 @@ def test_file_errors(tmp_path):
         hbn.GaussianProcess.load(bad)
     notmcap = tmp_path / "x.mcap"
     notmcap.write_text("not an mcap")
-    with pytest.raises(ValueError, match="MCAP"):
+    with pytest.raises(hbn.DataError, match="MCAP"):
         hbn.read_mcap(notmcap, {"u": "/u.data"})
     with pytest.raises(ValueError):
         hbn.read_mcap(notmcap, {})

@@ -106,18 +106,23 @@ impl Flags {
     }
 }
 
-/// Estimation mode.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// Estimation mode. The default is [`Mode::Ekf`] (what `hbn estimate` and Python use when no
+/// mode is given).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(rename_all = "kebab-case"))]
 pub enum Mode {
     /// Plain EKF: GP mean gradients as Jacobians, GP variances + learned noise as Q and R.
+    #[default]
     Ekf,
     /// EKF with local Bayesian linear regression for the Jacobians and the noise (Sec. 4.3).
     EkfBlr,
 }
 
 impl Mode {
+    /// Every mode, in the order of their names.
+    pub const ALL: [Mode; 2] = [Mode::Ekf, Mode::EkfBlr];
+
     /// The mode's name: `ekf` or `ekf-blr` (what [`core::str::FromStr`] accepts).
     pub const fn name(self) -> &'static str {
         match self {
@@ -182,9 +187,10 @@ pub struct EkfConfig {
     pub x_bounds: (f64, f64),
     /// Box of the sensor state `s`.
     pub y_bounds: (f64, f64),
-    /// Initial mean of `x` (e.g. the training mean).
+    /// Initial mean of `x` (e.g. the training mean), used when the model has no
+    /// [`InitPrior`] or the first measurement is not finite.
     pub x0_mean: f64,
-    /// Initial variance of `x` (e.g. the training variance).
+    /// Initial variance of `x` (e.g. the training variance); see `x0_mean`.
     pub x0_var: f64,
 }
 
@@ -234,6 +240,109 @@ impl EkfConfig {
     }
 }
 
+/// Prior of `x_0` from the first measurement: training `(y, x)` pairs sorted by `y`. Hysteresis
+/// makes `x` given `y` ambiguous; the spread of `x` over the training samples whose `y` is
+/// nearest says how much. Checked once by [`InitPrior::new`]; [`InitPrior::prior`] is
+/// allocation-free, `O(log n + neighbours)`.
+#[derive(Clone, Copy, Debug)]
+pub struct InitPrior<'a> {
+    pairs: &'a [[f64; 2]],
+    neighbours: usize,
+    var_floor: f64,
+}
+
+impl<'a> InitPrior<'a> {
+    /// `pairs`: `[y, x]` rows sorted by `y` (non-decreasing), finite, at least one; `neighbours`:
+    /// how many nearest samples to average (`>= 1`); `var_floor`: the smallest variance
+    /// returned (`> 0`).
+    pub fn new(
+        pairs: &'a [[f64; 2]],
+        neighbours: usize,
+        var_floor: f64,
+    ) -> Result<Self, CoreError> {
+        if pairs.is_empty() {
+            return Err(CoreError::Empty);
+        }
+        if neighbours == 0 {
+            return Err(CoreError::InvalidSpec(
+                "InitPrior needs at least one neighbour",
+            ));
+        }
+        if !(var_floor.is_finite() && var_floor > 0.0) {
+            return Err(CoreError::InvalidSpec(
+                "InitPrior's variance floor must be finite and > 0",
+            ));
+        }
+        if !pairs.iter().all(|p| p[0].is_finite() && p[1].is_finite()) {
+            return Err(CoreError::NonFinite);
+        }
+        if pairs.windows(2).any(|w| matches!(w, [a, b] if b[0] < a[0])) {
+            return Err(CoreError::InvalidSpec(
+                "InitPrior's pairs must be sorted by y",
+            ));
+        }
+        Ok(Self {
+            pairs,
+            neighbours,
+            var_floor,
+        })
+    }
+
+    /// Mean and variance of `x` over the `neighbours` training samples whose `y` is nearest `y0`
+    /// (ties go to the lower index), the variance at least the floor. `None` for a non-finite
+    /// `y0`.
+    pub fn prior(&self, y0: f64) -> Option<(f64, f64)> {
+        if !y0.is_finite() {
+            return None;
+        }
+        let p = self.pairs;
+        // Every index below is in bounds (`lo <= hi <= p.len()`); `get` keeps that checkable.
+        let dist = |i: usize| p.get(i).map_or(f64::INFINITY, |q| libm::fabs(q[0] - y0));
+        let k = self.neighbours.min(p.len());
+        // Grow a window [lo, hi) outward from y0; the left side wins ties (lower index).
+        let split = p.partition_point(|q| q[0] < y0);
+        let (mut lo, mut hi) = (split, split);
+        while hi - lo < k {
+            let take_left = lo > 0 && (hi == p.len() || dist(lo - 1) <= dist(hi));
+            if take_left {
+                lo -= 1;
+            } else if hi < p.len() {
+                hi += 1;
+            } else {
+                break;
+            }
+        }
+        // The walk takes ties on the left (equal distances, i.e. equal y) from the high-index
+        // end; the nearest-k set takes them from the low-index end. When the window cuts such
+        // a run, swap the part taken for the run's lowest indices.
+        let (mut first, mut cut) = (lo..lo, lo..hi);
+        if lo < split && lo > 0 && dist(lo - 1) == dist(lo) {
+            let d = dist(lo);
+            let run_hi = lo
+                + p.get(lo..split)
+                    .unwrap_or(&[])
+                    .partition_point(|q| libm::fabs(q[0] - y0) >= d);
+            let run_lo = p
+                .get(..lo)
+                .unwrap_or(&[])
+                .partition_point(|q| libm::fabs(q[0] - y0) > d);
+            first = run_lo..run_lo + (run_hi - lo);
+            cut = run_hi..hi;
+        }
+        let picked = || {
+            first
+                .clone()
+                .chain(cut.clone())
+                .filter_map(|i| p.get(i))
+                .map(|q| q[1])
+        };
+        let n = k.max(1) as f64;
+        let mean = picked().sum::<f64>() / n;
+        let var = picked().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n;
+        Some((mean, var.max(self.var_floor)))
+    }
+}
+
 /// The trained HBN as borrowed views: what the step reads. A firmware can build it from
 /// `static` slices.
 #[derive(Clone, Copy, Debug)]
@@ -248,6 +357,9 @@ pub struct HbnView<'a> {
     pub sensor_local: Option<Neighbourhood<'a>>,
     /// Local regression settings (EKF+BLR only).
     pub blr: LocalRegression,
+    /// Prior of `x_0` from the first measurement; without it (or with a non-finite first
+    /// measurement) the filter starts from [`EkfConfig::x0_mean`] and [`EkfConfig::x0_var`].
+    pub init: Option<InitPrior<'a>>,
 }
 
 impl HbnView<'_> {
@@ -334,30 +446,28 @@ struct Local {
     epistemic: f64,
 }
 
-/// The estimator: a model view, its settings, the state and the caller's scratch memory.
-#[derive(Debug)]
-pub struct Estimator<'m, 's> {
-    model: HbnView<'m>,
-    config: EkfConfig,
-    state: Option<EkfState>,
-    scratch: &'s mut [f64],
+/// Which relation of the HBN a linearisation is of.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Relation {
+    /// `H_D`, the transition.
+    Transition,
+    /// `H_S`, the sensor.
+    Sensor,
 }
 
-impl<'m, 's> Estimator<'m, 's> {
-    /// Scratch values [`Estimator::new`] needs for `model` (faer-style sizing).
-    pub fn scratch_len(model: &HbnView<'_>) -> usize {
-        model
-            .transition
-            .predict_scratch(Want::EKF)
-            .max(model.sensor.predict_scratch(Want::EKF))
-    }
+/// A checked model view and filter settings: the per-sample step as a function of the
+/// filter's state and the caller's scratch memory. `Copy`, so a firmware or an owning wrapper
+/// keeps it next to its state; [`Ekf::new`] does every check once and [`Ekf::step`] cannot
+/// fail.
+#[derive(Clone, Copy, Debug)]
+pub struct Ekf<'m> {
+    model: HbnView<'m>,
+    config: EkfConfig,
+}
 
-    /// Checks model, settings and scratch size once; the step then cannot fail.
-    pub fn new(
-        model: HbnView<'m>,
-        config: EkfConfig,
-        scratch: &'s mut [f64],
-    ) -> Result<Self, CoreError> {
+impl<'m> Ekf<'m> {
+    /// Checks model and settings once.
+    pub fn new(model: HbnView<'m>, config: EkfConfig) -> Result<Self, CoreError> {
         model.validate()?;
         config.validate()?;
         if config.mode == Mode::EkfBlr
@@ -367,24 +477,17 @@ impl<'m, 's> Estimator<'m, 's> {
                 "EKF+BLR needs the local training data in the model",
             ));
         }
-        let needed = Self::scratch_len(&model);
-        if scratch.len() < needed {
-            return Err(CoreError::ScratchTooSmall {
-                needed,
-                got: scratch.len(),
-            });
-        }
-        Ok(Self {
-            model,
-            config,
-            state: None,
-            scratch,
-        })
+        Ok(Self { model, config })
     }
 
-    /// The current state (`None` before the first step).
-    pub fn state(&self) -> Option<&EkfState> {
-        self.state.as_ref()
+    /// Scratch values [`Ekf::step`] needs (faer-style sizing).
+    pub fn scratch_len(&self) -> usize {
+        Estimator::scratch_len(&self.model)
+    }
+
+    /// The model view.
+    pub fn model(&self) -> &HbnView<'m> {
+        &self.model
     }
 
     /// The settings.
@@ -392,18 +495,23 @@ impl<'m, 's> Estimator<'m, 's> {
         &self.config
     }
 
-    /// Forgets the state; the next step initialises again.
-    pub fn reset(&mut self) {
-        self.state = None;
-    }
-
-    /// Processes sample `k`: input `u_k` and measurement `y_k`. Allocation-free, panic-free,
-    /// bounded time.
-    pub fn step(&mut self, u_k: f64, y_k: f64) -> StepOutput {
+    /// Processes sample `k`: input `u_k` and measurement `y_k`, advancing `state` (`None`
+    /// before the first sample: the step initialises it). Allocation-free, panic-free, bounded
+    /// time. A `scratch` shorter than [`Ekf::scratch_len`] makes every prediction fail, which
+    /// the step reports as [`Flags::MODEL_INVALID`] (the [`Estimator`] checks it once).
+    pub fn step(
+        &self,
+        state: &mut Option<EkfState>,
+        scratch: &mut [f64],
+        u_k: f64,
+        y_k: f64,
+    ) -> StepOutput {
         let mut flags = 0u32;
         let cfg = self.config;
-        let Some(mut st) = self.state else {
-            return self.initialise(u_k, y_k);
+        let Some(mut st) = *state else {
+            let (st, out) = self.initialise(u_k, y_k);
+            *state = Some(st);
+            return out;
         };
         let u_k = if u_k.is_finite() {
             u_k
@@ -415,7 +523,7 @@ impl<'m, 's> Estimator<'m, 's> {
         // ---- predict ----
         let (x1, x2, s1) = (st.z.x, st.z.y, st.z.z);
         let a_in = [x1, x2, st.u_last, st.u_prev];
-        let tr = self.linearise(true, &a_in, &mut flags);
+        let tr = self.linearise(Relation::Transition, &a_in, scratch, &mut flags);
         let (f_mat, g_vec, q_x, q_s, s_pred);
         let mut r = cfg
             .r_floor
@@ -425,7 +533,7 @@ impl<'m, 's> Estimator<'m, 's> {
             Some(t) => {
                 let xk = clamp_flag(t.mean, cfg.x_bounds, &mut flags);
                 let b_in = [x1, s1, xk];
-                match self.linearise(false, &b_in, &mut flags) {
+                match self.linearise(Relation::Sensor, &b_in, scratch, &mut flags) {
                     Some(s) => {
                         let a1 = clamp_jac(t.grad[0], cfg.jac_max, &mut flags);
                         let a2 = clamp_jac(t.grad[1], cfg.jac_max, &mut flags);
@@ -479,7 +587,7 @@ impl<'m, 's> Estimator<'m, 's> {
         // ---- update ----
         let (innovation, s_var, nis) = update(&mut st, y_k, r, &cfg, &mut flags);
         st.steps += 1;
-        self.state = Some(st);
+        *state = Some(st);
         StepOutput {
             x: st.z.x,
             x_std: sqrt(st.p.m11.max(0.0)),
@@ -494,8 +602,15 @@ impl<'m, 's> Estimator<'m, 's> {
         }
     }
 
-    fn initialise(&mut self, u_k: f64, y_k: f64) -> StepOutput {
+    /// The first sample: `x_0` from the model's [`InitPrior`] at `y_0` when it has one and
+    /// `y_0` is finite, else from the settings.
+    fn initialise(&self, u_k: f64, y_k: f64) -> (EkfState, StepOutput) {
         let cfg = self.config;
+        let (x0_mean, x0_var) = self
+            .model
+            .init
+            .and_then(|prior| prior.prior(y_k))
+            .unwrap_or((cfg.x0_mean, cfg.x0_var));
         let mut flags = Flags::INITIALISED;
         let u0 = if u_k.is_finite() {
             u_k
@@ -514,20 +629,17 @@ impl<'m, 's> Estimator<'m, 's> {
             0.5 * (cfg.y_bounds.0 + cfg.y_bounds.1)
         };
         let s_var = if y_k.is_finite() { r } else { cfg.p_max };
-        let p = Matrix3::new(
-            cfg.x0_var, cfg.x0_var, 0.0, cfg.x0_var, cfg.x0_var, 0.0, 0.0, 0.0, s_var,
-        );
+        let p = Matrix3::new(x0_var, x0_var, 0.0, x0_var, x0_var, 0.0, 0.0, 0.0, s_var);
         let mut f = flags;
         let p = bound_covariance(p, cfg.p_min, cfg.p_max, &mut f);
         let st = EkfState {
-            z: Vector3::new(cfg.x0_mean, cfg.x0_mean, s0),
+            z: Vector3::new(x0_mean, x0_mean, s0),
             p,
             u_last: u0,
             u_prev: u0,
             steps: 1,
         };
-        self.state = Some(st);
-        StepOutput {
+        let out = StepOutput {
             x: st.z.x,
             x_std: sqrt(st.p.m11),
             y_pred: s0,
@@ -538,17 +650,29 @@ impl<'m, 's> Estimator<'m, 's> {
             r,
             jacobian: Matrix3::identity(),
             flags: Flags(f),
-        }
+        };
+        (st, out)
     }
-}
 
-impl Estimator<'_, '_> {
-    /// Linearises the transition (`true`) or sensor (`false`) at `input` in the configured mode.
-    fn linearise(&mut self, transition: bool, input: &[f64], flags: &mut u32) -> Option<Local> {
-        let gp = if transition {
-            &self.model.transition
-        } else {
-            &self.model.sensor
+    /// Linearises one relation of the HBN at `input` in the configured mode.
+    fn linearise(
+        &self,
+        which: Relation,
+        input: &[f64],
+        scratch: &mut [f64],
+        flags: &mut u32,
+    ) -> Option<Local> {
+        let (gp, local, blr_empty) = match which {
+            Relation::Transition => (
+                &self.model.transition,
+                self.model.transition_local,
+                Flags::BLR_EMPTY_TRANSITION,
+            ),
+            Relation::Sensor => (
+                &self.model.sensor,
+                self.model.sensor_local,
+                Flags::BLR_EMPTY_SENSOR,
+            ),
         };
         let d = gp.dim();
         // `HbnView::validate` fixed `d` at 4 (transition) or 3 (sensor), the input's length.
@@ -556,7 +680,7 @@ impl Estimator<'_, '_> {
             *flags |= Flags::MODEL_INVALID;
             return None;
         };
-        let p = match gp.predict(input, Want::EKF, self.scratch) {
+        let p = match gp.predict(input, Want::EKF, scratch) {
             Ok(p) => p,
             Err(_) => {
                 *flags |= Flags::MODEL_INVALID;
@@ -572,43 +696,34 @@ impl Estimator<'_, '_> {
         for (g, pg) in out.grad.iter_mut().zip(&p.grad_mean).take(d) {
             *g = *pg;
         }
-        if self.config.mode == Mode::EkfBlr {
-            let local = if transition {
-                self.model.transition_local
-            } else {
-                self.model.sensor_local
-            };
-            if let Some(nb) = local {
-                let post = self.model.blr.posterior(
-                    &nb,
-                    input,
-                    p.mean,
-                    p.grad_mean.get(..d).unwrap_or(&[]),
-                    p.variance,
-                    out.noise,
-                );
-                if post.n == 0 {
-                    *flags |= if transition {
-                        Flags::BLR_EMPTY_TRANSITION
-                    } else {
-                        Flags::BLR_EMPTY_SENSOR
-                    };
+        if self.config.mode == Mode::EkfBlr
+            && let Some(nb) = local
+        {
+            let post = self.model.blr.posterior(
+                &nb,
+                input,
+                p.mean,
+                p.grad_mean.get(..d).unwrap_or(&[]),
+                p.variance,
+                out.noise,
+            );
+            if post.n == 0 {
+                *flags |= blr_empty;
+            }
+            if post.capped {
+                *flags |= Flags::BLR_CAPPED;
+            }
+            if post.noise.is_finite()
+                && post.grad.iter().take(d).all(|g| g.is_finite())
+                && post.intercept.is_finite()
+            {
+                out.mean += post.intercept;
+                for (g, pg) in out.grad.iter_mut().zip(&post.grad).take(d) {
+                    *g = *pg;
                 }
-                if post.capped {
-                    *flags |= Flags::BLR_CAPPED;
-                }
-                if post.noise.is_finite()
-                    && post.grad.iter().take(d).all(|g| g.is_finite())
-                    && post.intercept.is_finite()
-                {
-                    out.mean += post.intercept;
-                    for (g, pg) in out.grad.iter_mut().zip(&post.grad).take(d) {
-                        *g = *pg;
-                    }
-                    // BLR's expected noise covariance replaces the GP's learned (homoscedastic)
-                    // noise; the GP's epistemic variance still applies.
-                    out.noise = post.noise;
-                }
+                // BLR's expected noise covariance replaces the GP's learned (homoscedastic)
+                // noise; the GP's epistemic variance still applies.
+                out.noise = post.noise;
             }
         }
         if !(out.mean.is_finite()
@@ -620,6 +735,66 @@ impl Estimator<'_, '_> {
             return None;
         }
         Some(out)
+    }
+}
+
+/// The estimator for firmware: a checked [`Ekf`], its state and the caller's scratch memory,
+/// all borrowed. (`hbn_model::Filter` is the std twin that owns model, state and scratch.)
+#[derive(Debug)]
+pub struct Estimator<'m, 's> {
+    ekf: Ekf<'m>,
+    state: Option<EkfState>,
+    scratch: &'s mut [f64],
+}
+
+impl<'m, 's> Estimator<'m, 's> {
+    /// Scratch values [`Estimator::new`] needs for `model` (faer-style sizing).
+    pub fn scratch_len(model: &HbnView<'_>) -> usize {
+        model
+            .transition
+            .predict_scratch(Want::EKF)
+            .max(model.sensor.predict_scratch(Want::EKF))
+    }
+
+    /// Checks model, settings and scratch size once; the step then cannot fail.
+    pub fn new(
+        model: HbnView<'m>,
+        config: EkfConfig,
+        scratch: &'s mut [f64],
+    ) -> Result<Self, CoreError> {
+        let ekf = Ekf::new(model, config)?;
+        let needed = ekf.scratch_len();
+        if scratch.len() < needed {
+            return Err(CoreError::ScratchTooSmall {
+                needed,
+                got: scratch.len(),
+            });
+        }
+        Ok(Self {
+            ekf,
+            state: None,
+            scratch,
+        })
+    }
+
+    /// The current state (`None` before the first step).
+    pub fn state(&self) -> Option<&EkfState> {
+        self.state.as_ref()
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &EkfConfig {
+        self.ekf.config()
+    }
+
+    /// Forgets the state; the next step initialises again.
+    pub fn reset(&mut self) {
+        self.state = None;
+    }
+
+    /// Processes sample `k` ([`Ekf::step`]). Allocation-free, panic-free, bounded time.
+    pub fn step(&mut self, u_k: f64, y_k: f64) -> StepOutput {
+        self.ekf.step(&mut self.state, self.scratch, u_k, y_k)
     }
 }
 
@@ -791,4 +966,71 @@ pub fn observability_eigenvalues(jacobians: &[Matrix3<f64>], r: &[f64]) -> Optio
         hi = hi.max(*x);
     }
     Some((lo.max(0.0), hi))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    /// The nearest-k set by (distance, index), found by sorting (what the allocation-free walk
+    /// must equal): mean and variance of x.
+    fn brute(pairs: &[[f64; 2]], y0: f64, k: usize) -> (f64, f64) {
+        let mut order: [usize; 64] = core::array::from_fn(|i| i);
+        let order = &mut order[..pairs.len()];
+        order.sort_by(|&a, &b| {
+            libm::fabs(pairs[a][0] - y0)
+                .total_cmp(&libm::fabs(pairs[b][0] - y0))
+                .then(a.cmp(&b))
+        });
+        let mut near = [0usize; 64];
+        let k = k.min(pairs.len());
+        near[..k].copy_from_slice(&order[..k]);
+        near[..k].sort_unstable();
+        let mean = near[..k].iter().map(|&i| pairs[i][1]).sum::<f64>() / k as f64;
+        let var = near[..k]
+            .iter()
+            .map(|&i| (pairs[i][1] - mean) * (pairs[i][1] - mean))
+            .sum::<f64>()
+            / k as f64;
+        (mean, var)
+    }
+
+    #[test]
+    fn init_prior_takes_the_nearest_samples_ties_by_index() {
+        let mut rng = Rng::new(5);
+        for case in 0..400 {
+            let n = 1 + (case % 40);
+            // Few distinct y values: many ties, runs cut by the window on both sides.
+            let mut pairs = [[0.0; 2]; 64];
+            for p in pairs[..n].iter_mut() {
+                *p = [(rng.uniform() * 6.0).floor(), rng.uniform()];
+            }
+            let pairs = &mut pairs[..n];
+            pairs.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+            let k = 1 + (case % 7);
+            let prior = InitPrior::new(pairs, k, 1e-300).unwrap();
+            for y0 in [-1.0, 0.0, 1.5, 2.0, 2.5, 3.0, 5.0, 9.0] {
+                let (m, v) = prior.prior(y0).unwrap();
+                let (bm, bv) = brute(pairs, y0, k);
+                assert!((m - bm).abs() < 1e-12, "case {case} y0 {y0}: {m} vs {bm}");
+                assert!((v - bv.max(1e-300)).abs() < 1e-12, "case {case} y0 {y0}");
+            }
+            assert!(prior.prior(f64::NAN).is_none());
+        }
+    }
+
+    #[test]
+    fn init_prior_rejects_bad_tables() {
+        assert_eq!(InitPrior::new(&[], 1, 1.0).unwrap_err(), CoreError::Empty);
+        let unsorted = [[1.0, 0.0], [0.0, 0.0]];
+        assert!(InitPrior::new(&unsorted, 1, 1.0).is_err());
+        let nan = [[f64::NAN, 0.0]];
+        assert_eq!(
+            InitPrior::new(&nan, 1, 1.0).unwrap_err(),
+            CoreError::NonFinite
+        );
+        assert!(InitPrior::new(&[[0.0, 0.0]], 0, 1.0).is_err());
+        assert!(InitPrior::new(&[[0.0, 0.0]], 1, 0.0).is_err());
+    }
 }

@@ -40,7 +40,8 @@ pub mod rng;
 
 pub use blr::{LocalRegression, Neighbourhood, NeighbourhoodParts, Posterior};
 pub use ekf::{
-    EkfConfig, EkfState, Estimator, Flags, HbnView, Mode, StepOutput, observability_eigenvalues,
+    Ekf, EkfConfig, EkfState, Estimator, Flags, HbnView, InitPrior, Mode, StepOutput,
+    observability_eigenvalues,
 };
 pub use error::CoreError;
 pub use gp::{GpParts, GpView, Prediction, Variance, Want};

@@ -61,12 +61,12 @@ pub enum GpError {
         retries: usize,
     },
     /// Every optimiser start failed.
-    #[error("hyperparameter optimisation failed on all {starts} starts; last error: {last}")]
+    #[error("hyperparameter optimisation failed on all {starts} starts; the last: {last}")]
     OptimizationFailed {
         /// Starts tried.
         starts: usize,
-        /// The last failure.
-        last: String,
+        /// Why the last start failed.
+        last: crate::StartFailure,
     },
     /// An error of the allocation-free core.
     #[error("core: {0}")]
@@ -87,4 +87,13 @@ pub enum GpError {
         /// What is wrong.
         reason: String,
     },
+}
+
+impl From<hbn_fs::WriteError> for GpError {
+    fn from(e: hbn_fs::WriteError) -> Self {
+        GpError::Io {
+            path: e.path.display().to_string(),
+            source: e.source,
+        }
+    }
 }

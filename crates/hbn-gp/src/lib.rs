@@ -36,31 +36,13 @@ pub use model::{
     TrainingReport,
 };
 pub use params::{GpParams, Hyperparameters, RawHyperparameters, SparseParams, SubsetPolicy};
-pub use train::{FitProgress, fit, fit_observed};
+pub use train::{FitProgress, StartFailure, Termination, fit, fit_observed};
 
-/// Writes `bytes` to `path` atomically: a temporary file in the same directory, flushed, then
-/// renamed over the target. A failure leaves no partial file behind.
+/// Fewest support points a GP keeps (`GpParams::max_points` must be at least this).
+pub const MIN_POINTS: usize = 2;
+
+/// Writes `bytes` to `path` atomically: the one writer of [`hbn_fs`] (temporary file in the
+/// same directory, fsync, rename, directory fsync). A failure leaves no partial file behind.
 pub fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> Result<(), GpError> {
-    use std::io::Write;
-    let io = |source| GpError::Io {
-        path: path.display().to_string(),
-        source,
-    };
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => std::path::Path::new("."),
-    };
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(".hbn-tmp-");
-    // Outputs are ordinary files (0644), not the owner-only mode of temporary files.
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        builder.permissions(std::fs::Permissions::from_mode(0o644));
-    }
-    let mut tmp = builder.tempfile_in(dir).map_err(io)?;
-    tmp.write_all(bytes).map_err(io)?;
-    tmp.as_file().sync_all().map_err(io)?;
-    tmp.persist(path).map_err(|e| io(e.error))?;
-    Ok(())
+    Ok(hbn_fs::write_atomic(path, bytes)?)
 }

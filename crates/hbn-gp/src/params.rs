@@ -154,10 +154,10 @@ impl GpParams {
                 format!("must be finite and > 0, got {}", self.noise_floor),
             );
         }
-        if self.max_points < 2 {
+        if self.max_points < crate::MIN_POINTS {
             return bad(
                 "max_points",
-                format!("must be >= 2, got {}", self.max_points),
+                format!("must be >= {}, got {}", crate::MIN_POINTS, self.max_points),
             );
         }
         if let Some(sp) = &self.sparse {

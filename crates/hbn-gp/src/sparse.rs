@@ -855,7 +855,7 @@ pub(crate) fn fit_sparse(
             let initial_lml = full.evaluate(&p).ok().map(|e| e.lml);
             let run = run_lbfgs(&full, p.clone(), sp.refine_iters);
             report.refinement = Some(match run {
-                Ok((q, lml, iterations)) => {
+                Ok((q, lml, iterations, _termination)) => {
                     p = q;
                     StartReport {
                         initial_lml,
@@ -868,7 +868,7 @@ pub(crate) fn fit_sparse(
                     initial_lml,
                     final_lml: None,
                     iterations: 0,
-                    error: Some(e),
+                    error: Some(e.to_string()),
                 },
             });
             report.add_stats(full.stats());

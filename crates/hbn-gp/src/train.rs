@@ -6,16 +6,105 @@ use crate::data::{check_data, column_stats, select_subset, whitening};
 use crate::likelihood::{Likelihood, LikelihoodData, NegLml, Objective, param_of_noise};
 use crate::model::{GaussianProcess, StartReport, TrainingReport};
 use crate::params::GpParams;
-use argmin::core::{Executor, State};
+use argmin::core::{Executor, State, TerminationReason, TerminationStatus};
 use argmin::solver::linesearch::MoreThuenteLineSearch;
 use argmin::solver::quasinewton::LBFGS;
 use hbn_core::kernel::MAX_DIM;
 use hbn_core::rng::Rng;
 use hbn_core::{Kernel, Metric};
+use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
-/// Progress of a fit, for progress bars.
-#[derive(Clone, Copy, Debug)]
+/// Why an optimiser start stopped.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", tag = "termination")]
+pub enum Termination {
+    /// The gradient norm or the cost change fell below its tolerance.
+    Converged,
+    /// The iteration limit (`max_iters`) was reached first: raise it, or accept the result.
+    MaxIters,
+    /// The solver stopped for another reason it names (argmin's solver exit).
+    SolverExit {
+        /// The solver's words.
+        reason: String,
+    },
+    /// The start failed; the other starts may still succeed.
+    Failed {
+        /// What went wrong.
+        failure: StartFailure,
+    },
+}
+
+impl Termination {
+    fn of(status: &TerminationStatus) -> Self {
+        match status {
+            TerminationStatus::Terminated(TerminationReason::SolverConverged)
+            | TerminationStatus::Terminated(TerminationReason::TargetCostReached) => {
+                Termination::Converged
+            }
+            TerminationStatus::Terminated(TerminationReason::MaxItersReached) => {
+                Termination::MaxIters
+            }
+            TerminationStatus::Terminated(other) => Termination::SolverExit {
+                reason: other.text().to_owned(),
+            },
+            TerminationStatus::NotTerminated => Termination::SolverExit {
+                reason: "not terminated".to_owned(),
+            },
+        }
+    }
+}
+
+impl std::fmt::Display for Termination {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Termination::Converged => f.write_str("converged"),
+            Termination::MaxIters => f.write_str("stopped at the iteration limit"),
+            Termination::SolverExit { reason } => write!(f, "solver exit: {reason}"),
+            Termination::Failed { failure } => write!(f, "failed: {failure}"),
+        }
+    }
+}
+
+/// Why an optimiser start failed.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, thiserror::Error)]
+#[serde(rename_all = "kebab-case", tag = "kind")]
+pub enum StartFailure {
+    /// `K + noise I` stayed non-positive-definite during the search, even with jitter.
+    #[error(
+        "K + noise I is not positive definite even with jitter {jitter:e}; increase the noise \
+         floor or remove duplicate inputs"
+    )]
+    NotPositiveDefinite {
+        /// Largest jitter tried.
+        jitter: f64,
+    },
+    /// The search ended at a non-finite likelihood.
+    #[error("the optimiser ended at a non-finite likelihood")]
+    NonFiniteLikelihood,
+    /// The line search or the solver failed (argmin's message).
+    #[error("the optimiser failed: {message}")]
+    Solver {
+        /// The solver's message.
+        message: String,
+    },
+}
+
+impl StartFailure {
+    fn of(e: &argmin::core::Error) -> Self {
+        match e.downcast_ref::<GpError>() {
+            Some(GpError::NotPositiveDefinite { jitter, .. }) => {
+                StartFailure::NotPositiveDefinite { jitter: *jitter }
+            }
+            _ => StartFailure::Solver {
+                message: e.to_string(),
+            },
+        }
+    }
+}
+
+/// Progress of a fit, for progress bars: reported after each optimiser start.
+#[derive(Clone, Debug)]
 pub struct FitProgress {
     /// Start just finished (0-based).
     pub start: usize,
@@ -23,6 +112,10 @@ pub struct FitProgress {
     pub n_starts: usize,
     /// Best log marginal likelihood so far.
     pub best_lml: Option<f64>,
+    /// Log marginal likelihood this start reached (`None` if it failed).
+    pub lml: Option<f64>,
+    /// Why this start stopped.
+    pub termination: Termination,
 }
 
 /// Fits a GP to row-major inputs `x` (`n x dim`) and targets `y`.
@@ -134,7 +227,7 @@ pub fn fit_observed(
     }
     // Leave-one-out residuals e_i = alpha_i / [K_y^-1]_ii (Rasmussen & Williams Eq. 5.12).
     let kinv = solved.factor.inverse();
-    let loo_std = (0..n)
+    let loo_standardised = (0..n)
         .map(|i| (solved.alpha[i] / kinv[(i, i)]).powi(2))
         .sum::<f64>()
         / n as f64;
@@ -161,7 +254,7 @@ pub fn fit_observed(
         chol_packed,
         sparse: None,
         log_marginal_likelihood: solved.lml,
-        loo_error_variance: loo_std * output_scale * output_scale,
+        loo_error_variance: loo_standardised * output_scale * output_scale,
         report,
     })
 }
@@ -256,7 +349,7 @@ pub(crate) fn multi_start<O: Objective>(
     let spec = params.kernel;
     let mut rng = Rng::new(params.seed);
     let mut best: Option<(f64, Vec<f64>, usize)> = None;
-    let mut last_err = String::new();
+    let mut last_failure: Option<StartFailure> = None;
     for start in 0..params.n_starts {
         let mut p0 = theta0.to_vec();
         p0.push(param_of_noise(
@@ -268,8 +361,8 @@ pub(crate) fn multi_start<O: Objective>(
         }
         p0.extend_from_slice(tail);
         let initial_lml = objective.evaluate(&p0).ok().map(|e| e.lml);
-        match run_lbfgs(objective, p0, params.max_iters) {
-            Ok((p, lml, iters)) => {
+        let (lml, termination) = match run_lbfgs(objective, p0, params.max_iters) {
+            Ok((p, lml, iters, termination)) => {
                 report.starts.push(StartReport {
                     initial_lml,
                     final_lml: Some(lml),
@@ -279,27 +372,31 @@ pub(crate) fn multi_start<O: Objective>(
                 if best.as_ref().is_none_or(|b| lml > b.0) {
                     best = Some((lml, p, start));
                 }
+                (Some(lml), termination)
             }
-            Err(e) => {
-                last_err = e.clone();
+            Err(failure) => {
                 report.starts.push(StartReport {
                     initial_lml,
                     final_lml: None,
                     iterations: 0,
-                    error: Some(e),
+                    error: Some(failure.to_string()),
                 });
+                last_failure = Some(failure.clone());
+                (None, Termination::Failed { failure })
             }
-        }
+        };
         observe(FitProgress {
             start,
             n_starts: params.n_starts,
             best_lml: best.as_ref().map(|b| b.0),
+            lml,
+            termination,
         });
     }
     let Some((_, p, start)) = best else {
         return Err(GpError::OptimizationFailed {
             starts: params.n_starts,
-            last: last_err,
+            last: last_failure.unwrap_or(StartFailure::NonFiniteLikelihood),
         });
     };
     report.best_start = Some(start);
@@ -325,29 +422,40 @@ fn randomize(p: &mut [f64], spec: &hbn_core::KernelSpec, rng: &mut Rng) {
     p[spec.n_params()] = rng.uniform_in(-4.0 * ln10, -0.5);
 }
 
-/// One L-BFGS run from `p0`: the best parameters, objective and iterations.
+/// One L-BFGS start: best parameters, their log marginal likelihood, iterations, and why it
+/// stopped.
 pub(crate) fn run_lbfgs<O: Objective>(
     lik: &O,
     p0: Vec<f64>,
     max_iters: u64,
-) -> Result<(Vec<f64>, f64, u64), String> {
+) -> Result<(Vec<f64>, f64, u64, Termination), StartFailure> {
     let linesearch = MoreThuenteLineSearch::new();
     let solver = LBFGS::new(linesearch, 10)
         .with_tolerance_grad(1e-5)
         .and_then(|s| s.with_tolerance_cost(1e-8))
-        .map_err(|e| e.to_string())?;
+        .map_err(|e| StartFailure::of(&e))?;
     let res = Executor::new(NegLml(lik), solver)
         .configure(|state| state.param(p0).max_iters(max_iters))
         .run()
-        .map_err(|e| e.to_string())?;
+        .map_err(|e| StartFailure::of(&e))?;
     let state = res.state();
-    let p = state
-        .get_best_param()
-        .cloned()
-        .ok_or_else(|| "optimiser returned no parameters".to_string())?;
     let lml = -state.get_best_cost();
-    if !lml.is_finite() {
-        return Err("optimiser ended at a non-finite likelihood".into());
+    let p = match state.get_best_param() {
+        Some(p) if lml.is_finite() => p.clone(),
+        _ => return Err(StartFailure::NonFiniteLikelihood),
+    };
+    Ok((
+        p,
+        lml,
+        state.get_iter(),
+        Termination::of(state.get_termination_status()),
+    ))
+}
+
+impl GaussianProcess {
+    /// Forgets the wall-clock seconds in the training report, so that the saved GP (and an HBN
+    /// model holding it) depends only on its data and parameters.
+    pub fn forget_timing(&mut self) {
+        self.report.seconds = 0.0;
     }
-    Ok((p, lml, state.get_iter()))
 }

@@ -371,3 +371,27 @@ fn saved_files_are_world_readable() {
         0o644
     );
 }
+
+/// Each optimiser start reports why it stopped: the iteration limit when it is tiny, and
+/// convergence when the limit is generous.
+#[test]
+fn termination_is_reported_per_start() {
+    let x: Vec<f64> = (0..40).map(|i| i as f64 / 8.0).collect();
+    let y: Vec<f64> = x.iter().map(|v| v.sin()).collect();
+    let mut p = GpParams::new(KernelSpec::se_ard(1));
+    for (max_iters, want) in [
+        (1, hbn_gp::Termination::MaxIters),
+        (500, hbn_gp::Termination::Converged),
+    ] {
+        p.n_starts = 2;
+        p.max_iters = max_iters;
+        let mut seen = Vec::new();
+        hbn_gp::fit_observed(&p, &x, &y, &mut |prog| {
+            seen.push((prog.start, prog.termination.clone()))
+        })
+        .unwrap();
+        assert_eq!(seen.len(), 2);
+        assert_eq!(seen[0].0, 0);
+        assert_eq!(seen[0].1, want, "max_iters {max_iters}");
+    }
+}

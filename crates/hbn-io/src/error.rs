@@ -209,14 +209,24 @@ pub enum IoError {
         reason: String,
     },
     /// An option has an invalid value.
-    #[error("bad option {name} = {value}: {reason}")]
+    #[error("bad option {name} = {value}: {requirement}")]
     BadOption {
-        /// Option name.
+        /// Option name (`rate_hz`, `max_gap_s`).
         name: &'static str,
         /// The value given.
-        value: String,
+        value: f64,
         /// What is required.
-        reason: String,
+        requirement: &'static str,
+    },
+    /// The grid would have more points than hbn resamples to.
+    #[error(
+        "{span_s:.3} s of overlap at {rate_hz} Hz gives more than 1e9 grid points; lower the rate"
+    )]
+    GridTooLarge {
+        /// Seconds the signals overlap.
+        span_s: f64,
+        /// The requested rate.
+        rate_hz: f64,
     },
     /// Inputs to a writer are inconsistent.
     #[error("cannot write `{}`: {reason}", file.display())]
@@ -226,4 +236,14 @@ pub enum IoError {
         /// What is wrong.
         reason: String,
     },
+}
+
+impl From<hbn_fs::WriteError> for IoError {
+    fn from(e: hbn_fs::WriteError) -> Self {
+        IoError::Open {
+            file: e.path,
+            op: e.op,
+            source: e.source,
+        }
+    }
 }

@@ -29,7 +29,10 @@ mod write;
 
 pub use error::IoError;
 pub use path::{PathElem, SignalPath};
-pub use read::{RawSignal, ReadOptions, TimeSource, TopicInfo, list_topics, read_signals};
+pub use read::{
+    RawSignal, ReadOptions, ReadProgress, TimeSource, TopicInfo, UnknownTimeSource, list_topics,
+    read_signals, read_signals_observed,
+};
 pub use resample::{Aligned, ResampleOptions, native_rate_hz, resample};
 pub use write::{
     Encoding, STAMPED_SCALAR_NAME, ScalarTopic, stamped_scalar_cdr, stamped_scalar_jsonschema,

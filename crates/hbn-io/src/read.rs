@@ -25,14 +25,64 @@ pub enum TimeSource {
     HeaderStamp,
 }
 
+impl TimeSource {
+    /// Every clock, in the order of their names.
+    pub const ALL: [TimeSource; 2] = [TimeSource::LogTime, TimeSource::HeaderStamp];
+
+    /// `log` or `header` (what [`std::str::FromStr`] accepts).
+    pub const fn name(self) -> &'static str {
+        match self {
+            TimeSource::LogTime => "log",
+            TimeSource::HeaderStamp => "header",
+        }
+    }
+}
+
+impl std::fmt::Display for TimeSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A clock name other than `log` and `header`.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("unknown time source {given:?}; choose \"log\" or \"header\"")]
+pub struct UnknownTimeSource {
+    /// The text given.
+    pub given: String,
+}
+
+impl std::str::FromStr for TimeSource {
+    type Err = UnknownTimeSource;
+    /// Parses `log` or `header` (case-insensitive).
+    fn from_str(s: &str) -> Result<Self, UnknownTimeSource> {
+        let t = s.trim();
+        TimeSource::ALL
+            .into_iter()
+            .find(|ts| t.eq_ignore_ascii_case(ts.name()))
+            .ok_or_else(|| UnknownTimeSource {
+                given: s.to_owned(),
+            })
+    }
+}
+
 /// Options for reading.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ReadOptions {
     /// Which clock samples are placed at.
     pub time_source: TimeSource,
-    /// Show an indicatif progress bar on stderr while reading (hidden when stderr is not a
-    /// terminal).
-    pub progress: bool,
+}
+
+/// How far a read has come, for a progress display the caller renders
+/// ([`read_signals_observed`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ReadProgress {
+    /// Bytes of the file read so far.
+    pub bytes_read: u64,
+    /// Size of the file.
+    pub total_bytes: u64,
+    /// The pass is over (the last report of a read).
+    pub done: bool,
 }
 
 /// One signal as recorded.
@@ -149,40 +199,28 @@ fn read_up_to(f: &mut File, buf: &mut [u8]) -> std::io::Result<usize> {
     Ok(n)
 }
 
-struct Progress {
-    bar: Option<indicatif::ProgressBar>,
+/// Reports progress every 4096 messages and once at the end.
+struct Progress<'o> {
+    observe: &'o mut dyn FnMut(ReadProgress),
     count: Rc<Cell<u64>>,
+    total: u64,
     n: u64,
 }
 
-impl Progress {
-    fn new(show: bool, len: u64, count: Rc<Cell<u64>>, file: &Path) -> Self {
-        let bar = show.then(|| {
-            let bar = indicatif::ProgressBar::new(len);
-            if let Ok(style) = indicatif::ProgressStyle::with_template(
-                "{msg} [{bar:40}] {bytes}/{total_bytes} ({eta})",
-            ) {
-                bar.set_style(style.progress_chars("=> "));
-            }
-            bar.set_message(format!("reading {}", file.display()));
-            bar
-        });
-        Progress { bar, count, n: 0 }
-    }
-
+impl Progress<'_> {
     fn tick(&mut self) {
         self.n += 1;
-        if let Some(b) = &self.bar
-            && self.n.is_multiple_of(4096)
-        {
-            b.set_position(self.count.get());
+        if self.n.is_multiple_of(4096) {
+            self.report(false);
         }
     }
 
-    fn finish(&self) {
-        if let Some(b) = &self.bar {
-            b.finish_and_clear();
-        }
+    fn report(&mut self, done: bool) {
+        (self.observe)(ReadProgress {
+            bytes_read: self.count.get().min(self.total),
+            total_bytes: self.total,
+            done,
+        });
     }
 }
 
@@ -496,6 +534,18 @@ pub fn read_signals(
     signals: &[SignalPath],
     opts: &ReadOptions,
 ) -> Result<Vec<RawSignal>, IoError> {
+    read_signals_observed(file, signals, opts, &mut |_| {})
+}
+
+/// [`read_signals`], reporting how many bytes have been read to `observe` (every 4096
+/// messages, and once at the end with `done`). The caller renders it (the CLI draws a progress
+/// bar); this crate prints nothing.
+pub fn read_signals_observed(
+    file: &Path,
+    signals: &[SignalPath],
+    opts: &ReadOptions,
+    observe: &mut dyn FnMut(ReadProgress),
+) -> Result<Vec<RawSignal>, IoError> {
     let (mut reader, len, count) = open(file)?;
     let mut out: Vec<RawSignal> = signals
         .iter()
@@ -510,7 +560,12 @@ pub fn read_signals(
         by_topic.entry(p.topic.as_str()).or_default().push(i);
     }
     let mut plans: HashMap<u16, Option<Plan>> = HashMap::new();
-    let mut progress = Progress::new(opts.progress, len, count, file);
+    let mut progress = Progress {
+        observe,
+        count,
+        total: len,
+        n: 0,
+    };
 
     for m in reader.by_ref() {
         let m = m.map_err(|e| corrupt(file, &e))?;
@@ -564,7 +619,7 @@ pub fn read_signals(
             }
         }
     }
-    progress.finish();
+    progress.report(true);
 
     let available = topics_of(&reader);
     for p in signals {

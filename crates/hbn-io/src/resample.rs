@@ -13,11 +13,14 @@ pub struct ResampleOptions {
 }
 
 impl ResampleOptions {
-    /// Options with the given rate and the default `max_gap_s` of 0.5 s.
+    /// The default largest gap between two samples of a signal (s).
+    pub const DEFAULT_MAX_GAP_S: f64 = 0.5;
+
+    /// Options with the given rate and the default `max_gap_s` ([`Self::DEFAULT_MAX_GAP_S`]).
     pub fn new(rate_hz: f64) -> Self {
         ResampleOptions {
             rate_hz,
-            max_gap_s: 0.5,
+            max_gap_s: Self::DEFAULT_MAX_GAP_S,
         }
     }
 }
@@ -57,15 +60,15 @@ pub fn resample(signals: &[RawSignal], opts: &ResampleOptions) -> Result<Aligned
     if !(opts.rate_hz.is_finite() && opts.rate_hz > 0.0) {
         return Err(IoError::BadOption {
             name: "rate_hz",
-            value: opts.rate_hz.to_string(),
-            reason: "the resampling rate must be a finite number of Hz > 0".into(),
+            value: opts.rate_hz,
+            requirement: "the resampling rate must be a finite number of Hz > 0",
         });
     }
     if !(opts.max_gap_s.is_finite() && opts.max_gap_s > 0.0) {
         return Err(IoError::BadOption {
             name: "max_gap_s",
-            value: opts.max_gap_s.to_string(),
-            reason: "the largest allowed gap must be a finite number of seconds > 0".into(),
+            value: opts.max_gap_s,
+            requirement: "the largest allowed gap must be a finite number of seconds > 0",
         });
     }
     if signals.is_empty() {
@@ -137,10 +140,9 @@ pub fn resample(signals: &[RawSignal], opts: &ResampleOptions) -> Result<Aligned
     }
     let steps = (span_s * opts.rate_hz * (1.0 + 1e-12)).floor();
     if !(steps.is_finite() && steps < 1e9) {
-        return Err(IoError::BadOption {
-            name: "rate_hz",
-            value: opts.rate_hz.to_string(),
-            reason: format!("{span_s:.3} s at this rate gives more than 1e9 grid points"),
+        return Err(IoError::GridTooLarge {
+            span_s,
+            rate_hz: opts.rate_hz,
         });
     }
     let npts = steps as usize + 1;

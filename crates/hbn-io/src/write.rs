@@ -1,8 +1,8 @@
 //! Writing logs and other files atomically.
 
 use std::collections::BTreeMap;
-use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
+use std::io::BufWriter;
+use std::path::Path;
 
 use serde_json::{Value, json};
 
@@ -132,58 +132,19 @@ fn split_stamp(file: &Path, t: u64) -> Result<(i32, u32), IoError> {
     Ok((sec, nsec))
 }
 
-/// Creates a temp file next to `file`, lets `f` fill it, fsyncs and renames it over `file`.
+/// Lets `f` fill a temporary file next to `file` and moves it over `file` atomically (the one
+/// writer of `hbn-fs`).
 fn atomic<F>(file: &Path, f: F) -> Result<(), IoError>
 where
     F: FnOnce(&mut BufWriter<std::fs::File>) -> Result<(), IoError>,
 {
-    let dir: PathBuf = match file.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_owned(),
-        _ => PathBuf::from("."),
-    };
-    let open_err = |op, source| IoError::Open {
-        file: file.to_owned(),
-        op,
-        source,
-    };
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(".hbn-tmp-");
-    // Outputs are ordinary files (0644), not the owner-only mode of temporary files.
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        builder.permissions(std::fs::Permissions::from_mode(0o644));
-    }
-    let tmp = builder
-        .tempfile_in(&dir)
-        .map_err(|e| open_err("create a temporary file for", e))?;
-    let (handle, tmp_path) = tmp.into_parts();
-    let mut w = BufWriter::new(handle);
-    f(&mut w)?;
-    let handle = w
-        .into_inner()
-        .map_err(|e| open_err("write", e.into_error()))?;
-    handle.sync_all().map_err(|e| open_err("write", e))?;
-    drop(handle);
-    tmp_path
-        .persist(file)
-        .map_err(|e| open_err("rename the temporary file onto", e.error))?;
-    // Make the rename durable where the platform allows opening directories.
-    if let Ok(d) = std::fs::File::open(&dir) {
-        let _ = d.sync_all();
-    }
-    Ok(())
+    hbn_fs::write_atomic_with(file, f)
 }
 
-/// Writes `bytes` to `file` atomically: a temp file in the target's directory, fsync, rename.
+/// Writes `bytes` to `file` atomically: a temp file in the target's directory, fsync, rename,
+/// directory fsync ([`hbn_fs::write_atomic`]).
 pub fn write_atomic(file: &Path, bytes: &[u8]) -> Result<(), IoError> {
-    atomic(file, |w| {
-        w.write_all(bytes).map_err(|e| IoError::Open {
-            file: file.to_owned(),
-            op: "write",
-            source: e,
-        })
-    })
+    Ok(hbn_fs::write_atomic(file, bytes)?)
 }
 
 /// Writes scalar series as separate topics, atomically.

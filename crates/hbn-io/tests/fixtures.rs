@@ -71,7 +71,6 @@ fn json_fixture_values_and_times() {
         &paths(&["/sensor.data"]),
         &ReadOptions {
             time_source: TimeSource::HeaderStamp,
-            progress: false,
         },
     )
     .unwrap();
@@ -142,7 +141,6 @@ fn check_actuator(file: &str, n: usize) {
         &paths(&["/actuator.pressure"]),
         &ReadOptions {
             time_source: TimeSource::HeaderStamp,
-            progress: false,
         },
     )
     .unwrap();
@@ -241,7 +239,6 @@ fn missing_field_lists_fields() {
         &paths(&["/status.count"]),
         &ReadOptions {
             time_source: TimeSource::HeaderStamp,
-            progress: false,
         },
     ) {
         Err(e @ IoError::MissingField { .. }) => {
@@ -383,7 +380,6 @@ fn fuzz_truncations_and_bit_flips() {
             } else {
                 TimeSource::HeaderStamp
             },
-            progress: false,
         };
         if read_signals(&target, p, &opts).is_ok() {
             ok += 1;

@@ -63,16 +63,22 @@ fn scalar_log_round_trip_json_and_ros2() {
         assert_eq!(s[0].value, u, "{enc:?}");
         assert_eq!(s[1].value, x, "{enc:?}");
         assert_eq!(s[2].value, y, "{enc:?}");
-        let h = read_signals(
+        let mut reports = Vec::new();
+        let h = hbn_io::read_signals_observed(
             &f,
             &paths(&["/sensor.data"]),
             &ReadOptions {
                 time_source: TimeSource::HeaderStamp,
-                progress: true,
             },
+            &mut |p| reports.push(p),
         )
         .unwrap();
         assert_eq!(h[0].t_ns, t);
+        // The observer hears the end of the pass, with the whole file read.
+        let last = reports.last().copied().unwrap();
+        assert!(last.done && last.total_bytes > 0, "{last:?}");
+        assert_eq!(last.bytes_read, last.total_bytes);
+        assert_eq!(reports.iter().filter(|p| p.done).count(), 1);
         let topics = hbn_io::list_topics(&f).unwrap();
         assert_eq!(topics.len(), 3);
         assert_eq!(
@@ -203,7 +209,6 @@ fn json_log_and_foxglove_nsec_stamps() {
         &paths(&["/est.x"]),
         &ReadOptions {
             time_source: TimeSource::HeaderStamp,
-            progress: false,
         },
     )
     .unwrap();
@@ -228,7 +233,6 @@ fn time_backwards_and_equal_times() {
         &paths(&["/est.x"]),
         &ReadOptions {
             time_source: TimeSource::HeaderStamp,
-            progress: false,
         },
     ) {
         Err(

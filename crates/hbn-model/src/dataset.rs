@@ -10,7 +10,7 @@
 //! `sgn(x_k - x_{k-1})` for `D_S` (inputs 2, 0); see [`TRANSITION_DIRECTION`] and
 //! [`SENSOR_DIRECTION`].
 
-use crate::ModelError;
+use crate::error::{DataError, Signal};
 
 /// Inputs of the transition GP.
 pub const TRANSITION_DIM: usize = 4;
@@ -20,6 +20,9 @@ pub const SENSOR_DIM: usize = 3;
 pub const TRANSITION_DIRECTION: [usize; 2] = [2, 3];
 /// Direction pair of the sensor: `sgn(x_k - x_{k-1})`.
 pub const SENSOR_DIRECTION: [usize; 2] = [2, 0];
+
+/// Fewest samples in a training trajectory (the transition reads two past samples).
+pub const MIN_SAMPLES: usize = 3;
 
 /// One trajectory of aligned samples at the model's rate (borrowed).
 #[derive(Clone, Copy, Debug)]
@@ -32,29 +35,43 @@ pub struct Sequence<'a> {
     pub y: &'a [f64],
 }
 
-impl Sequence<'_> {
-    /// Checks lengths (equal, `>= 3`) and values (finite). `index` names the trajectory.
-    pub fn validate(&self, index: usize) -> Result<(), ModelError> {
+impl<'a> Sequence<'a> {
+    /// The three signals of one trajectory.
+    pub fn new(u: &'a [f64], x: &'a [f64], y: &'a [f64]) -> Self {
+        Self { u, x, y }
+    }
+
+    /// Checks lengths (equal, at least [`MIN_SAMPLES`]) and values (finite). `index` names the
+    /// trajectory.
+    pub fn validate(&self, index: usize) -> Result<(), DataError> {
         let n = self.u.len();
         if self.x.len() != n || self.y.len() != n {
-            return Err(ModelError::Data(format!(
-                "trajectory {index}: u, x and y must have equal lengths (got {}, {}, {})",
-                n,
-                self.x.len(),
-                self.y.len()
-            )));
+            return Err(DataError::LengthMismatch {
+                trajectory: index,
+                u: n,
+                x: self.x.len(),
+                y: self.y.len(),
+            });
         }
-        if n < 3 {
-            return Err(ModelError::Data(format!(
-                "trajectory {index}: needs at least 3 samples, got {n}"
-            )));
+        if n < MIN_SAMPLES {
+            return Err(DataError::TooShort {
+                trajectory: index,
+                len: n,
+                min: MIN_SAMPLES,
+            });
         }
-        for (name, s) in [("u", self.u), ("x", self.x), ("y", self.y)] {
+        for (signal, s) in [
+            (Signal::Input, self.u),
+            (Signal::State, self.x),
+            (Signal::Output, self.y),
+        ] {
             if let Some(k) = s.iter().position(|v| !v.is_finite()) {
-                return Err(ModelError::Data(format!(
-                    "trajectory {index}: {name}[{k}] is {}; clean or cut the log",
-                    s[k]
-                )));
+                return Err(DataError::NonFinite {
+                    trajectory: index,
+                    signal,
+                    index: k,
+                    value: s[k],
+                });
             }
         }
         Ok(())
@@ -93,9 +110,9 @@ pub struct Dataset {
 }
 
 /// Builds `D_D` and `D_S` from trajectories, never crossing a boundary.
-pub fn build_dataset(trajectories: &[Sequence<'_>]) -> Result<Dataset, ModelError> {
+pub fn build_dataset(trajectories: &[Sequence<'_>]) -> Result<Dataset, DataError> {
     if trajectories.is_empty() {
-        return Err(ModelError::Data("no trajectories given".into()));
+        return Err(DataError::NoTrajectories);
     }
     let mut tr = Table {
         dim: TRANSITION_DIM,

@@ -1,10 +1,10 @@
-//! Estimation drivers over whole sequences: the EKF / EKF+BLR step in a loop, the open-loop
-//! GP simulation baseline, and the observability diagnostic.
+//! Estimation over whole sequences: the [`Filter`](crate::Filter)'s per-sample step in a loop,
+//! the open-loop GP simulation baseline, and the observability diagnostic.
 
 use crate::ModelError;
+use crate::filter::{FilterOutput, Tracker};
 use crate::model::HbnModel;
-use hbn_core::{EkfConfig, Estimator, Flags, Mode, Want, observability_eigenvalues};
-use nalgebra::Matrix3;
+use hbn_core::{Ekf, EkfConfig, Flags, Mode, Want};
 
 /// Observability window `h` of thesis Sec. 4.2.
 pub const OBSERVABILITY_WINDOW: usize = 3;
@@ -51,6 +51,46 @@ pub struct ObservabilitySummary {
 pub const NEAR_UNOBSERVABLE: f64 = 1e-8;
 
 impl Estimate {
+    /// An empty estimate with room for `n` samples.
+    pub fn with_capacity(n: usize) -> Self {
+        Self {
+            x: Vec::with_capacity(n),
+            x_std: Vec::with_capacity(n),
+            y_pred: Vec::with_capacity(n),
+            innovation: Vec::with_capacity(n),
+            nis: Vec::with_capacity(n),
+            q_x: Vec::with_capacity(n),
+            r: Vec::with_capacity(n),
+            flags: Vec::with_capacity(n),
+            obs_min: Vec::with_capacity(n),
+            obs_max: Vec::with_capacity(n),
+        }
+    }
+
+    /// Appends one sample's output.
+    pub fn push(&mut self, o: &FilterOutput) {
+        self.x.push(o.x);
+        self.x_std.push(o.x_std);
+        self.y_pred.push(o.y_pred);
+        self.innovation.push(o.innovation);
+        self.nis.push(o.nis);
+        self.q_x.push(o.q_x);
+        self.r.push(o.r);
+        self.flags.push(o.flags.0);
+        self.obs_min.push(o.obs_min);
+        self.obs_max.push(o.obs_max);
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    /// Whether there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+
     /// Counts of each guard flag over the run, by name.
     pub fn flag_counts(&self) -> Vec<(&'static str, usize)> {
         let mut counts: Vec<(&'static str, usize)> = Vec::new();
@@ -100,9 +140,11 @@ impl Estimate {
 }
 
 impl HbnModel {
-    /// Runs the filter over a sequence with the default settings of `mode`.
+    /// Runs the filter over a sequence with the default settings of `mode`: the loop of
+    /// [`Filter::step`](crate::Filter::step) over the samples, without taking ownership of the
+    /// model (equal to [`Filter::run`](crate::Filter::run) bit for bit).
     pub fn estimate(&self, u: &[f64], y: &[f64], mode: Mode) -> Result<Estimate, ModelError> {
-        self.estimate_with(u, y, &self.ekf_config_for(mode, y))
+        self.estimate_with(u, y, &self.ekf_config(mode))
     }
 
     /// Runs the filter with explicit settings.
@@ -112,57 +154,8 @@ impl HbnModel {
         y: &[f64],
         config: &EkfConfig,
     ) -> Result<Estimate, ModelError> {
-        if u.len() != y.len() {
-            return Err(ModelError::Data(format!(
-                "u and y must have equal lengths (got {} and {})",
-                u.len(),
-                y.len()
-            )));
-        }
-        let view = self.view()?;
-        let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
-        let mut est = Estimator::new(view, *config, &mut scratch)?;
-        let n = u.len();
-        let mut out = Estimate {
-            x: Vec::with_capacity(n),
-            x_std: Vec::with_capacity(n),
-            y_pred: Vec::with_capacity(n),
-            innovation: Vec::with_capacity(n),
-            nis: Vec::with_capacity(n),
-            q_x: Vec::with_capacity(n),
-            r: Vec::with_capacity(n),
-            flags: Vec::with_capacity(n),
-            obs_min: Vec::with_capacity(n),
-            obs_max: Vec::with_capacity(n),
-        };
-        let h = OBSERVABILITY_WINDOW + 1;
-        let mut jac: Vec<Matrix3<f64>> = Vec::with_capacity(h);
-        let mut rs: Vec<f64> = Vec::with_capacity(h);
-        for k in 0..n {
-            let s = est.step(u[k], y[k]);
-            out.x.push(s.x);
-            out.x_std.push(s.x_std);
-            out.y_pred.push(s.y_pred);
-            out.innovation.push(s.innovation);
-            out.nis.push(s.nis);
-            out.q_x.push(s.q_x);
-            out.r.push(s.r);
-            out.flags.push(s.flags.0);
-            if jac.len() == h {
-                jac.remove(0);
-                rs.remove(0);
-            }
-            jac.push(s.jacobian);
-            rs.push(s.r);
-            let (lo, hi) = if jac.len() == h {
-                observability_eigenvalues(&jac, &rs).unwrap_or((f64::NAN, f64::NAN))
-            } else {
-                (f64::NAN, f64::NAN)
-            };
-            out.obs_min.push(lo);
-            out.obs_max.push(hi);
-        }
-        Ok(out)
+        let ekf = Ekf::new(self.view()?, *config)?;
+        crate::filter::run(&mut Tracker::new(&ekf), &ekf, u, y)
     }
 
     /// Open-loop GP simulation: `x_k = mean H_D(x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2})` from the

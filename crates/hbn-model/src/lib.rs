@@ -5,75 +5,54 @@
 //! `y_k = H_S(x_{k-1}, y_{k-1}, x_k)` learned from logged `(u, x, y)`, driving the
 //! allocation-free EKF / EKF+BLR step of [`hbn_core`] to estimate `x` from `u` and `y` alone.
 //!
+//! - [`HbnParams`]: the training parameters, their defaults and their one check
+//!   ([`HbnParams::check`] gives [`CheckedHbnParams`]; errors name the [`Param`]);
+//! - [`HbnModel`]: fit, save, load; [`HbnModel::estimate`] over a whole sequence;
+//! - [`Filter`]: the owned streaming estimator (model, state and scratch in one value), whose
+//!   per-sample step batch estimation loops over.
+//!
 //! ```
-//! use hbn_model::{HbnModel, HbnParams, Sequence, metrics::nrmse};
+//! use hbn_model::{Filter, HbnModel, HbnParams, Sequence, metrics::nrmse};
 //! use hbn_sim::{SimConfig, SystemKind, simulate_random};
 //! use hbn_core::Mode;
 //! let cfg = SimConfig { noise_gain: 1.0, ..SimConfig::new(SystemKind::Duhem) };
 //! let train = simulate_random(&cfg, 400).unwrap();
 //! let params = HbnParams { max_points: 150, n_starts: 1, ..HbnParams::default() };
-//! let model = HbnModel::fit(&[Sequence { u: &train.u, x: &train.x, y: &train.y }], &params).unwrap();
+//! let model = HbnModel::fit(&[Sequence::new(&train.u, &train.x, &train.y)], &params).unwrap();
 //! let test = simulate_random(&SimConfig { seed: 7, ..cfg }, 300).unwrap();
 //! let est = model.estimate(&test.u, &test.y, Mode::Ekf).unwrap();
 //! assert!(nrmse(&est.x, &test.x) < 0.2);
+//! // Streaming gives the same numbers, one sample at a time.
+//! let mut filter = Filter::new(model, Mode::Ekf).unwrap();
+//! let first = filter.step(test.u[0], test.y[0]);
+//! assert_eq!(first.x, est.x[0]);
 //! ```
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
+#![cfg_attr(
+    not(test),
+    deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
+)]
 
 pub mod dataset;
+mod error;
 mod estimate;
-pub mod experiment;
+mod filter;
 mod local;
 pub mod metrics;
 mod model;
+mod params;
 
-pub use dataset::{Dataset, Sequence, Table, build_dataset};
+pub use dataset::{Dataset, MIN_SAMPLES, Sequence, Table, build_dataset};
+pub use error::{DataError, ModelError, ModelFileProblem, Signal};
 pub use estimate::{Estimate, NEAR_UNOBSERVABLE, OBSERVABILITY_WINDOW, ObservabilitySummary};
+pub use filter::{Filter, FilterOutput};
 pub use local::LocalData;
 pub use model::{
-    DEFAULT_INDUCING, HbnModel, HbnParams, INIT_NEIGHBOURS, KernelChoice, KernelFamily,
-    MODEL_FORMAT, MODEL_FORMAT_VERSION, SignalInfo, SignalStats, Signals, TrainingSummary,
+    GpRole, HbnModel, INIT_NEIGHBOURS, MODEL_FORMAT, MODEL_FORMAT_VERSION, SignalStats,
+    StartSummary, TrainingSummary,
 };
-
-/// Errors of the model layer; each says what would fix it.
-#[derive(Debug, thiserror::Error)]
-pub enum ModelError {
-    /// Bad training or estimation data.
-    #[error("data: {0}")]
-    Data(String),
-    /// A bad setting.
-    #[error("configuration: {0}")]
-    Config(String),
-    /// One of the GPs failed to train.
-    #[error("{which} GP: {source}")]
-    Gp {
-        /// `transition` or `sensor`.
-        which: &'static str,
-        /// The GP error.
-        #[source]
-        source: hbn_gp::GpError,
-    },
-    /// The allocation-free core rejected the model or settings.
-    #[error("core: {0}")]
-    Core(#[from] hbn_core::CoreError),
-    /// Reading or writing a file.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: String,
-        /// The OS error.
-        #[source]
-        source: std::io::Error,
-    },
-    /// A file that is not a model of a supported version.
-    #[error("{path}: {reason}")]
-    Format {
-        /// The file.
-        path: String,
-        /// What is wrong.
-        reason: String,
-    },
-    /// A simulator error.
-    #[error("simulator: {0}")]
-    Sim(#[from] hbn_sim::SimError),
-}
+pub use params::{
+    CheckedHbnParams, ConfigError, DEFAULT_INDUCING, HbnParams, KernelChoice, KernelFamily, Param,
+    ParamValue, Problem, SignalInfo, Signals, UnknownKernel,
+};

@@ -2,6 +2,8 @@
 
 use crate::ModelError;
 use crate::dataset::Table;
+use crate::params::{ConfigError, Param, Problem};
+use hbn_core::CoreError;
 use hbn_core::blr::{BLR_MAX_DIM, CELL_BITS};
 use hbn_core::{Neighbourhood, NeighbourhoodParts};
 use serde::{Deserialize, Serialize};
@@ -29,20 +31,29 @@ impl LocalData {
     pub fn build(table: &Table, window_fraction: f64) -> Result<Self, ModelError> {
         let d = table.dim;
         if d == 0 || d > BLR_MAX_DIM {
-            return Err(ModelError::Config(format!(
-                "local regression supports 1..={BLR_MAX_DIM} inputs, got {d}"
-            )));
+            return Err(
+                CoreError::InvalidSpec("local regression supports 1..=BLR_MAX_DIM inputs").into(),
+            );
         }
         if !(window_fraction.is_finite() && window_fraction > 0.0 && window_fraction <= 0.5) {
-            return Err(ModelError::Config(format!(
-                "BLR window fraction must be in (0, 0.5], got {window_fraction}"
-            )));
+            return Err(ConfigError {
+                param: Param::BlrWindow,
+                problem: Problem::OutOfRange {
+                    value: window_fraction,
+                    min: 0.0,
+                    max: 0.5,
+                },
+            }
+            .into());
         }
         let n = table.len();
-        if n == 0 || n > u32::MAX as usize {
-            return Err(ModelError::Data(format!(
-                "local regression needs 1..=2^32 samples, got {n}"
-            )));
+        if n == 0 {
+            return Err(CoreError::Empty.into());
+        }
+        if n > u32::MAX as usize {
+            return Err(
+                CoreError::InvalidSpec("local regression indexes at most 2^32 samples").into(),
+            );
         }
         let col = |j: usize| table.inputs.iter().skip(j).step_by(d).copied();
         let mut origin = Vec::with_capacity(d);

@@ -4,12 +4,13 @@ use crate::ModelError;
 use crate::dataset::{
     SENSOR_DIM, SENSOR_DIRECTION, Sequence, TRANSITION_DIM, TRANSITION_DIRECTION, build_dataset,
 };
+use crate::error::ModelFileProblem;
 use crate::local::LocalData;
-use hbn_core::{EkfConfig, HbnView, KernelSpec, LocalRegression, Metric, Mode, Profile};
-use hbn_gp::{GaussianProcess, GpParams, SparseParams, SubsetPolicy};
+use crate::params::{CheckedHbnParams, HbnParams, Signals};
+use hbn_core::{EkfConfig, HbnView, InitPrior, Mode};
+use hbn_gp::{FitProgress, GaussianProcess, Termination};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
-use std::str::FromStr;
 use std::time::Instant;
 
 /// Format tag of an HBN model file.
@@ -17,267 +18,32 @@ pub const MODEL_FORMAT: &str = "hbn-model";
 /// Current model file format version.
 pub const MODEL_FORMAT_VERSION: u32 = 1;
 
-/// A kernel family by name.
+/// One of the two GPs of the HBN.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
-pub enum KernelFamily {
-    /// Isotropic squared exponential (Eq. 5).
-    Se,
-    /// ARD squared exponential.
-    SeArd,
-    /// ARD Matern 5/2.
-    Matern52,
-    /// Mahalanobis SE with the empirical input covariance (Eq. 17).
-    Mahalanobis,
-    /// tanh-warped inputs (Eq. 18) under the Mahalanobis SE.
-    Warped,
+pub enum GpRole {
+    /// `H_D`: `x_k` from `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}]`.
+    Transition,
+    /// `H_S`: `y_k` from `[x_{k-1}, y_{k-1}, x_k]`.
+    Sensor,
 }
 
-/// A kernel choice: family plus the optional direction-advantage factor (Eq. 19).
-///
-/// Parsed from `se`, `se-ard`, `matern52`, `mahalanobis`, `warped`, each optionally with
-/// `+dir`; `thesis` is `warped+dir` (the thesis' Eq. 19 kernel).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-pub struct KernelChoice {
-    /// Family.
-    pub family: KernelFamily,
-    /// Multiply by `1/2 (1 + g g')`.
-    pub direction: bool,
-}
+impl GpRole {
+    /// Both GPs, transition first.
+    pub const ALL: [GpRole; 2] = [GpRole::Transition, GpRole::Sensor];
 
-impl KernelChoice {
-    /// Names accepted by [`FromStr`].
-    pub const NAMES: &'static str =
-        "se, se-ard, matern52, mahalanobis, warped (each optionally +dir), thesis";
-
-    /// The kernel structure for `dim` inputs with direction pair `dir`.
-    pub fn spec(&self, dim: usize, dir: [usize; 2]) -> KernelSpec {
-        let base = KernelSpec::se_ard(dim);
-        let mut spec = match self.family {
-            KernelFamily::Se => KernelSpec {
-                metric: Metric::Isotropic,
-                ..base
-            },
-            KernelFamily::SeArd => base,
-            KernelFamily::Matern52 => KernelSpec {
-                profile: Profile::Matern52,
-                ..base
-            },
-            KernelFamily::Mahalanobis => KernelSpec {
-                metric: Metric::Mahalanobis,
-                ..base
-            },
-            KernelFamily::Warped => KernelSpec {
-                metric: Metric::Mahalanobis,
-                warp_units: 1,
-                ..base
-            },
-        };
-        if self.direction {
-            spec.direction = Some(dir);
-        }
-        spec
-    }
-}
-
-/// The default, `matern52`: measured the most robust across the six simulators and noise
-/// levels (docs/results.md). The thesis' direction factor (`+dir`, `thesis`) helps open-loop
-/// simulation but made the filter lose track at input reversals on several seeds.
-impl Default for KernelChoice {
-    fn default() -> Self {
-        Self {
-            family: KernelFamily::Matern52,
-            direction: false,
+    /// `transition` or `sensor`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            GpRole::Transition => "transition",
+            GpRole::Sensor => "sensor",
         }
     }
 }
 
-impl FromStr for KernelChoice {
-    type Err = ModelError;
-    fn from_str(s: &str) -> Result<Self, ModelError> {
-        let t = s.trim().to_ascii_lowercase();
-        if t == "thesis" {
-            return Ok(Self {
-                family: KernelFamily::Warped,
-                direction: true,
-            });
-        }
-        let (base, direction) = match t.strip_suffix("+dir") {
-            Some(b) => (b, true),
-            None => (t.as_str(), false),
-        };
-        let family = match base {
-            "se" => KernelFamily::Se,
-            "se-ard" | "ard" => KernelFamily::SeArd,
-            "matern52" | "matern" => KernelFamily::Matern52,
-            "mahalanobis" => KernelFamily::Mahalanobis,
-            "warped" => KernelFamily::Warped,
-            _ => {
-                return Err(ModelError::Config(format!(
-                    "unknown kernel {s:?}; choose one of {}",
-                    Self::NAMES
-                )));
-            }
-        };
-        Ok(Self { family, direction })
-    }
-}
-
-impl std::fmt::Display for KernelChoice {
+impl std::fmt::Display for GpRole {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let base = match self.family {
-            KernelFamily::Se => "se",
-            KernelFamily::SeArd => "se-ard",
-            KernelFamily::Matern52 => "matern52",
-            KernelFamily::Mahalanobis => "mahalanobis",
-            KernelFamily::Warped => "warped",
-        };
-        write!(f, "{base}{}", if self.direction { "+dir" } else { "" })
-    }
-}
-
-/// Name, log path and unit of one signal.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct SignalInfo {
-    /// Short name (`u`, `x`, `y` by default).
-    pub name: String,
-    /// Where it was read from (a Foxglove message path), if from a log.
-    pub path: Option<String>,
-    /// Unit, if known.
-    pub unit: Option<String>,
-}
-
-/// The three signals of the HBN.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Signals {
-    /// Input `u` (e.g. valve pressure).
-    pub input: SignalInfo,
-    /// State `x` (e.g. bend angle; only needed for training and evaluation).
-    pub state: SignalInfo,
-    /// Sensor output `y` (e.g. strain sensor voltage).
-    pub output: SignalInfo,
-}
-
-impl Default for Signals {
-    fn default() -> Self {
-        let s = |n: &str| SignalInfo {
-            name: n.into(),
-            path: None,
-            unit: None,
-        };
-        Self {
-            input: s("u"),
-            state: s("x"),
-            output: s("y"),
-        }
-    }
-}
-
-/// Suggested number of inducing points per GP when sparse GPs are asked for
-/// (`HbnParams::n_inducing = Some(DEFAULT_INDUCING)`, `hbn train --inducing 64`). The default
-/// model stays exact: measured on the thesis protocol, sparse GPs are as accurate at noise gain
-/// 10 but up to 2.8x less accurate at gains 0 and 1 (`docs/results.md`, "Sparse or exact").
-pub const DEFAULT_INDUCING: usize = 64;
-
-/// Training parameters of the HBN (checked by [`HbnParams::validate`]).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct HbnParams {
-    /// Sample rate of the trajectories (Hz); estimation must use the same.
-    pub rate_hz: f64,
-    /// Kernel of the transition GP.
-    pub transition_kernel: KernelChoice,
-    /// Kernel of the sensor GP.
-    pub sensor_kernel: KernelChoice,
-    /// Inducing points per GP: `Some(m)` trains sparse GPs (Titsias' bound) on every sample;
-    /// `None` (the default, see [`DEFAULT_INDUCING`]) trains exact GPs on at most `max_points`
-    /// samples. Model files written before the sparse GP existed read as `None`.
-    #[serde(default)]
-    pub n_inducing: Option<usize>,
-    /// Most support points per exact GP (unused by the sparse GP).
-    pub max_points: usize,
-    /// Policy when there are more samples.
-    pub subset_policy: SubsetPolicy,
-    /// Optimiser starts per GP.
-    pub n_starts: usize,
-    /// L-BFGS iterations per start.
-    pub max_iters: u64,
-    /// Seed of random starts and subsets.
-    pub seed: u64,
-    /// Standardise GP inputs and outputs.
-    pub normalize: bool,
-    /// Lower bound of each GP's noise variance (standardised units). The default `1e-4` (a noise
-    /// standard deviation of 1% of the target's) keeps a GP fitted to noise-free or repeated
-    /// data from interpolating kinks exactly; measured on noise-free generalised-PI data it cut
-    /// the EKF's nRMSE from 0.155 to 0.055.
-    pub noise_floor: f64,
-    /// BLR window: `+-` this fraction of each coordinate's range.
-    pub blr_window: f64,
-    /// BLR prior settings.
-    pub blr: LocalRegression,
-    /// Signal names, paths and units.
-    pub signals: Signals,
-}
-
-impl Default for HbnParams {
-    fn default() -> Self {
-        Self {
-            rate_hz: 100.0,
-            transition_kernel: KernelChoice::default(),
-            sensor_kernel: KernelChoice::default(),
-            n_inducing: None,
-            max_points: 500,
-            subset_policy: SubsetPolicy::FarthestPoint,
-            n_starts: 2,
-            max_iters: 100,
-            seed: 0,
-            normalize: true,
-            noise_floor: 1e-4,
-            blr_window: 0.025,
-            blr: LocalRegression::default(),
-            signals: Signals::default(),
-        }
-    }
-}
-
-impl HbnParams {
-    /// Checks every field once.
-    pub fn validate(&self) -> Result<(), ModelError> {
-        if !(self.rate_hz.is_finite() && self.rate_hz > 0.0) {
-            return Err(ModelError::Config(format!(
-                "rate must be > 0 Hz, got {}",
-                self.rate_hz
-            )));
-        }
-        if !(self.blr_window.is_finite() && self.blr_window > 0.0 && self.blr_window <= 0.5) {
-            return Err(ModelError::Config(format!(
-                "BLR window must be in (0, 0.5], got {}",
-                self.blr_window
-            )));
-        }
-        self.blr.validate()?;
-        self.gp_params(
-            self.transition_kernel
-                .spec(TRANSITION_DIM, TRANSITION_DIRECTION),
-        )
-        .validate()
-        .map_err(|e| ModelError::Gp {
-            which: "transition",
-            source: e,
-        })?;
-        Ok(())
-    }
-
-    fn gp_params(&self, spec: KernelSpec) -> GpParams {
-        let mut p = GpParams::new(spec);
-        p.max_points = self.max_points;
-        p.sparse = self.n_inducing.map(SparseParams::new);
-        p.subset_policy = self.subset_policy;
-        p.n_starts = self.n_starts;
-        p.max_iters = self.max_iters;
-        p.seed = self.seed;
-        p.normalize = self.normalize;
-        p.noise_floor = self.noise_floor;
-        p
+        f.write_str(self.name())
     }
 }
 
@@ -317,6 +83,29 @@ impl SignalStats {
     }
 }
 
+/// One optimiser start of one GP.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StartSummary {
+    /// Which GP.
+    pub gp: GpRole,
+    /// Start index (0 = from the default hyperparameters).
+    pub start: usize,
+    /// Log marginal likelihood reached (`None` if the start failed).
+    pub lml: Option<f64>,
+    /// Why the start stopped.
+    pub termination: Termination,
+}
+
+impl TrainingSummary {
+    /// Why each optimiser start of one GP stopped, in order.
+    pub fn terminations(&self, role: GpRole) -> impl Iterator<Item = &Termination> {
+        self.starts
+            .iter()
+            .filter(move |s| s.gp == role)
+            .map(|s| &s.termination)
+    }
+}
+
 /// What training did.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct TrainingSummary {
@@ -324,12 +113,17 @@ pub struct TrainingSummary {
     pub trajectories: usize,
     /// Rows of each training set.
     pub rows: usize,
-    /// Wall-clock seconds.
+    /// Wall-clock seconds of this training run. Not saved, so that a model file depends only
+    /// on its data and parameters (0 in a loaded model).
+    #[serde(skip)]
     pub seconds: f64,
     /// Warnings from both GPs (jitter, subsets, failed starts) and the observability check.
     pub warnings: Vec<String>,
     /// Observability of the linearised filter along the first training trajectory.
     pub observability: Option<crate::ObservabilitySummary>,
+    /// Every optimiser start of both GPs, in order: what it reached and why it stopped.
+    #[serde(default)]
+    pub starts: Vec<StartSummary>,
 }
 
 /// The trained Hysteresis Bayesian Network.
@@ -360,44 +154,48 @@ struct ModelFile {
 }
 
 impl HbnModel {
-    /// Learns both relations from trajectories at `params.rate_hz`.
+    /// Learns both relations from trajectories at `params.rate_hz`: checks the parameters
+    /// ([`HbnParams::check`]), then [`HbnModel::fit_checked`].
     pub fn fit(trajectories: &[Sequence<'_>], params: &HbnParams) -> Result<Self, ModelError> {
-        Self::fit_observed(trajectories, params, &mut |_, _| {})
+        let checked = params.clone().check()?;
+        Self::fit_checked(trajectories, &checked, &mut |_, _| {})
     }
 
-    /// [`HbnModel::fit`], reporting progress as `(which GP, progress)`.
-    pub fn fit_observed(
+    /// Learns both relations with parameters checked beforehand, reporting each optimiser
+    /// start to `observe` as `(which GP, progress)`.
+    pub fn fit_checked(
         trajectories: &[Sequence<'_>],
-        params: &HbnParams,
-        observe: &mut dyn FnMut(&'static str, hbn_gp::FitProgress),
+        params: &CheckedHbnParams,
+        observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
         let t0 = Instant::now();
-        params.validate()?;
         let data = build_dataset(trajectories)?;
         let tr_spec = params
             .transition_kernel
             .spec(TRANSITION_DIM, TRANSITION_DIRECTION);
         let se_spec = params.sensor_kernel.spec(SENSOR_DIM, SENSOR_DIRECTION);
-        let transition = hbn_gp::fit_observed(
-            &params.gp_params(tr_spec),
-            &data.transition.inputs,
-            &data.transition.targets,
-            &mut |p| observe("transition", p),
-        )
-        .map_err(|e| ModelError::Gp {
-            which: "transition",
-            source: e,
-        })?;
-        let sensor = hbn_gp::fit_observed(
-            &params.gp_params(se_spec),
-            &data.sensor.inputs,
-            &data.sensor.targets,
-            &mut |p| observe("sensor", p),
-        )
-        .map_err(|e| ModelError::Gp {
-            which: "sensor",
-            source: e,
-        })?;
+        let mut starts = Vec::new();
+        let mut fit_gp = |which: GpRole, spec, table: &crate::dataset::Table| {
+            let mut gp = hbn_gp::fit_observed(
+                &params.gp_params(spec),
+                &table.inputs,
+                &table.targets,
+                &mut |p| {
+                    starts.push(StartSummary {
+                        gp: which,
+                        start: p.start,
+                        lml: p.lml,
+                        termination: p.termination.clone(),
+                    });
+                    observe(which, &p);
+                },
+            )
+            .map_err(|source| ModelError::Gp { which, source })?;
+            gp.forget_timing();
+            Ok::<_, ModelError>(gp)
+        };
+        let transition = fit_gp(GpRole::Transition, tr_spec, &data.transition)?;
+        let sensor = fit_gp(GpRole::Sensor, se_spec, &data.sensor)?;
         let transition_local = LocalData::build(&data.transition, params.blr_window)?;
         let sensor_local = LocalData::build(&data.sensor, params.blr_window)?;
         let cat = |f: fn(&Sequence<'_>) -> Vec<f64>| {
@@ -409,19 +207,19 @@ impl HbnModel {
             cat(|t| t.y.to_vec()),
         );
         let mut warnings = Vec::new();
-        for (name, gp) in [("transition", &transition), ("sensor", &sensor)] {
+        for (role, gp) in [(GpRole::Transition, &transition), (GpRole::Sensor, &sensor)] {
             warnings.extend(
                 gp.report()
                     .warnings()
                     .into_iter()
-                    .map(|w| format!("{name} GP: {w}")),
+                    .map(|w| format!("{role} GP: {w}")),
             );
         }
         let mut init_pairs: Vec<[f64; 2]> =
             y_all.iter().zip(&x_all).map(|(&y, &x)| [y, x]).collect();
         init_pairs.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
         let mut model = Self {
-            params: params.clone(),
+            params: (**params).clone(),
             transition,
             sensor,
             transition_local,
@@ -436,6 +234,7 @@ impl HbnModel {
                 seconds: 0.0,
                 warnings,
                 observability: None,
+                starts,
             },
         };
         // Observability diagnostic (Sec. 4.2) along the first training trajectory.
@@ -457,7 +256,8 @@ impl HbnModel {
         Ok(model)
     }
 
-    /// The borrowed view the allocation-free step reads.
+    /// The borrowed view the allocation-free step reads (validates every array: build it
+    /// once, not per step).
     pub fn view(&self) -> Result<HbnView<'_>, ModelError> {
         Ok(HbnView {
             transition: self.transition.view()?,
@@ -465,7 +265,22 @@ impl HbnModel {
             transition_local: Some(self.transition_local.view()?),
             sensor_local: Some(self.sensor_local.view()?),
             blr: self.params.blr,
+            init: self.init_prior()?,
         })
+    }
+
+    /// The prior of `x_0` from the first measurement ([`InitPrior`] over the training pairs;
+    /// `None` for a model file without them).
+    fn init_prior(&self) -> Result<Option<InitPrior<'_>>, ModelError> {
+        if self.init_pairs.is_empty() {
+            return Ok(None);
+        }
+        let sx = self.x_stats.span();
+        Ok(Some(InitPrior::new(
+            &self.init_pairs,
+            INIT_NEIGHBOURS,
+            1e-4 * sx * sx,
+        )?))
     }
 
     /// Default filter settings from the training ranges (see `docs/ekf.md`).
@@ -491,45 +306,12 @@ impl HbnModel {
     }
 
     /// Prior of `x_0` from the first measurement: mean and variance of `x` over the
-    /// [`INIT_NEIGHBOURS`] training samples whose `y` is nearest `y0` (ties by index). Hysteresis
-    /// makes `x` given `y` ambiguous; the variance says how much. `None` without training pairs
-    /// or for a non-finite `y0`.
+    /// [`INIT_NEIGHBOURS`] training samples whose `y` is nearest `y0` (ties by index), the
+    /// variance at least `1e-4` of the squared training range of `x`. Hysteresis makes `x` given
+    /// `y` ambiguous; the variance says how much. `None` without training pairs or for a
+    /// non-finite `y0`. The filter's first step uses exactly this ([`hbn_core::InitPrior`]).
     pub fn initial_state(&self, y0: f64) -> Option<(f64, f64)> {
-        if !y0.is_finite() || self.init_pairs.is_empty() {
-            return None;
-        }
-        let mut order: Vec<usize> = (0..self.init_pairs.len()).collect();
-        order.sort_by(|&a, &b| {
-            (self.init_pairs[a][0] - y0)
-                .abs()
-                .total_cmp(&(self.init_pairs[b][0] - y0).abs())
-                .then(a.cmp(&b))
-        });
-        let near = &order[..order.len().min(INIT_NEIGHBOURS)];
-        let n = near.len() as f64;
-        let mean = near.iter().map(|&i| self.init_pairs[i][1]).sum::<f64>() / n;
-        let var = near
-            .iter()
-            .map(|&i| (self.init_pairs[i][1] - mean).powi(2))
-            .sum::<f64>()
-            / n;
-        let sx = self.x_stats.span();
-        Some((mean, var.max(1e-4 * sx * sx)))
-    }
-
-    /// [`HbnModel::ekf_config`] with the filter's prior taken from the first finite measurement
-    /// ([`HbnModel::initial_state`]); what [`HbnModel::estimate`] uses.
-    pub fn ekf_config_for(&self, mode: Mode, y: &[f64]) -> EkfConfig {
-        let mut cfg = self.ekf_config(mode);
-        if let Some((m, v)) = y
-            .iter()
-            .find(|v| v.is_finite())
-            .and_then(|&y0| self.initial_state(y0))
-        {
-            cfg.x0_mean = m;
-            cfg.x0_var = v;
-        }
-        cfg
+        self.init_prior().ok().flatten()?.prior(y0)
     }
 
     /// Training parameters (kernels, rate, signals, BLR settings).
@@ -544,9 +326,12 @@ impl HbnModel {
     pub fn signals(&self) -> &Signals {
         &self.params.signals
     }
-    /// Sets the signal descriptions (e.g. the log paths the CLI read).
-    pub fn set_signals(&mut self, signals: Signals) {
-        self.params.signals = signals;
+    /// One of the GPs.
+    pub fn gp(&self, role: GpRole) -> &GaussianProcess {
+        match role {
+            GpRole::Transition => &self.transition,
+            GpRole::Sensor => &self.sensor,
+        }
     }
     /// Transition GP.
     pub fn transition(&self) -> &GaussianProcess {
@@ -573,60 +358,54 @@ impl HbnModel {
         &self.summary
     }
 
-    /// JSON with format tag and version (exact float round trip).
+    /// JSON with format tag and version (exact float round trip). The same model gives the
+    /// same bytes: nothing in it depends on the clock.
     pub fn to_json(&self) -> Result<String, ModelError> {
         serde_json::to_string(&ModelFile {
             format: MODEL_FORMAT.into(),
             version: MODEL_FORMAT_VERSION,
             model: self.clone(),
         })
-        .map_err(|e| ModelError::Format {
+        .map_err(|e| ModelError::ModelFile {
             path: "<memory>".into(),
-            reason: e.to_string(),
+            problem: ModelFileProblem::Malformed {
+                detail: e.to_string(),
+            },
         })
     }
 
-    /// Parses [`HbnModel::to_json`] output, checking tag, version and consistency.
+    /// Parses [`HbnModel::to_json`] output, checking tag, version and consistency. `origin`
+    /// names the source in errors.
     pub fn from_json(text: &str, origin: &str) -> Result<Self, ModelError> {
-        let fmt_err = |reason: String| ModelError::Format {
+        let fail = |problem| ModelError::ModelFile {
             path: origin.into(),
-            reason,
+            problem,
         };
-        let value: serde_json::Value = serde_json::from_str(text).map_err(|_| {
-            fmt_err("not an hbn model file (it is not JSON); train one with `hbn train`".into())
-        })?;
+        let value: serde_json::Value =
+            serde_json::from_str(text).map_err(|_| fail(ModelFileProblem::NotJson))?;
         let tag = value.get("format").and_then(|v| v.as_str()).unwrap_or("");
         if tag != MODEL_FORMAT {
-            return Err(fmt_err(format!(
-                "not an hbn model file (format tag {tag:?}, expected {MODEL_FORMAT:?})"
-            )));
+            return Err(fail(ModelFileProblem::WrongFormat { tag: tag.into() }));
         }
         let version = value.get("version").and_then(|v| v.as_u64()).unwrap_or(0);
         if version != u64::from(MODEL_FORMAT_VERSION) {
-            return Err(fmt_err(format!(
-                "model format version {version} is not supported by this hbn (reads version {MODEL_FORMAT_VERSION}); retrain with this version"
-            )));
+            return Err(fail(ModelFileProblem::UnsupportedVersion { version }));
         }
-        let file: ModelFile =
-            serde_json::from_value(value).map_err(|e| fmt_err(format!("malformed model: {e}")))?;
-        file.model
-            .view()
-            .map_err(|e| fmt_err(format!("inconsistent model: {e}")))?;
+        let file: ModelFile = serde_json::from_value(value).map_err(|e| {
+            fail(ModelFileProblem::Malformed {
+                detail: e.to_string(),
+            })
+        })?;
+        file.model.view().map_err(|e| match e {
+            ModelError::Core(c) => fail(ModelFileProblem::Inconsistent(c)),
+            other => other,
+        })?;
         Ok(file.model)
     }
 
-    /// Writes the model atomically.
+    /// Writes the model atomically ([`hbn_fs::write_atomic`]).
     pub fn save(&self, path: &Path) -> Result<(), ModelError> {
-        hbn_gp::write_atomic(path, self.to_json()?.as_bytes()).map_err(|e| match e {
-            hbn_gp::GpError::Io { source, .. } => ModelError::Io {
-                path: path.display().to_string(),
-                source,
-            },
-            other => ModelError::Format {
-                path: path.display().to_string(),
-                reason: other.to_string(),
-            },
-        })
+        Ok(hbn_fs::write_atomic(path, self.to_json()?.as_bytes())?)
     }
 
     /// Loads a model written by [`HbnModel::save`].
@@ -635,9 +414,9 @@ impl HbnModel {
             path: path.display().to_string(),
             source,
         })?;
-        let text = String::from_utf8(bytes).map_err(|_| ModelError::Format {
+        let text = String::from_utf8(bytes).map_err(|_| ModelError::ModelFile {
             path: path.display().to_string(),
-            reason: "not an hbn model file (binary data); train one with `hbn train`".into(),
+            problem: ModelFileProblem::NotJson,
         })?;
         Self::from_json(&text, &path.display().to_string())
     }

@@ -7,9 +7,15 @@ The same Rust engine as the ``hbn`` command-line tool, with a scikit-learn feel:
 * :class:`HysteresisModel` -- the HBN (actuator ``u -> x``, soft sensor ``x -> y``) learned from
   logged ``(u, x, y)`` trajectories, whose EKF estimates ``x`` from ``u`` and ``y`` alone; its
   files are the CLI's ``hbn train --out model.hbn`` files;
+* :class:`Filter` -- the streaming estimator (``model.filter()``): one ``step(u, y)`` per sample,
+  equal to :meth:`HysteresisModel.estimate` sample for sample;
 * :func:`simulate` -- the hysteretic test systems of ``hbn simulate``;
 * :func:`read_mcap` -- numeric signals from MCAP robot logs (ROS 2 or Foxglove), resampled on one
-  grid.
+  grid by the CLI's own pipeline; :meth:`HysteresisModel.from_logs` trains from logs exactly like
+  ``hbn train``.
+
+Defaults are the library's (:func:`default_params`, :func:`default_log_options`,
+:func:`default_gp_params`): an argument left at ``None`` takes them.
 
 Example
 -------
@@ -21,14 +27,16 @@ Example
 >>> x_hat.shape
 (400,)
 
-Errors: bad data or settings raise ``ValueError``; missing or unreadable files raise ``OSError``
-(``FileNotFoundError`` for a missing file); a file that is not an hbn model (or of another format
-version) raises ``ValueError``.
+Errors are subclasses of :class:`HbnError`: :class:`ConfigError` (an invalid argument; its
+``keyword`` names it), :class:`DataError` (bad data or an unusable log), :class:`ModelFileError`
+(not an hbn model or GP of a supported version), :class:`HbnIOError` (a file could not be read or
+written; :class:`HbnFileNotFoundError` when it does not exist) and :class:`TrainingError`
+(numerical failure). They also derive from ``ValueError``, ``OSError`` /
+``FileNotFoundError`` and ``RuntimeError`` respectively, so generic handlers keep working.
 """
 
 from __future__ import annotations
 
-import json
 import os
 from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
 
@@ -40,16 +48,38 @@ __all__ = [
     "GaussianProcess",
     "HysteresisModel",
     "Estimate",
+    "Filter",
+    "FilterOutput",
     "simulate",
     "read_mcap",
     "list_topics",
+    "default_params",
+    "default_log_options",
+    "default_gp_params",
+    "HbnError",
+    "HbnIOError",
+    "HbnFileNotFoundError",
+    "DataError",
+    "ModelFileError",
+    "ConfigError",
+    "TrainingError",
     "SYSTEMS",
     "KERNELS",
     "DEFAULT_INDUCING",
+    "MODES",
     "__version__",
 ]
 
 __version__: str = _hbn.__version__
+
+HbnError = _hbn.HbnError
+HbnIOError = _hbn.HbnIOError
+HbnFileNotFoundError = _hbn.HbnFileNotFoundError
+DataError = _hbn.DataError
+ModelFileError = _hbn.ModelFileError
+ConfigError = _hbn.ConfigError
+TrainingError = _hbn.TrainingError
+FilterOutput = _hbn.FilterOutput
 
 #: Names accepted by ``simulate(system=...)``.
 SYSTEMS: Tuple[str, ...] = tuple(_hbn.systems())
@@ -57,6 +87,32 @@ SYSTEMS: Tuple[str, ...] = tuple(_hbn.systems())
 KERNELS: str = _hbn.kernel_names()
 #: Suggested inducing points per GP for sparse models (``HysteresisModel.fit(n_inducing=...)``).
 DEFAULT_INDUCING: int = _hbn.DEFAULT_INDUCING
+#: Estimation modes accepted by ``mode=``.
+MODES: Tuple[str, ...] = tuple(_hbn.mode_names())
+
+
+def default_params() -> Dict[str, Any]:
+    """The training parameters' defaults by keyword argument (``HbnParams::default`` in Rust; the
+    defaults of ``hbn train``), plus the BLR prior (``blr``) and ``signals``.
+
+    >>> import hbn
+    >>> p = hbn.default_params()
+    >>> {"max_points", "n_restarts", "max_iter", "kernel"} <= set(p) | {"kernel"}
+    True
+    """
+    return _hbn.default_params()
+
+
+def default_log_options() -> Dict[str, Any]:
+    """How logs are read by default (``LogOptions::default`` in Rust; ``hbn train`` / ``hbn
+    estimate``): ``time_source``, ``max_gap`` (s), ``rate`` (``None``: the log's native rate), the
+    default signal paths ``input``, ``state``, ``output`` and the default ``mode``."""
+    return _hbn.default_log_options()
+
+
+def default_gp_params() -> Dict[str, Any]:
+    """The defaults of :class:`GaussianProcess` (``GpParams::new`` in Rust)."""
+    return _hbn.default_gp_params()
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -95,6 +151,20 @@ def _fspath(path: PathLike) -> str:
     return os.fspath(path)
 
 
+def _config_error(keyword: str, problem: str) -> "ConfigError":
+    e = ConfigError(f"invalid {keyword}=: {problem}")
+    e.keyword = keyword
+    return e
+
+
+def _opt_float(v: Any) -> Optional[float]:
+    return None if v is None else float(v)
+
+
+def _opt_str(v: Any) -> Optional[str]:
+    return None if v is None else str(v)
+
+
 # ------------------------------------------------------------------------------------------------
 # GaussianProcess
 # ------------------------------------------------------------------------------------------------
@@ -117,19 +187,19 @@ class GaussianProcess:
         ARD kernels, one value otherwise). With ``optimize=False`` they are used exactly as given
         (missing ones take the defaults: unit variance and length scales in standardised units);
         with ``optimize=True`` they are the first optimiser start.
-    optimize : bool, default True
+    optimize : bool, optional
         Maximise the log marginal likelihood (multi-start L-BFGS on log-parameters).
-    normalize : bool, default True
+    normalize : bool, optional
         Standardise inputs (per feature) and targets before the kernel.
-    n_restarts : int, default 2
+    n_restarts : int, optional
         Optimiser starts *in all* (the first from the given/default hyperparameters, the rest
         random); the CLI's ``--starts``. Must be >= 1.
-    max_iter : int, default 200
+    max_iter : int, optional
         L-BFGS iterations per start.
-    max_points : int, default 1000
+    max_points : int, optional
         Most support points kept; larger data sets are reduced by farthest-point sampling (the
         fit reports it in :attr:`warnings_`).
-    seed : int, default 0
+    seed : int, optional
         Seed of the random starts.
     n_inducing : int or None, default None
         ``None`` fits the exact GP (on at most ``max_points`` samples). An integer ``m`` fits
@@ -141,6 +211,8 @@ class GaussianProcess:
         Fixed starting inducing inputs (raw units) for the sparse GP, instead of the selection.
     optimize_inducing : bool, default False
         Learn the inducing inputs together with the hyperparameters (sparse GP only).
+
+    Settings left at ``None`` take the library defaults, :func:`default_gp_params`.
 
     Examples
     --------
@@ -167,12 +239,12 @@ class GaussianProcess:
         lengthscales: Optional[Union[float, Sequence[float], np.ndarray]] = None,
         signal_variance: Optional[float] = None,
         noise_variance: Optional[float] = None,
-        optimize: bool = True,
-        normalize: bool = True,
-        n_restarts: int = 2,
-        max_iter: int = 200,
-        max_points: int = 1000,
-        seed: int = 0,
+        optimize: Optional[bool] = None,
+        normalize: Optional[bool] = None,
+        n_restarts: Optional[int] = None,
+        max_iter: Optional[int] = None,
+        max_points: Optional[int] = None,
+        seed: Optional[int] = None,
         n_inducing: Optional[int] = None,
         inducing_points: Optional[Any] = None,
         optimize_inducing: bool = False,
@@ -202,11 +274,13 @@ class GaussianProcess:
         return self._core
 
     @staticmethod
-    def _count(value: Any, name: str) -> int:
+    def _count(value: Any, name: str) -> Optional[int]:
+        if value is None:
+            return None
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-            raise ValueError(f"{name} must be an integer, got {value!r}")
+            raise _config_error(name, f"must be an integer, got {value!r}")
         if value < 0:
-            raise ValueError(f"{name} must be >= 0, got {value}")
+            raise _config_error(name, f"must be >= 0, got {value}")
         return int(value)
 
     def fit(self, X: Any, y: Any) -> "GaussianProcess":
@@ -248,8 +322,8 @@ class GaussianProcess:
             ls,
             None if self.signal_variance is None else float(self.signal_variance),
             None if self.noise_variance is None else float(self.noise_variance),
-            bool(self.optimize),
-            bool(self.normalize),
+            None if self.optimize is None else bool(self.optimize),
+            None if self.normalize is None else bool(self.normalize),
             self._count(self.n_restarts, "n_restarts"),
             self._count(self.max_iter, "max_iter"),
             self._count(self.max_points, "max_points"),
@@ -359,7 +433,7 @@ class GaussianProcess:
     @property
     def report_(self) -> Dict[str, Any]:
         """The training report (starts, evaluations, jitter, seconds) as a dict."""
-        return json.loads(self._fitted().report_json())
+        return self._fitted().report()
 
     def save(self, path: PathLike) -> None:
         """Writes the fitted GP to a JSON file (atomically).
@@ -374,8 +448,8 @@ class GaussianProcess:
 
     @classmethod
     def load(cls, path: PathLike) -> "GaussianProcess":
-        """Loads a GP written by :meth:`save` (``FileNotFoundError`` if missing, ``ValueError`` if
-        the file is not an hbn GP of a supported version)."""
+        """Loads a GP written by :meth:`save` (:class:`HbnFileNotFoundError` if missing,
+        :class:`ModelFileError` if the file is not an hbn GP of a supported version)."""
         core = _hbn.GaussianProcessCore.load(_fspath(path))
         gp = cls(kernel=core.kernel)
         gp._core = core
@@ -400,7 +474,8 @@ class Estimate:
     (predicted measurement before the update), ``innovation``, ``nis`` (normalised innovation
     squared), ``q_x`` (process noise variance used), ``r`` (measurement noise variance used),
     ``flags`` (guard bits, ``uint32``; see :meth:`flag_names`), ``obs_min`` / ``obs_max``
-    (eigenvalues of the observability Gramian, NaN for the first samples), ``mode``.
+    (eigenvalues of the observability Gramian, NaN for the first samples), ``mode``, and ``t``
+    (seconds from the first grid sample; only for :meth:`HysteresisModel.estimate_log`).
 
     Unpacks as ``x, x_std = model.estimate(u, y)``.
 
@@ -427,9 +502,12 @@ class Estimate:
         "obs_min",
         "obs_max",
         "mode",
+        "t",
     )
 
-    def __init__(self, fields: Mapping[str, np.ndarray], mode: str) -> None:
+    def __init__(
+        self, fields: Mapping[str, np.ndarray], mode: str, t: Optional[np.ndarray] = None
+    ) -> None:
         self.x: np.ndarray = fields["x"]
         self.x_std: np.ndarray = fields["x_std"]
         self.y_pred: np.ndarray = fields["y_pred"]
@@ -441,6 +519,7 @@ class Estimate:
         self.obs_min: np.ndarray = fields["obs_min"]
         self.obs_max: np.ndarray = fields["obs_max"]
         self.mode: str = mode
+        self.t: Optional[np.ndarray] = t
 
     def __iter__(self) -> Iterator[np.ndarray]:
         yield self.x
@@ -468,7 +547,7 @@ class Estimate:
 
     def to_dict(self) -> Dict[str, np.ndarray]:
         """All per-sample arrays by name."""
-        return {k: getattr(self, k) for k in self.__slots__ if k != "mode"}
+        return {k: getattr(self, k) for k in self.__slots__ if k not in ("mode", "t")}
 
     def score(self, x_ref: Any) -> Dict[str, float]:
         """Scores against the true state ``x_ref`` (same length), as ``hbn eval`` reports them:
@@ -495,35 +574,23 @@ def _trajectories(a: Any, name: str) -> List[np.ndarray]:
     return [_vector(a, name)]
 
 
-def _signals_json(signals: Optional[Mapping[str, Any]]) -> Optional[str]:
-    if signals is None:
-        return None
-    if not isinstance(signals, Mapping):
-        raise ValueError('signals must be a dict like {"u": "/topic.field", "x": ..., "y": ...}')
-    unknown = set(signals) - {"u", "x", "y"}
-    if unknown:
-        raise ValueError(f"signals: unknown keys {sorted(unknown)}; use u, x and y")
-    out: Dict[str, Dict[str, Optional[str]]] = {}
-    for key, role in (("u", "input"), ("x", "state"), ("y", "output")):
-        v = signals.get(key)
-        if v is None:
-            info: Dict[str, Optional[str]] = {"name": key, "path": None, "unit": None}
-        elif isinstance(v, str):
-            info = {"name": key, "path": v, "unit": None}
-        elif isinstance(v, Mapping):
-            info = {"name": str(v.get("name", key)), "path": v.get("path"), "unit": v.get("unit")}
-        else:
-            raise ValueError(f"signals[{key!r}] must be a message path string or a dict")
-        out[role] = info
-    return json.dumps(out)
-
-
 class HysteresisModel:
     """The Hysteresis Bayesian Network: a transition GP ``x_k = H_D(x_{k-1}, x_{k-2}, u_{k-1},
     u_{k-2})`` and a sensor GP ``y_k = H_S(x_{k-1}, y_{k-1}, x_k)``, with an EKF (optionally with
     local Bayesian linear regression) that estimates ``x`` from ``u`` and ``y`` alone.
 
-    Build one with :meth:`fit` or :meth:`load` (files of the CLI's ``hbn train --out``).
+    Build one with :meth:`fit` (arrays), :meth:`from_logs` (MCAP logs, like ``hbn train``) or
+    :meth:`load` (files of ``hbn train --out``).
+
+    Training parameters are keyword arguments (``**params``) applied over the library defaults
+    (:func:`default_params`): ``kernel`` (both GPs; see :data:`KERNELS`), ``transition_kernel``,
+    ``sensor_kernel``, ``n_inducing`` (``None``: exact GPs on at most ``max_points`` samples;
+    an integer: sparse GPs with that many inducing points, trained on every sample; see
+    :data:`DEFAULT_INDUCING`), ``max_points``, ``subset`` (``"farthest-point"`` or ``"random"``),
+    ``n_restarts`` (optimiser starts per GP), ``max_iter`` (L-BFGS iterations per start),
+    ``seed``, ``normalize``, ``noise_floor``, ``blr_window`` (half-width of the EKF+BLR window as a
+    fraction of each coordinate's range). They are the flags of ``hbn train``. A bad value
+    raises :class:`ConfigError` whose ``keyword`` names it.
 
     >>> import hbn
     >>> tr = hbn.simulate("maxwell-slip", 500, seed=1, noise_gain=1.0)
@@ -536,7 +603,10 @@ class HysteresisModel:
 
     def __init__(self, core: _hbn.HysteresisModelCore) -> None:
         if not isinstance(core, _hbn.HysteresisModelCore):
-            raise TypeError("use HysteresisModel.fit(...) or HysteresisModel.load(path)")
+            raise TypeError(
+                "use HysteresisModel.fit(...), HysteresisModel.from_logs(...) or "
+                "HysteresisModel.load(path)"
+            )
         self._core = core
 
     def __repr__(self) -> str:
@@ -552,30 +622,22 @@ class HysteresisModel:
         u: Any,
         x: Any,
         y: Any,
-        rate: float = 100.0,
-        kernel: str = "matern52",
-        max_points: int = 500,
-        n_restarts: int = 2,
-        seed: int = 0,
-        blr_window: float = 0.025,
-        max_iter: int = 100,
+        rate: Optional[float] = None,
         signals: Optional[Mapping[str, Any]] = None,
-        n_inducing: Optional[int] = None,
+        **params: Any,
     ) -> "HysteresisModel":
-        """Learns both GPs from logged trajectories sampled at ``rate`` Hz.
+        """Learns both GPs from logged trajectories sampled at ``rate`` Hz (``None``: the default
+        rate of :func:`default_params`).
 
         ``u``, ``x``, ``y``: one trajectory (1-D arrays of equal length, at least 3 samples) or
-        lists of trajectories (rows never straddle two trajectories). ``kernel`` is used for both
-        GPs (see :class:`GaussianProcess`; ``+dir`` uses the direction of ``u`` for the transition
-        and of ``x`` for the sensor). ``n_restarts``: optimiser starts in all per GP;
-        ``max_iter``: L-BFGS iterations per start; ``blr_window``: half-width of the EKF+BLR
-        window as a fraction of each coordinate's range. ``n_inducing``: ``None`` (the default)
-        trains exact GPs on at most ``max_points`` samples each; an integer (``hbn.DEFAULT_INDUCING``
-        = 64 is a good start) trains sparse GPs with that many inducing points on every sample. Same defaults as ``hbn train``.
-        ``signals`` (optional) records where the signals come from, in the form of
-        :func:`read_mcap`'s dict, ``{"u": "/valve.pressure", "x": ..., "y": ...}`` (or with
-        ``{"name", "path", "unit"}`` dicts as values): ``hbn estimate --model`` then reads ``u``
-        and ``y`` from those message paths.
+        lists of trajectories (rows never straddle two trajectories). ``**params``: training
+        parameters (see the class documentation; ``n_inducing=None``, the default, trains exact
+        GPs on at most ``max_points`` samples each; an integer, ``hbn.DEFAULT_INDUCING`` = 64 is
+        a good start, trains sparse GPs with that many inducing points on every sample). ``signals`` (optional) records where the
+        signals come from, ``{"u": "/valve.pressure", "x": ..., "y": ...}`` (or with ``{"name",
+        "path", "unit"}`` dicts as values): ``hbn estimate --model`` then reads ``u`` and ``y``
+        from those message paths. To train from MCAP logs use :meth:`from_logs`, which keeps the
+        logs' rate.
 
         >>> import hbn
         >>> runs = [hbn.simulate("duhem", 200, seed=s, noise_gain=1.0) for s in (1, 2)]
@@ -585,30 +647,64 @@ class HysteresisModel:
         2
         """
         us, xs, ys = _trajectories(u, "u"), _trajectories(x, "x"), _trajectories(y, "y")
-        c = GaussianProcess._count
+        if signals is not None and not isinstance(signals, Mapping):
+            raise _config_error(
+                "signals", 'must be a dict like {"u": "/topic.field", "x": ..., "y": ...}'
+            )
         core = _hbn.HysteresisModelCore.fit(
-            us,
-            xs,
-            ys,
-            float(rate),
-            str(kernel),
-            c(max_points, "max_points"),
-            c(n_restarts, "n_restarts"),
-            c(max_iter, "max_iter"),
-            c(seed, "seed"),
-            float(blr_window),
-            _signals_json(signals),
-            None if n_inducing is None else c(n_inducing, "n_inducing"),
+            us, xs, ys, _opt_float(rate), None if signals is None else dict(signals), params
         )
         return cls(core)
 
-    def estimate(self, u: Any, y: Any, mode: str = "ekf") -> Estimate:
+    @classmethod
+    def from_logs(
+        cls,
+        paths: Union[PathLike, Sequence[PathLike]],
+        input: Optional[str] = None,
+        state: Optional[str] = None,
+        output: Optional[str] = None,
+        rate: Optional[float] = None,
+        time_source: Optional[str] = None,
+        max_gap: Optional[float] = None,
+        **params: Any,
+    ) -> "HysteresisModel":
+        """Trains from MCAP logs exactly like ``hbn train`` (the same Rust function): each log is
+        one trajectory; the same logs and parameters give a bit-identical model file.
+
+        ``input``, ``state``, ``output``: Foxglove message paths of ``u``, ``x``, ``y`` (defaults
+        in :func:`default_log_options`, the topics ``hbn simulate`` writes). ``rate``: grid rate in
+        Hz (``None``: the native rate of ``input`` in the first log, rounded to 0.1 Hz); the model
+        keeps it. ``time_source`` (``"log"`` or ``"header"``) and ``max_gap`` (largest gap between
+        two samples of a signal, seconds) are the CLI's ``--time-source`` and ``--max-gap``.
+        ``**params``: training parameters (see the class documentation).
+
+        >>> import hbn  # doctest: +SKIP
+        >>> m = hbn.HysteresisModel.from_logs(["run1.mcap", "run2.mcap"], input="/valve.pressure",
+        ...                                   state="/mocap.angle", output="/strain.data")  # doctest: +SKIP
+        """
+        if isinstance(paths, (str, os.PathLike)):
+            paths = [paths]
+        core = _hbn.HysteresisModelCore.from_logs(
+            [_fspath(p) for p in paths],
+            _opt_str(input),
+            _opt_str(state),
+            _opt_str(output),
+            _opt_float(rate),
+            _opt_str(time_source),
+            _opt_float(max_gap),
+            params,
+        )
+        return cls(core)
+
+    def estimate(self, u: Any, y: Any, mode: Optional[str] = None) -> Estimate:
         """Estimates the state from the input ``u`` and the sensor output ``y`` (same length, at
-        the model's rate). ``mode``: ``"ekf"`` or ``"ekf-blr"``.
+        the model's rate). ``mode``: one of :data:`MODES` (``None``: ``"ekf"``, the default of
+        ``hbn estimate``).
 
         NaN/Inf samples are allowed (sensor drop-outs): the filter holds the last input or skips
-        the update and says so in ``flags``. Returns an :class:`Estimate` that unpacks as
-        ``(x, x_std)``.
+        the update and says so in ``flags``. Equal, sample for sample, to stepping
+        :meth:`filter` over the data. Returns an :class:`Estimate` that unpacks as ``(x,
+        x_std)``.
 
         >>> import hbn
         >>> tr = hbn.simulate("duhem", 300, seed=1)
@@ -618,9 +714,55 @@ class HysteresisModel:
         True
         """
         uv, yv = _vector(u, "u"), _vector(y, "y")
-        if uv.shape != yv.shape:
-            raise ValueError(f"u and y must have equal lengths (got {uv.shape[0]} and {yv.shape[0]})")
-        return Estimate(self._core.estimate(uv, yv, str(mode)), str(mode).lower())
+        fields = self._core.estimate(uv, yv, _opt_str(mode))
+        return Estimate(fields, self._mode_name(mode))
+
+    def estimate_log(
+        self,
+        path: PathLike,
+        mode: Optional[str] = None,
+        input: Optional[str] = None,
+        output: Optional[str] = None,
+        csv: Optional[PathLike] = None,
+        mcap: Optional[PathLike] = None,
+        time_source: Optional[str] = None,
+        max_gap: Optional[float] = None,
+    ) -> Estimate:
+        """Estimates the state over an MCAP log exactly like ``hbn estimate``: reads ``u`` and
+        ``y`` (the model's paths unless ``input`` / ``output`` are given) at the model's rate,
+        runs the filter, and writes the estimate to ``csv`` and/or ``mcap`` when given (the CLI's
+        formats, atomically). Returns an :class:`Estimate` with ``t`` set.
+        """
+        t, fields = self._core.estimate_log(
+            _fspath(path),
+            _opt_str(mode),
+            _opt_str(input),
+            _opt_str(output),
+            None if csv is None else _fspath(csv),
+            None if mcap is None else _fspath(mcap),
+            _opt_str(time_source),
+            _opt_float(max_gap),
+        )
+        return Estimate(fields, self._mode_name(mode), t)
+
+    def filter(self, mode: Optional[str] = None) -> "Filter":
+        """A streaming estimator over this model (it shares the model): call ``step(u, y)`` once
+        per sample. It initialises like :meth:`estimate` and its outputs equal :meth:`estimate`'s
+        bit for bit.
+
+        >>> import hbn
+        >>> tr = hbn.simulate("duhem", 300, seed=1)
+        >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_restarts=1)
+        >>> f = m.filter(mode="ekf")
+        >>> out = f.step(tr["u"][0], tr["y"][0])
+        >>> bool(out.x == m.estimate(tr["u"][:1], tr["y"][:1]).x[0])
+        True
+        """
+        return Filter(self._core.filter(_opt_str(mode)))
+
+    @staticmethod
+    def _mode_name(mode: Optional[str]) -> str:
+        return default_log_options()["mode"] if mode is None else str(mode).lower()
 
     def simulate_open_loop(self, u: Any) -> np.ndarray:
         """Open-loop GP simulation of ``x`` from ``u`` alone (the baseline the EKF must beat).
@@ -635,7 +777,7 @@ class HysteresisModel:
 
     def save(self, path: PathLike) -> None:
         """Writes the model (the CLI's model file format: ``hbn inspect`` / ``hbn estimate --model``
-        read it).
+        read it), atomically.
 
         >>> import hbn, os, tempfile
         >>> tr = hbn.simulate("duhem", 200, seed=1)
@@ -650,8 +792,8 @@ class HysteresisModel:
     def load(cls, path: PathLike) -> "HysteresisModel":
         """Loads a model written by :meth:`save` or by ``hbn train --out``.
 
-        ``FileNotFoundError`` if the file is missing; ``ValueError`` if it is not an hbn model or
-        of an unsupported format version.
+        :class:`HbnFileNotFoundError` if the file is missing; :class:`ModelFileError` if it is not
+        an hbn model or of an unsupported format version.
         """
         return cls(_hbn.HysteresisModelCore.load(_fspath(path)))
 
@@ -663,17 +805,19 @@ class HysteresisModel:
     @property
     def signals(self) -> Dict[str, Dict[str, Optional[str]]]:
         """Signal descriptions: ``{"input": {"name", "path", "unit"}, "state": ..., "output": ...}``."""
-        return json.loads(self._core.signals_json())
+        return self._core.signals()
 
     @property
     def params(self) -> Dict[str, Any]:
-        """Training parameters (kernels, rate, max_points, ...)."""
-        return json.loads(self._core.params_json())
+        """Training parameters by keyword argument (as :func:`default_params`), with ``blr`` and
+        ``signals``."""
+        return self._core.params()
 
     @property
     def summary(self) -> Dict[str, Any]:
-        """Training summary (trajectories, rows, seconds, warnings, observability)."""
-        return json.loads(self._core.summary_json())
+        """Training summary: trajectories, rows, warnings, observability, every optimiser start
+        (``gp``, ``start``, ``lml``, ``termination``) and ``seconds`` (0 for a loaded model)."""
+        return self._core.summary()
 
     @property
     def transition(self) -> GaussianProcess:
@@ -685,9 +829,59 @@ class HysteresisModel:
         """The sensor GP (inputs ``[x_{k-1}, y_{k-1}, x_k]``, target ``y_k``)."""
         return GaussianProcess._from_core(self._core.sensor())
 
-    def ekf_config(self, mode: str = "ekf") -> Dict[str, Any]:
-        """The default filter settings the estimator uses for ``mode`` (floors, bounds, x0)."""
-        return json.loads(self._core.ekf_config_json(str(mode)))
+    def ekf_config(self, mode: Optional[str] = None) -> Dict[str, Any]:
+        """The filter settings the estimator uses for ``mode`` (floors, bounds, training prior)."""
+        return self._core.ekf_config(_opt_str(mode))
+
+    def initial_state(self, y0: float) -> Optional[Tuple[float, float]]:
+        """Prior ``(mean, variance)`` of ``x_0`` the filter takes from a first measurement ``y0``
+        (``None`` if ``y0`` is not finite: the training prior of :meth:`ekf_config` applies)."""
+        return self._core.initial_state(float(y0))
+
+
+class Filter:
+    """The streaming estimator: one :meth:`step` per sample, for a robot node or a live plot.
+
+    Made by :meth:`HysteresisModel.filter`. It owns its state and shares the model; it
+    initialises like :meth:`HysteresisModel.estimate` (the prior of ``x_0`` from the first
+    measurement) and gives the same numbers, bit for bit. :meth:`step` returns a
+    :class:`FilterOutput` (``x``, ``x_std``, ``y_pred``, ``innovation``, ``innovation_var``,
+    ``nis``, ``q_x``, ``r``, ``flags``, ``obs_min``, ``obs_max``, ``flag_names()``).
+
+    >>> import hbn
+    >>> tr = hbn.simulate("duhem", 200, seed=1)
+    >>> f = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=80, n_restarts=1).filter()
+    >>> outs = [f.step(u, y) for u, y in zip(tr["u"], tr["y"])]
+    >>> "initialised" in outs[0].flag_names()
+    True
+    """
+
+    def __init__(self, core: _hbn.FilterCore) -> None:
+        if not isinstance(core, _hbn.FilterCore):
+            raise TypeError("use HysteresisModel.filter(mode=...)")
+        self._core = core
+
+    def __repr__(self) -> str:
+        return f"Filter(mode={self.mode!r}, steps={self.steps})"
+
+    def step(self, u: float, y: float) -> FilterOutput:
+        """Processes one sample: input ``u`` and measurement ``y`` (NaN allowed: the last input is
+        held or the update skipped, and the flags say so)."""
+        return self._core.step(float(u), float(y))
+
+    def reset(self) -> None:
+        """Forgets the state; the next step initialises again."""
+        self._core.reset()
+
+    @property
+    def mode(self) -> str:
+        """The estimation mode."""
+        return self._core.mode
+
+    @property
+    def steps(self) -> int:
+        """Samples processed since the last (re)initialisation."""
+        return self._core.steps
 
 
 # ------------------------------------------------------------------------------------------------
@@ -696,14 +890,19 @@ class HysteresisModel:
 
 
 def simulate(
-    system: str, steps: int, seed: int = 0, noise_gain: float = 0.0, rate: float = 100.0
+    system: str,
+    steps: int,
+    seed: Optional[int] = None,
+    noise_gain: Optional[float] = None,
+    rate: Optional[float] = None,
 ) -> Dict[str, np.ndarray]:
     """Simulates a hysteretic actuator/sensor system under a random bounded-increment input.
 
     ``system``: one of :data:`SYSTEMS` (``"maxwell-slip"``, ``"generalized-pi"``, ``"bouc-wen"``,
     ``"preisach"``, ``"duhem"``, ``"soft-actuator"``). ``noise_gain``: the thesis' noise gain
-    (0 = clean). Returns ``{"u", "x", "y"}`` arrays of ``steps`` samples (the same data as
-    ``hbn simulate`` with the same settings).
+    (0 = clean). ``None`` settings take the simulator's defaults (seed 0, noise-free, 100 Hz).
+    Returns ``{"u", "x", "y"}`` arrays of ``steps`` samples (the data of ``hbn simulate`` with the
+    same settings).
 
     >>> import hbn
     >>> d = hbn.simulate("bouc-wen", 100, seed=3, noise_gain=1.0)
@@ -711,7 +910,9 @@ def simulate(
     (['u', 'x', 'y'], (100,))
     """
     n = GaussianProcess._count(steps, "steps")
-    u, x, y = _hbn.simulate(str(system), n, GaussianProcess._count(seed, "seed"), float(noise_gain), float(rate))
+    u, x, y = _hbn.simulate(
+        str(system), n, GaussianProcess._count(seed, "seed"), _opt_float(noise_gain), _opt_float(rate)
+    )
     return {"u": u, "x": x, "y": y}
 
 
@@ -729,25 +930,35 @@ def list_topics(path: PathLike) -> List[Dict[str, Any]]:
 
 
 def read_mcap(
-    path: PathLike, signals: Mapping[str, str], rate: Optional[float] = None
+    path: PathLike,
+    signals: Mapping[str, str],
+    rate: Optional[float] = None,
+    time_source: Optional[str] = None,
+    max_gap: Optional[float] = None,
 ) -> Dict[str, np.ndarray]:
-    """Reads numeric signals from an MCAP log and resamples them on one uniform grid.
+    """Reads numeric signals from an MCAP log and resamples them on one uniform grid, with the
+    pipeline of the ``hbn`` CLI.
 
     ``signals`` maps your names to Foxglove-style message paths, e.g.
     ``{"u": "/valve.pressure", "y": "/joint_states.position[1]"}``. ``rate``: grid rate in Hz
-    (``None`` = the native rate of the first signal). Returns the same keys plus ``"t"`` (seconds
-    since the first grid point).
+    (``None`` = the native rate of the first signal, rounded to 0.1 Hz); ``time_source``,
+    ``max_gap``: as in :meth:`HysteresisModel.from_logs`. Returns the same keys plus ``"t"``
+    (seconds since the first grid point).
 
     >>> import hbn  # doctest: +SKIP
     >>> d = hbn.read_mcap("run.mcap", {"u": "/hbn/u.data", "y": "/hbn/y.data"}, rate=100.0)  # doctest: +SKIP
     """
     if not isinstance(signals, Mapping) or len(signals) == 0:
-        raise ValueError("signals must be a non-empty dict {name: message path}")
+        raise _config_error("signals", "must be a non-empty dict {name: message path}")
     if "t" in signals:
-        raise ValueError('"t" is reserved for the time column; name the signal otherwise')
+        raise _config_error("signals", '"t" is reserved for the time column; name the signal otherwise')
     names = list(signals.keys())
     t, cols, _ = _hbn.read_mcap(
-        _fspath(path), [str(signals[n]) for n in names], None if rate is None else float(rate)
+        _fspath(path),
+        [str(signals[n]) for n in names],
+        _opt_float(rate),
+        _opt_str(time_source),
+        _opt_float(max_gap),
     )
     out: Dict[str, np.ndarray] = {"t": t}
     out.update(zip(names, cols))

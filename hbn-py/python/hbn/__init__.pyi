@@ -12,12 +12,25 @@ __all__ = [
     "GaussianProcess",
     "HysteresisModel",
     "Estimate",
+    "Filter",
+    "FilterOutput",
     "simulate",
     "read_mcap",
     "list_topics",
+    "default_params",
+    "default_log_options",
+    "default_gp_params",
+    "HbnError",
+    "HbnIOError",
+    "HbnFileNotFoundError",
+    "DataError",
+    "ModelFileError",
+    "ConfigError",
+    "TrainingError",
     "SYSTEMS",
     "KERNELS",
     "DEFAULT_INDUCING",
+    "MODES",
     "__version__",
 ]
 
@@ -25,6 +38,20 @@ __version__: str
 SYSTEMS: Tuple[str, ...]
 KERNELS: str
 DEFAULT_INDUCING: int
+MODES: Tuple[str, ...]
+
+HbnError = _hbn.HbnError
+HbnIOError = _hbn.HbnIOError
+HbnFileNotFoundError = _hbn.HbnFileNotFoundError
+DataError = _hbn.DataError
+ModelFileError = _hbn.ModelFileError
+ConfigError = _hbn.ConfigError
+TrainingError = _hbn.TrainingError
+FilterOutput = _hbn.FilterOutput
+
+def default_params() -> Dict[str, Any]: ...
+def default_log_options() -> Dict[str, Any]: ...
+def default_gp_params() -> Dict[str, Any]: ...
 
 PathLike = Union[str, os.PathLike[str]]
 ArrayLike = npt.ArrayLike
@@ -35,24 +62,24 @@ class GaussianProcess:
     lengthscales: Optional[Union[float, Sequence[float], np.ndarray]]
     signal_variance: Optional[float]
     noise_variance: Optional[float]
-    optimize: bool
-    normalize: bool
-    n_restarts: int
-    max_iter: int
-    max_points: int
-    seed: int
+    optimize: Optional[bool]
+    normalize: Optional[bool]
+    n_restarts: Optional[int]
+    max_iter: Optional[int]
+    max_points: Optional[int]
+    seed: Optional[int]
     def __init__(
         self,
         kernel: str = "se-ard",
         lengthscales: Optional[Union[float, Sequence[float], np.ndarray]] = None,
         signal_variance: Optional[float] = None,
         noise_variance: Optional[float] = None,
-        optimize: bool = True,
-        normalize: bool = True,
-        n_restarts: int = 2,
-        max_iter: int = 200,
-        max_points: int = 1000,
-        seed: int = 0,
+        optimize: Optional[bool] = None,
+        normalize: Optional[bool] = None,
+        n_restarts: Optional[int] = None,
+        max_iter: Optional[int] = None,
+        max_points: Optional[int] = None,
+        seed: Optional[int] = None,
         n_inducing: Optional[int] = None,
         inducing_points: Optional[ArrayLike] = None,
         optimize_inducing: bool = False,
@@ -110,7 +137,10 @@ class Estimate:
     obs_min: FloatArray
     obs_max: FloatArray
     mode: str
-    def __init__(self, fields: Mapping[str, np.ndarray], mode: str) -> None: ...
+    t: Optional[FloatArray]
+    def __init__(
+        self, fields: Mapping[str, np.ndarray], mode: str, t: Optional[np.ndarray] = None
+    ) -> None: ...
     def __iter__(self) -> Iterator[FloatArray]: ...
     def __len__(self) -> int: ...
     def flag_names(self, k: int) -> List[str]: ...
@@ -126,17 +156,35 @@ class HysteresisModel:
         u: Union[ArrayLike, Sequence[ArrayLike]],
         x: Union[ArrayLike, Sequence[ArrayLike]],
         y: Union[ArrayLike, Sequence[ArrayLike]],
-        rate: float = 100.0,
-        kernel: str = "matern52",
-        max_points: int = 500,
-        n_restarts: int = 2,
-        seed: int = 0,
-        blr_window: float = 0.025,
-        max_iter: int = 100,
+        rate: Optional[float] = None,
         signals: Optional[Mapping[str, Any]] = None,
-        n_inducing: Optional[int] = None,
+        **params: Any,
     ) -> HysteresisModel: ...
-    def estimate(self, u: ArrayLike, y: ArrayLike, mode: str = "ekf") -> Estimate: ...
+    @classmethod
+    def from_logs(
+        cls,
+        paths: Union[PathLike, Sequence[PathLike]],
+        input: Optional[str] = None,
+        state: Optional[str] = None,
+        output: Optional[str] = None,
+        rate: Optional[float] = None,
+        time_source: Optional[str] = None,
+        max_gap: Optional[float] = None,
+        **params: Any,
+    ) -> HysteresisModel: ...
+    def estimate(self, u: ArrayLike, y: ArrayLike, mode: Optional[str] = None) -> Estimate: ...
+    def estimate_log(
+        self,
+        path: PathLike,
+        mode: Optional[str] = None,
+        input: Optional[str] = None,
+        output: Optional[str] = None,
+        csv: Optional[PathLike] = None,
+        mcap: Optional[PathLike] = None,
+        time_source: Optional[str] = None,
+        max_gap: Optional[float] = None,
+    ) -> Estimate: ...
+    def filter(self, mode: Optional[str] = None) -> Filter: ...
     def simulate_open_loop(self, u: ArrayLike) -> FloatArray: ...
     def save(self, path: PathLike) -> None: ...
     @classmethod
@@ -153,12 +201,30 @@ class HysteresisModel:
     def transition(self) -> GaussianProcess: ...
     @property
     def sensor(self) -> GaussianProcess: ...
-    def ekf_config(self, mode: str = "ekf") -> Dict[str, Any]: ...
+    def ekf_config(self, mode: Optional[str] = None) -> Dict[str, Any]: ...
+    def initial_state(self, y0: float) -> Optional[Tuple[float, float]]: ...
+
+class Filter:
+    def __init__(self, core: _hbn.FilterCore) -> None: ...
+    def step(self, u: float, y: float) -> FilterOutput: ...
+    def reset(self) -> None: ...
+    @property
+    def mode(self) -> str: ...
+    @property
+    def steps(self) -> int: ...
 
 def simulate(
-    system: str, steps: int, seed: int = 0, noise_gain: float = 0.0, rate: float = 100.0
+    system: str,
+    steps: int,
+    seed: Optional[int] = None,
+    noise_gain: Optional[float] = None,
+    rate: Optional[float] = None,
 ) -> Dict[str, FloatArray]: ...
 def list_topics(path: PathLike) -> List[Dict[str, Any]]: ...
 def read_mcap(
-    path: PathLike, signals: Mapping[str, str], rate: Optional[float] = None
+    path: PathLike,
+    signals: Mapping[str, str],
+    rate: Optional[float] = None,
+    time_source: Optional[str] = None,
+    max_gap: Optional[float] = None,
 ) -> Dict[str, FloatArray]: ...

@@ -1,6 +1,6 @@
 """Native extension of hbn (Rust, PyO3). Use the classes in ``hbn`` instead."""
 
-from typing import Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 import numpy.typing as npt
@@ -8,6 +8,15 @@ import numpy.typing as npt
 __version__: str
 MODEL_FORMAT_VERSION: int
 DEFAULT_INDUCING: int
+
+class HbnError(Exception): ...
+class HbnIOError(HbnError, OSError): ...
+class HbnFileNotFoundError(HbnIOError, FileNotFoundError): ...
+class DataError(HbnError, ValueError): ...
+class ModelFileError(HbnError, ValueError): ...
+class ConfigError(HbnError, ValueError):
+    keyword: str
+class TrainingError(HbnError, RuntimeError): ...
 
 class GaussianProcessCore:
     @staticmethod
@@ -19,12 +28,12 @@ class GaussianProcessCore:
         lengthscales: Optional[List[float]],
         signal_variance: Optional[float],
         noise_variance: Optional[float],
-        optimize: bool,
-        normalize: bool,
-        n_starts: int,
-        max_iters: int,
-        max_points: int,
-        seed: int,
+        optimize: Optional[bool],
+        normalize: Optional[bool],
+        n_starts: Optional[int],
+        max_iters: Optional[int],
+        max_points: Optional[int],
+        seed: Optional[int],
         n_inducing: Optional[int] = None,
         inducing_points: Optional[npt.NDArray[np.float64]] = None,
         optimize_inducing: bool = False,
@@ -55,7 +64,7 @@ class GaussianProcessCore:
     def dim(self) -> int: ...
     @property
     def kernel(self) -> str: ...
-    def report_json(self) -> str: ...
+    def report(self) -> Dict[str, Any]: ...
     def warnings(self) -> List[str]: ...
     def to_json(self) -> str: ...
     @staticmethod
@@ -64,32 +73,72 @@ class GaussianProcessCore:
     @staticmethod
     def load(path: str) -> GaussianProcessCore: ...
 
+class FilterOutput:
+    x: float
+    x_std: float
+    y_pred: float
+    innovation: float
+    innovation_var: float
+    nis: float
+    q_x: float
+    r: float
+    flags: int
+    obs_min: float
+    obs_max: float
+    def flag_names(self) -> List[str]: ...
+
+class FilterCore:
+    def step(self, u: float, y: float) -> FilterOutput: ...
+    def reset(self) -> None: ...
+    @property
+    def mode(self) -> str: ...
+    @property
+    def steps(self) -> int: ...
+
 class HysteresisModelCore:
     @staticmethod
     def fit(
         u: List[npt.NDArray[np.float64]],
         x: List[npt.NDArray[np.float64]],
         y: List[npt.NDArray[np.float64]],
-        rate: float,
-        kernel: str,
-        max_points: int,
-        n_starts: int,
-        max_iters: int,
-        seed: int,
-        blr_window: float,
-        signals_json: Optional[str],
-        n_inducing: Optional[int] = None,
+        rate: Optional[float],
+        signals: Optional[Dict[str, Any]],
+        params: Optional[Dict[str, Any]],
+    ) -> HysteresisModelCore: ...
+    @staticmethod
+    def from_logs(
+        paths: List[str],
+        input: Optional[str],
+        state: Optional[str],
+        output: Optional[str],
+        rate: Optional[float],
+        time_source: Optional[str],
+        max_gap: Optional[float],
+        params: Optional[Dict[str, Any]],
     ) -> HysteresisModelCore: ...
     def estimate(
-        self, u: npt.NDArray[np.float64], y: npt.NDArray[np.float64], mode: str
+        self, u: npt.NDArray[np.float64], y: npt.NDArray[np.float64], mode: Optional[str]
     ) -> Dict[str, np.ndarray]: ...
+    def estimate_log(
+        self,
+        path: str,
+        mode: Optional[str],
+        input: Optional[str],
+        output: Optional[str],
+        csv: Optional[str],
+        mcap: Optional[str],
+        time_source: Optional[str],
+        max_gap: Optional[float],
+    ) -> Tuple[npt.NDArray[np.float64], Dict[str, np.ndarray]]: ...
+    def filter(self, mode: Optional[str]) -> FilterCore: ...
     def simulate_open_loop(self, u: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
-    def ekf_config_json(self, mode: str) -> str: ...
+    def ekf_config(self, mode: Optional[str]) -> Dict[str, Any]: ...
+    def initial_state(self, y0: float) -> Optional[Tuple[float, float]]: ...
     @property
     def rate(self) -> float: ...
-    def signals_json(self) -> str: ...
-    def params_json(self) -> str: ...
-    def summary_json(self) -> str: ...
+    def signals(self) -> Dict[str, Dict[str, Optional[str]]]: ...
+    def params(self) -> Dict[str, Any]: ...
+    def summary(self) -> Dict[str, Any]: ...
     def transition(self) -> GaussianProcessCore: ...
     def sensor(self) -> GaussianProcessCore: ...
     def to_json(self) -> str: ...
@@ -100,13 +149,20 @@ class HysteresisModelCore:
     def load(path: str) -> HysteresisModelCore: ...
 
 def simulate(
-    system: str, steps: int, seed: int, noise_gain: float, rate: float
+    system: str, steps: int, seed: Optional[int], noise_gain: Optional[float], rate: Optional[float]
 ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
 def systems() -> List[str]: ...
 def read_mcap(
-    path: str, signals: List[str], rate: Optional[float]
+    path: str,
+    signals: List[str],
+    rate: Optional[float],
+    time_source: Optional[str],
+    max_gap: Optional[float],
 ) -> Tuple[npt.NDArray[np.float64], List[npt.NDArray[np.float64]], float]: ...
 def list_topics(path: str) -> List[Tuple[str, int, str, Optional[str]]]: ...
+def default_params() -> Dict[str, Any]: ...
+def default_log_options() -> Dict[str, Any]: ...
+def default_gp_params() -> Dict[str, Any]: ...
 def kernel_names() -> str: ...
 def flag_names() -> List[str]: ...
 def mode_names() -> List[str]: ...

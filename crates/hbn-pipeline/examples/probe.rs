@@ -1,7 +1,8 @@
 //! Diagnostic for one experiment case: `probe SYSTEM GAIN SEED`.
 use hbn_core::Mode;
-use hbn_model::experiment::{ExperimentConfig, test_trajectory, training_set};
-use hbn_model::{HbnModel, HbnParams, Sequence};
+use hbn_model::{HbnModel, HbnParams};
+use hbn_pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
+use hbn_pipeline::sequences;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let a: Vec<String> = std::env::args().collect();
@@ -29,14 +30,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         rng(&test.x),
         rng(&test.y)
     );
-    let seqs: Vec<Sequence<'_>> = train
-        .iter()
-        .map(|t| Sequence {
-            u: &t.u,
-            x: &t.x,
-            y: &t.y,
-        })
-        .collect();
     let mut params = HbnParams {
         seed,
         ..cfg.params.clone()
@@ -48,7 +41,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         params.transition_kernel = k.parse()?;
         params.sensor_kernel = k.parse()?;
     }
-    let model = HbnModel::fit(&seqs, &params)?;
+    let model = HbnModel::fit(&sequences(&train), &params)?;
     let open = model.simulate_open_loop(&test.u)?;
     println!("warnings {:?}", model.summary().warnings);
     println!(

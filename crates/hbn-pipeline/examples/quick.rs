@@ -1,5 +1,5 @@
-//! Quick accuracy survey: `cargo run --release -p hbn-model --example quick -- [gain] [kernel]`.
-use hbn_model::experiment::{ExperimentConfig, markdown_table, run};
+//! Quick accuracy survey: `cargo run --release -p hbn-pipeline --example quick -- [gain] [kernel]`.
+use hbn_pipeline::experiment::{ExperimentConfig, markdown_table, run};
 use hbn_sim::SystemKind;
 
 fn main() {
@@ -19,7 +19,10 @@ fn main() {
         cfg.params.transition_kernel = k;
         cfg.params.sensor_kernel = k;
     }
-    let rows = run(&cfg, &mut |r| {
+    let rows = run(&cfg, &mut |e| {
+        let hbn_pipeline::Event::ExperimentCase { row: r, .. } = e else {
+            return;
+        };
         eprintln!(
             "{} seed {} gain {}: ekf {:.4} blr {:.4} open {:.4} ({:.1}s)",
             r.system,

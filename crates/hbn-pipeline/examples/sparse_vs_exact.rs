@@ -3,10 +3,10 @@
 //! input), trained once with exact GPs on 500 support points and once with sparse GPs on
 //! every sample, scored by nRMSE of the EKF and EKF+BLR on the test run.
 //!
-//! `cargo run --release -p hbn-model --example sparse_vs_exact -- OUT.json [systems] [gains]
+//! `cargo run --release -p hbn-pipeline --example sparse_vs_exact -- OUT.json [systems] [gains]
 //! [seeds] [m,...]`
 use hbn_model::HbnParams;
-use hbn_model::experiment::{ExperimentConfig, run_case};
+use hbn_pipeline::experiment::{ExperimentConfig, run_case};
 use hbn_sim::SystemKind;
 
 fn list<T: std::str::FromStr>(arg: Option<&String>, default: Vec<T>) -> Vec<T> {

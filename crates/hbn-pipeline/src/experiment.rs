@@ -6,11 +6,12 @@
 //! by the EKF, the EKF+BLR and open-loop GP simulation, and scored by nRMSE against the true
 //! (disturbed) state.
 
-use crate::ModelError;
-use crate::dataset::Sequence;
-use crate::metrics::{correlation, nrmse, rmse};
-use crate::model::{HbnModel, HbnParams};
+use crate::error::PipelineError;
+use crate::log::{Event, Observer};
+use crate::sim::sequences;
 use hbn_core::Mode;
+use hbn_model::metrics::{correlation, nrmse, rmse};
+use hbn_model::{HbnModel, HbnParams};
 use hbn_sim::{InputKind, SimConfig, SystemKind, Trajectory, generate_input, simulate};
 use serde::Serialize;
 
@@ -40,7 +41,7 @@ impl Default for ExperimentConfig {
         Self {
             systems: vec![SystemKind::MaxwellSlip, SystemKind::GeneralizedPi],
             seeds: vec![1, 2, 3],
-            noise_gains: vec![1.0],
+            noise_gains: vec![0.0, 0.5, 1.0],
             train_steps: 500,
             repeats: 10,
             test_steps: 1000,
@@ -87,7 +88,7 @@ pub fn training_set(
     noise_gain: f64,
     seed: u64,
     cfg: &ExperimentConfig,
-) -> Result<Vec<Trajectory>, ModelError> {
+) -> Result<Vec<Trajectory>, PipelineError> {
     let u = generate_input(
         InputKind::RandomRamps,
         cfg.train_steps,
@@ -113,7 +114,7 @@ pub fn test_trajectory(
     noise_gain: f64,
     seed: u64,
     cfg: &ExperimentConfig,
-) -> Result<Trajectory, ModelError> {
+) -> Result<Trajectory, PipelineError> {
     let u = generate_input(
         InputKind::RandomRamps,
         cfg.test_steps,
@@ -135,21 +136,13 @@ pub fn run_case(
     seed: u64,
     noise_gain: f64,
     cfg: &ExperimentConfig,
-) -> Result<ExperimentRow, ModelError> {
+) -> Result<ExperimentRow, PipelineError> {
     let train = training_set(system, noise_gain, seed, cfg)?;
-    let seqs: Vec<Sequence<'_>> = train
-        .iter()
-        .map(|t| Sequence {
-            u: &t.u,
-            x: &t.x,
-            y: &t.y,
-        })
-        .collect();
     let params = HbnParams {
         seed,
         ..cfg.params.clone()
     };
-    let model = HbnModel::fit(&seqs, &params)?;
+    let model = HbnModel::fit(&sequences(&train), &params)?;
     let test = test_trajectory(system, noise_gain, seed, cfg)?;
     let ekf = model.estimate(&test.u, &test.y, Mode::Ekf)?;
     let blr = model.estimate(&test.u, &test.y, Mode::EkfBlr)?;
@@ -178,18 +171,27 @@ pub fn run_case(
     })
 }
 
-/// Runs every case of `cfg`, calling `progress` after each.
+/// Runs every case of `cfg` (parameters checked first), reporting each as
+/// [`Event::ExperimentCase`].
 pub fn run(
     cfg: &ExperimentConfig,
-    progress: &mut dyn FnMut(&ExperimentRow),
-) -> Result<Vec<ExperimentRow>, ModelError> {
-    let mut rows = Vec::new();
+    observe: &mut Observer<'_>,
+) -> Result<Vec<ExperimentRow>, PipelineError> {
+    cfg.params.check_ref()?;
+    let total = cfg.systems.len() * cfg.noise_gains.len() * cfg.seeds.len();
+    let mut rows = Vec::with_capacity(total);
     for &system in &cfg.systems {
         for &gain in &cfg.noise_gains {
             for &seed in &cfg.seeds {
                 let row = run_case(system, seed, gain, cfg)?;
-                progress(&row);
                 rows.push(row);
+                if let Some(row) = rows.last() {
+                    observe(Event::ExperimentCase {
+                        row,
+                        done: rows.len(),
+                        total,
+                    });
+                }
             }
         }
     }

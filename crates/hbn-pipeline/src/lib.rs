@@ -1,0 +1,48 @@
+//! # hbn-pipeline — the hbn workflows as a library
+//!
+//! A sample's way from MCAP bytes to an estimate file, in library code only:
+//!
+//! 1. [`load_log`] reads the signals by Foxglove message path ([`hbn_io::read_signals_observed`]),
+//!    chooses the grid rate (given, the model's, or the first signal's native rate), resamples
+//!    and checks gaps ([`hbn_io::resample`]) under [`LogOptions`] (time source, largest gap,
+//!    rate), checked once ([`LogOptions::check`]);
+//! 2. [`train_from_logs`] trains the HBN on the grid and keeps the rate in the model
+//!    ([`hbn_model::HbnModel::fit_checked`]);
+//! 3. [`estimate_log`] runs the filter over a log at the model's rate and writes the estimate
+//!    as CSV or MCAP ([`Outputs`], atomically through [`hbn_fs`]); [`evaluate_log`] scores it
+//!    against a logged state.
+//!
+//! The `hbn` CLI and the Python package are thin shells over these functions, with the same
+//! options and the same defaults. Workflows report progress as [`Event`]s to an observer the
+//! front end renders. [`experiment`] runs the thesis' simulation study; [`sequences`] turns
+//! simulated runs into training sequences.
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+#![cfg_attr(
+    not(test),
+    deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
+)]
+
+mod error;
+mod estimate;
+mod eval;
+pub mod experiment;
+mod log;
+mod sim;
+mod train;
+
+pub use error::{LogOption, OptionError, PipelineError, Setting};
+pub use estimate::{
+    CSV_HEADER, ESTIMATE_SCHEMA, ESTIMATE_TOPIC, LogEstimate, Outputs, SignalChoice, estimate_log,
+    estimate_schema, read_at_model_rate,
+};
+pub use eval::{Evaluation, Method, Score, evaluate_log};
+pub use log::{
+    CheckedLogOptions, Event, LogData, LogOptions, Observer, RATE_NOTICE_TOLERANCE, load_log,
+    parse_signal, parse_time_source, round_rate,
+};
+pub use sim::{START_NS, SimLog, log_times, sequences, simulate_log};
+pub use train::{
+    DEFAULT_INPUT, DEFAULT_OUTPUT, DEFAULT_STATE, MIN_LOG_SAMPLES, TrainSignals, Trained,
+    train_from_logs,
+};

@@ -1,0 +1,145 @@
+//! Logs to a trained model: the one implementation behind `hbn train` and Python's
+//! `HysteresisModel.from_logs`, so the same logs and parameters give the same model file.
+
+use std::path::PathBuf;
+
+use hbn_io::SignalPath;
+use hbn_model::{HbnModel, HbnParams, Problem, Sequence};
+
+use crate::error::{LogOption, OptionError, PipelineError};
+use crate::log::{Event, LogData, LogOptions, Observer, load_log};
+
+/// Default message path of the input `u` (what `hbn simulate` writes).
+pub const DEFAULT_INPUT: &str = "/input.data";
+/// Default message path of the state `x`.
+pub const DEFAULT_STATE: &str = "/state.data";
+/// Default message path of the sensor output `y`.
+pub const DEFAULT_OUTPUT: &str = "/sensor.data";
+
+/// Fewest grid samples a training log must have.
+pub const MIN_LOG_SAMPLES: usize = 10;
+
+/// Where the three signals are in the logs (Foxglove message paths).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TrainSignals {
+    /// The input `u`.
+    pub input: SignalPath,
+    /// The state `x`.
+    pub state: SignalPath,
+    /// The sensor output `y`.
+    pub output: SignalPath,
+}
+
+fn default_path(text: &str) -> SignalPath {
+    // The defaults are plain `/topic.field` paths; a parse failure would be a bug caught by
+    // the test below, and falls back to the topic alone.
+    text.parse().unwrap_or_else(|_| SignalPath {
+        topic: text.to_owned(),
+        fields: Vec::new(),
+    })
+}
+
+impl Default for TrainSignals {
+    fn default() -> Self {
+        Self {
+            input: default_path(DEFAULT_INPUT),
+            state: default_path(DEFAULT_STATE),
+            output: default_path(DEFAULT_OUTPUT),
+        }
+    }
+}
+
+/// A model trained from logs, with the logs as read.
+#[derive(Clone, Debug)]
+pub struct Trained {
+    /// The model (its rate is the logs' grid rate, its signals the paths read).
+    pub model: HbnModel,
+    /// The logs on their grid, one trajectory each.
+    pub logs: Vec<LogData>,
+}
+
+impl Trained {
+    /// Grid samples over all logs.
+    pub fn samples(&self) -> usize {
+        self.logs.iter().map(LogData::len).sum()
+    }
+}
+
+/// Trains the HBN from MCAP logs, each log one trajectory.
+///
+/// Every option and parameter is checked before a file is opened. The grid rate is
+/// `log_options.rate_hz`, or the native rate of the input in the first log (rounded to 0.1 Hz);
+/// every log is resampled to it, and the model keeps it as its rate. The model's signals record
+/// the paths read.
+pub fn train_from_logs(
+    logs: &[PathBuf],
+    signals: &TrainSignals,
+    log_options: LogOptions,
+    params: HbnParams,
+    observe: &mut Observer<'_>,
+) -> Result<Trained, PipelineError> {
+    if logs.is_empty() {
+        return Err(OptionError {
+            option: LogOption::Logs,
+            problem: Problem::TooSmall { value: 0, min: 1 },
+        }
+        .into());
+    }
+    let opts = log_options.check()?;
+    let params = params.check()?;
+    let paths = [
+        signals.input.clone(),
+        signals.state.clone(),
+        signals.output.clone(),
+    ];
+    let mut rate = opts.rate_hz;
+    let mut data = Vec::with_capacity(logs.len());
+    for file in logs {
+        let log = load_log(file, &paths, rate, &opts, observe)?;
+        rate = Some(log.rate_hz());
+        if log.len() < MIN_LOG_SAMPLES {
+            return Err(PipelineError::ShortLog {
+                file: file.clone(),
+                samples: log.len(),
+                rate_hz: log.rate_hz(),
+                min: MIN_LOG_SAMPLES,
+            });
+        }
+        data.push(log);
+    }
+    let mut described = params.signals.clone();
+    for (info, path) in [
+        (&mut described.input, &signals.input),
+        (&mut described.state, &signals.state),
+        (&mut described.output, &signals.output),
+    ] {
+        info.path = Some(path.to_string());
+    }
+    let params = match rate {
+        Some(r) => params.with_rate(r)?,
+        None => params,
+    }
+    .with_signals(described);
+    let seqs: Vec<Sequence<'_>> = data
+        .iter()
+        .map(|d| Sequence::new(d.column(0), d.column(1), d.column(2)))
+        .collect();
+    let model = HbnModel::fit_checked(&seqs, &params, &mut |gp, progress| {
+        observe(Event::Training { gp, progress })
+    })?;
+    Ok(Trained { model, logs: data })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_paths_parse() {
+        for text in [DEFAULT_INPUT, DEFAULT_STATE, DEFAULT_OUTPUT] {
+            let p: SignalPath = text.parse().unwrap();
+            assert_eq!(p.to_string(), text);
+        }
+        assert_eq!(TrainSignals::default().state.to_string(), DEFAULT_STATE);
+    }
+}

@@ -1,0 +1,199 @@
+//! What the CLI adds to the library: its own names for settings (`--max-points`), hints in
+//! error messages, and the rendering of workflow events as notices and progress bars.
+
+use hbn_io::{IoError, TimeSource};
+use hbn_model::{ModelError, Param};
+use hbn_pipeline::{Event, LogOption, PipelineError, Setting};
+use indicatif::ProgressBar;
+
+use crate::Ui;
+
+/// The command-line flag of a setting.
+pub fn flag(setting: Setting) -> &'static str {
+    match setting {
+        Setting::Param(p) => match p {
+            Param::Rate => "--rate",
+            Param::Kernel => "--kernel",
+            Param::TransitionKernel => "--transition-kernel",
+            Param::SensorKernel => "--sensor-kernel",
+            Param::Inducing => "--inducing",
+            Param::MaxPoints => "--max-points",
+            Param::SubsetPolicy => "--subset",
+            Param::Starts => "--starts",
+            Param::MaxIters => "--max-iters",
+            Param::Seed => "--seed",
+            Param::Normalize => "--no-normalize",
+            Param::NoiseFloor => "--noise-floor",
+            Param::BlrWindow => "--blr-window",
+            Param::Blr => "the BLR prior (set in the Rust API)",
+        },
+        Setting::Log(o) => match o {
+            LogOption::Rate => "--rate",
+            LogOption::MaxGap => "--max-gap",
+            LogOption::TimeSource => "--time-source",
+            LogOption::Logs => "--log",
+            LogOption::Input => "--input",
+            LogOption::State => "--state",
+            LogOption::Output => "--output",
+            LogOption::Mode => "--mode",
+        },
+    }
+}
+
+/// A library error as the CLI reports it: settings by their flag, reading errors with the
+/// flags that would fix them.
+pub fn error(e: PipelineError, time_source: TimeSource) -> anyhow::Error {
+    let problem = match &e {
+        PipelineError::Option(o) => Some(o.problem.to_string()),
+        PipelineError::Config(c) | PipelineError::Model(ModelError::Config(c)) => {
+            Some(c.problem.to_string())
+        }
+        _ => None,
+    };
+    if let (Some(setting), Some(problem)) = (e.setting(), problem) {
+        return anyhow::anyhow!("invalid {}: {problem}", flag(setting));
+    }
+    let hint = match &e {
+        PipelineError::Read {
+            source: IoError::TimeBackwards { .. },
+            ..
+        } if time_source == TimeSource::HeaderStamp => " (on the command line: --time-source log)",
+        PipelineError::Read {
+            source: IoError::Gap { .. } | IoError::TooFewSamples { .. },
+            ..
+        } => " (options --max-gap, --rate)",
+        PipelineError::UnknownRate { .. } => " (--rate)",
+        PipelineError::SignalPath { .. } => " (--input, --state, --output)",
+        _ => "",
+    };
+    if hint.is_empty() {
+        anyhow::Error::new(e)
+    } else {
+        anyhow::anyhow!("{e}{hint}")
+    }
+}
+
+/// Why each optimiser start of one GP stopped, comma-separated.
+pub fn terminations(summary: &hbn_model::TrainingSummary, role: hbn_model::GpRole) -> String {
+    summary
+        .terminations(role)
+        .map(|t| t.to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Renders workflow events: notices on stderr and progress bars (both off with `--quiet`).
+#[derive(Default)]
+pub struct Renderer {
+    reading: Option<ProgressBar>,
+    training: Option<ProgressBar>,
+    experiment: Option<ProgressBar>,
+}
+
+impl Renderer {
+    /// Shows one event.
+    pub fn event(&mut self, ui: &mut Ui<'_>, e: Event<'_>) {
+        match e {
+            Event::Reading { file, progress } => {
+                if progress.done {
+                    if let Some(b) = self.reading.take() {
+                        b.finish_and_clear();
+                    }
+                } else {
+                    let bar = self.reading.get_or_insert_with(|| {
+                        crate::progress::bytes(ui.quiet, progress.total_bytes, file)
+                    });
+                    bar.set_position(progress.bytes_read);
+                }
+            }
+            Event::NativeRate {
+                file,
+                path,
+                rate_hz,
+            } => ui.notice(format!(
+                "using {rate_hz:.1} Hz, the native rate of {path} in `{}` (set --rate to override)",
+                file.display()
+            )),
+            Event::Resampling {
+                file,
+                path,
+                native_hz,
+                rate_hz,
+            } => ui.notice(format!(
+                "resampling {path} from {native_hz:.1} Hz to {rate_hz:.1} Hz (`{}`)",
+                file.display()
+            )),
+            Event::Training { gp, progress } => {
+                let bar = self.training.get_or_insert_with(|| {
+                    crate::progress::bar(ui.quiet, 2 * progress.n_starts as u64, "training")
+                });
+                bar.inc(1);
+                let best = progress
+                    .best_lml
+                    .map_or_else(|| "-".to_owned(), |l| format!("{l:.1}"));
+                bar.set_message(format!(
+                    "{gp} GP start {}/{} {} (best LML {best})",
+                    progress.start + 1,
+                    progress.n_starts,
+                    progress.termination
+                ));
+            }
+            Event::ExperimentCase { row, total, .. } => {
+                let bar = self.experiment.get_or_insert_with(|| {
+                    crate::progress::bar(ui.quiet, total as u64, "experiment")
+                });
+                bar.inc(1);
+                bar.set_message(format!(
+                    "{} gain {} seed {}: nRMSE EKF {:.4}",
+                    row.system, row.noise_gain, row.seed, row.nrmse_ekf
+                ));
+            }
+        }
+    }
+
+    /// Clears every bar.
+    pub fn finish(&mut self) {
+        for b in [
+            self.reading.take(),
+            self.training.take(),
+            self.experiment.take(),
+        ]
+        .into_iter()
+        .flatten()
+        {
+            b.finish_and_clear();
+        }
+    }
+}
+
+impl Drop for Renderer {
+    fn drop(&mut self) {
+        self.finish();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every setting has a flag, and the flags of distinct settings are distinct (except the
+    /// rate, which is one flag for the log grid and the model).
+    #[test]
+    fn every_setting_has_its_own_flag() {
+        let mut seen = std::collections::BTreeMap::new();
+        let settings = Param::ALL
+            .iter()
+            .map(|&p| Setting::Param(p))
+            .chain(LogOption::ALL.iter().map(|&o| Setting::Log(o)));
+        for s in settings {
+            let f = flag(s);
+            assert!(
+                f.starts_with("--") || s == Setting::Param(Param::Blr),
+                "{s:?}"
+            );
+            if let Some(prev) = seen.insert(f, s) {
+                assert_eq!(f, "--rate", "{prev:?} and {s:?} share {f}");
+            }
+        }
+    }
+}

@@ -1,0 +1,187 @@
+"""The pipeline shared with the CLI: training from logs gives the CLI's model file byte for byte
+(also at 50 Hz), the model keeps the log's rate, estimates written from Python equal the CLI's,
+the streaming filter equals batch estimation bit for bit, and every parameter check names the
+keyword argument to change."""
+
+import subprocess
+
+import numpy as np
+import pytest
+
+import hbn
+from conftest import find_hbn_bin
+
+
+@pytest.fixture(scope="module")
+def cli():
+    exe = find_hbn_bin()
+    if exe is None:
+        pytest.skip("no hbn CLI binary: set HBN_BIN or build target/release/hbn")
+
+    def run(*args):
+        r = subprocess.run([exe, "--quiet", *map(str, args)], capture_output=True, text=True, timeout=900)
+        assert r.returncode == 0, f"hbn {' '.join(map(str, args))} failed:\n{r.stdout}\n{r.stderr}"
+        return r.stdout
+
+    return run
+
+
+def _logs(cli, d, rate, n=2):
+    paths = []
+    for s in range(n):
+        p = d / f"train{s}-{rate:g}hz.mcap"
+        cli("simulate", "--system", "duhem", "--steps", 500, "--seed", 10 + s, "--input-seed", 1,
+            "--rate", rate, "--noise-gain", 1, "--out", p)
+        paths.append(p)
+    return paths
+
+
+@pytest.mark.parametrize("rate", [50.0, 100.0])
+def test_from_logs_gives_the_cli_model_file_byte_for_byte(cli, tmp_path, rate):
+    logs = _logs(cli, tmp_path, rate)
+    cli_model = tmp_path / "cli.hbn"
+    args = ["train", "--max-points", 120, "--starts", 1, "--max-iters", 40, "--seed", 3]
+    for p in logs:
+        args += ["--log", p]
+    cli(*args, "--out", cli_model)
+    model = hbn.HysteresisModel.from_logs(logs, max_points=120, n_restarts=1, max_iter=40, seed=3)
+    # The model keeps the logs' rate (not a default of 100 Hz).
+    assert model.rate == rate
+    py_model = tmp_path / "py.hbn"
+    model.save(py_model)
+    assert py_model.read_bytes() == cli_model.read_bytes()
+    # Defaults are the library's: what Python records equals what `hbn train` records.
+    loaded = hbn.HysteresisModel.load(cli_model)
+    assert loaded.params == model.params
+    assert loaded.signals["input"]["path"] == "/input.data"
+
+
+def test_estimates_written_from_python_equal_the_cli(cli, tmp_path):
+    logs = _logs(cli, tmp_path, 50.0, n=1)
+    model_path = tmp_path / "m.hbn"
+    cli("train", "--log", logs[0], "--max-points", 100, "--starts", 1, "--out", model_path)
+    test = tmp_path / "test.mcap"
+    cli("simulate", "--system", "duhem", "--steps", 300, "--seed", 99, "--rate", 50, "--out", test)
+    cli("estimate", "--model", model_path, "--log", test, "--mode", "ekf-blr",
+        "--csv", tmp_path / "cli.csv", "--out", tmp_path / "cli.mcap")
+    model = hbn.HysteresisModel.load(model_path)
+    est = model.estimate_log(test, mode="ekf-blr", csv=tmp_path / "py.csv", mcap=tmp_path / "py.mcap")
+    assert (tmp_path / "py.csv").read_bytes() == (tmp_path / "cli.csv").read_bytes()
+    # Read back through resampling (grid times rounded to ns): equal up to interpolation rounding.
+    back = hbn.read_mcap(tmp_path / "py.mcap", {"x": "/hbn/estimate.x"}, rate=50.0)
+    np.testing.assert_allclose(back["x"], est.x, rtol=0, atol=1e-12)
+    assert est.t is not None and est.t[1] == pytest.approx(0.02)
+    # The same numbers as the array API on the same grid.
+    d = hbn.read_mcap(test, {"u": "/input.data", "y": "/sensor.data"}, rate=model.rate)
+    np.testing.assert_array_equal(model.estimate(d["u"], d["y"], mode="ekf-blr").x, est.x)
+
+
+def test_streaming_filter_equals_batch_bit_for_bit(trained):
+    model, _, test = trained
+    u, y = test["u"].copy(), test["y"].copy()
+    u[30] = np.nan
+    y[31] = np.nan
+    for mode in hbn.MODES:
+        batch = model.estimate(u, y, mode=mode)
+        f = model.filter(mode=mode)
+        assert f.mode == mode and f.steps == 0
+        for rnd in range(2):
+            outs = [f.step(a, b) for a, b in zip(u, y)]
+            for name in ("x", "x_std", "y_pred", "innovation", "nis", "q_x", "r", "obs_min", "obs_max"):
+                got = np.array([getattr(o, name) for o in outs])
+                np.testing.assert_array_equal(got, getattr(batch, name), err_msg=f"{mode} {name}")
+            assert [o.flags for o in outs] == list(batch.flags)
+            assert "input_invalid" in outs[30].flag_names()
+            assert f.steps == len(u)
+            f.reset()
+    # The first step takes the prior from the first measurement.
+    mean, var = model.initial_state(y[0])
+    first = model.filter().step(u[0], y[0])
+    assert first.x == mean and first.x_std == pytest.approx(np.sqrt(var), rel=1e-9)
+
+
+def test_defaults_come_from_the_library():
+    p = hbn.default_params()
+    tr = hbn.simulate("duhem", 200, seed=1)
+    m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=60)
+    got = m.params
+    for k, v in p.items():
+        if k not in ("max_points", "signals"):
+            assert got[k] == v, k
+    assert got["max_points"] == 60
+    o = hbn.default_log_options()
+    assert o["rate"] is None and o["max_gap"] > 0 and o["time_source"] == "log"
+    assert hbn.default_gp_params()["n_restarts"] >= 1
+
+
+def test_exception_classes():
+    assert issubclass(hbn.DataError, hbn.HbnError) and issubclass(hbn.DataError, ValueError)
+    assert issubclass(hbn.ConfigError, hbn.HbnError) and issubclass(hbn.ConfigError, ValueError)
+    assert issubclass(hbn.ModelFileError, hbn.HbnError)
+    assert issubclass(hbn.HbnIOError, OSError) and issubclass(hbn.HbnIOError, hbn.HbnError)
+    assert issubclass(hbn.HbnFileNotFoundError, FileNotFoundError)
+    assert issubclass(hbn.HbnFileNotFoundError, hbn.HbnIOError)
+    assert issubclass(hbn.TrainingError, hbn.HbnError) and issubclass(hbn.TrainingError, RuntimeError)
+
+
+BAD_PARAMS = [
+    ("rate", -1.0),
+    ("rate", 0),
+    ("max_points", 1),
+    ("n_restarts", 0),
+    ("max_iter", 0),
+    ("noise_floor", 0.0),
+    ("blr_window", 0.7),
+    ("blr_window", 0.0),
+    ("kernel", "rbf"),
+    ("transition_kernel", "rbf"),
+    ("sensor_kernel", "rbf"),
+    ("subset", "all"),
+    ("seed", -1),
+    ("normalize", "yes"),
+]
+
+
+@pytest.mark.parametrize("keyword,value", BAD_PARAMS)
+def test_every_parameter_check_names_its_keyword(keyword, value):
+    d = hbn.simulate("duhem", 50, seed=1)
+    with pytest.raises(hbn.ConfigError, match=keyword) as e:
+        hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], **{keyword: value})
+    assert e.value.keyword == keyword
+
+
+@pytest.mark.parametrize(
+    "keyword,kwargs",
+    [
+        ("max_gap", {"max_gap": 0.0}),
+        ("time_source", {"time_source": "gps"}),
+        ("rate", {"rate": -2.0}),
+        ("input", {"input": "/a[x"}),
+        ("paths", {"paths": []}),
+        ("max_points", {"max_points": 1}),
+    ],
+)
+def test_log_option_checks_name_their_keyword_before_reading(keyword, kwargs, tmp_path):
+    kwargs = dict(kwargs)
+    paths = kwargs.pop("paths", [tmp_path / "absent.mcap"])
+    with pytest.raises(hbn.ConfigError, match=keyword) as e:
+        hbn.HysteresisModel.from_logs(paths, **kwargs)
+    assert e.value.keyword == keyword
+
+
+def test_unknown_keyword_is_a_type_error():
+    d = hbn.simulate("duhem", 50, seed=1)
+    with pytest.raises(TypeError, match="max_pointz"):
+        hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], max_pointz=10)
+
+
+def test_summary_reports_every_start(trained):
+    model, _, _ = trained
+    s = model.summary
+    assert isinstance(s, dict) and s["trajectories"] == 1
+    assert [st["gp"] for st in s["starts"]] == ["transition", "sensor"]
+    for st in s["starts"]:
+        t = st["termination"]
+        assert t["termination"] in ("converged", "max-iters", "solver-exit", "failed"), t
+        assert t["termination"] != "solver-exit" or t["reason"], t
+    assert isinstance(model.transition.report_, dict)
