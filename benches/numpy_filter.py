@@ -167,10 +167,14 @@ def _span(st: Dict[str, float]) -> float:
 
 
 def ekf_config(model: Dict[str, Any]) -> Dict[str, Any]:
-    """``HbnModel::ekf_config(Mode::Ekf)``."""
+    """``HbnModel::ekf_config(Mode::Ekf)``, with the noise scales learned at training."""
     xs, ys = model["x_stats"], model["y_stats"]
     sx, sy = _span(xs), _span(ys)
+    scales = model.get("tuning", {}).get("ekf", {"q": 1.0, "r": 1.0, "std": 1.0})
     return {
+        "q_scale": float(scales["q"]),
+        "r_scale": float(scales["r"]),
+        "std_scale": float(scales["std"]),
         "q_floor": 1e-10 * sx * sx,
         "r_floor": 1e-10 * sy * sy,
         "qx_model_floor": float(model["transition"].get("loo_error_variance", 0.0)),
@@ -246,7 +250,7 @@ class NumpyEkf:
     def _initialise(self, u_k: float, y_k: float) -> Tuple[float, float]:
         c = self.cfg
         u0 = u_k if math.isfinite(u_k) else 0.0
-        r = max(c["r_floor"], self.se.noise_var_raw, c["r_model_floor"])
+        r = max(c["r_floor"], c["r_scale"] * max(self.se.noise_var_raw, c["r_model_floor"]))
         if math.isfinite(y_k):
             s0, s_var = _clamp(y_k, c["y_bounds"]), r
         else:
@@ -260,7 +264,7 @@ class NumpyEkf:
             "u_last": u0,
             "u_prev": u0,
         }
-        return c["x0_mean"], math.sqrt(p[0, 0])
+        return c["x0_mean"], c["std_scale"] * math.sqrt(p[0, 0])
 
     def step(self, u_k: float, y_k: float) -> Tuple[float, float]:
         c = self.cfg
@@ -272,7 +276,7 @@ class NumpyEkf:
         z, p = st["z"], st["p"]
         x1, x2, s1 = z[0], z[1], z[2]
         jm = c["jac_max"]
-        r = max(c["r_floor"], self.se.noise_var_raw, c["r_model_floor"])
+        r = max(c["r_floor"], c["r_scale"] * max(self.se.noise_var_raw, c["r_model_floor"]))
         t = self._linearise(self.tr, np.array([x1, x2, st["u_last"], st["u_prev"]]))
         if t is not None:
             xk = _clamp(t[0], c["x_bounds"])
@@ -282,15 +286,23 @@ class NumpyEkf:
                 cc, e, f = (_clamp_jac(s[2][0], jm), _clamp_jac(s[2][1], jm), _clamp_jac(s[2][2], jm))
                 fm = np.array([[a1, a2, 0.0], [1.0, 0.0, 0.0], [cc + f * a1, f * a2, e]])
                 g = np.array([1.0, 0.0, f])
-                q_x = _floor(max(self.tr.noise_var_raw + t[1], c["qx_model_floor"]), c["q_floor"])
-                q_s = _floor(s[1], c["q_floor"])
+                q_x = _floor(
+                    c["q_scale"] * max(self.tr.noise_var_raw + t[1], c["qx_model_floor"]),
+                    c["q_floor"],
+                )
+                q_s = _floor(c["q_scale"] * s[1], c["q_floor"])
                 s_pred = _clamp(s[0], c["y_bounds"])
                 z = np.array([xk, x1, s_pred])
-                r = _floor(max(self.se.noise_var_raw, c["r_model_floor"]), c["r_floor"])
+                r = _floor(
+                    c["r_scale"] * max(self.se.noise_var_raw, c["r_model_floor"]), c["r_floor"]
+                )
             else:
                 fm = np.array([[t[2][0], t[2][1], 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
                 g = np.array([1.0, 0.0, 0.0])
-                q_x = _floor(max(self.tr.noise_var_raw + t[1], c["qx_model_floor"]), c["q_floor"])
+                q_x = _floor(
+                    c["q_scale"] * max(self.tr.noise_var_raw + t[1], c["qx_model_floor"]),
+                    c["q_floor"],
+                )
                 q_s = c["p_max"] * 0.01
                 z = np.array([xk, x1, s1])
         else:
@@ -317,7 +329,7 @@ class NumpyEkf:
                     z = np.array([_clamp(zn[0], xb), _clamp(zn[1], xb), _clamp(zn[2], yb)])
                     p = _bound_cov(pn, c["p_min"], c["p_max"])
         st["z"], st["p"] = z, p
-        return z[0], math.sqrt(max(p[0, 0], 0.0))
+        return z[0], c["std_scale"] * math.sqrt(max(p[0, 0], 0.0))
 
     @staticmethod
     def _linearise(gp: NumpyGP, x: np.ndarray):

@@ -90,6 +90,13 @@ fn simulate_train_inspect_estimate_eval() {
         out.contains("transition GP") && out.contains("LML"),
         "{out}"
     );
+    // Filter-aware training: the held-out table, both modes, the default marked.
+    assert!(
+        out.contains("filter tuned on held-out data")
+            && out.contains("the last 400 of 1600 samples held out")
+            && out.contains("default mode"),
+        "{out}"
+    );
 
     // inspect, text and JSON.
     let (out, _) = ok(&["inspect", &model]);
@@ -118,6 +125,24 @@ fn simulate_train_inspect_estimate_eval() {
         Some(3)
     );
     assert!(v["blr"]["transition"]["cells"].as_u64().unwrap_or(0) > 0);
+    let rows = v["filter"]["validation"]["rows"]
+        .as_array()
+        .expect("validation rows");
+    assert_eq!(rows.len(), 2);
+    let default_mode = v["filter"]["tuning"]["default_mode"]
+        .as_str()
+        .expect("default mode")
+        .to_owned();
+    assert_eq!(
+        v["filter"]["validation"]["default_mode"],
+        default_mode.as_str()
+    );
+    for r in rows {
+        // The search starts from scale 1, so the held-out score can only improve.
+        let nlpd = |k: &str| r[k]["calibration"]["nlpd"].as_f64().expect("nlpd");
+        assert!(nlpd("tuned") <= nlpd("untuned") + 1e-9, "{r}");
+        assert!(r["scales"]["q"].as_f64().is_some_and(|q| q > 0.0), "{r}");
+    }
 
     // estimate to CSV and MCAP.
     let (csv, mcap) = (p(dir, "est.csv"), p(dir, "est.mcap"));
@@ -162,6 +187,37 @@ fn simulate_train_inspect_estimate_eval() {
     assert_eq!(sig[0].t_ns[599], 1_000_000_000 + 599 * 10_000_000);
     let csv_x0: f64 = rows[0][1].parse().expect("x");
     assert_eq!(sig[0].value[0], csv_x0);
+
+    // Without --mode, estimate runs the model's default mode (chosen on held-out data).
+    let (csv_default, csv_named) = (p(dir, "default.csv"), p(dir, "named.csv"));
+    let (out, _) = ok(&[
+        "estimate",
+        "--model",
+        &model,
+        "--log",
+        &test,
+        "--csv",
+        &csv_default,
+    ]);
+    assert!(
+        out.contains(&format!("{default_mode}: 600 samples")),
+        "{out}"
+    );
+    ok(&[
+        "estimate",
+        "--model",
+        &model,
+        "--log",
+        &test,
+        "--mode",
+        &default_mode,
+        "--csv",
+        &csv_named,
+    ]);
+    assert_eq!(
+        std::fs::read_to_string(&csv_default).expect("csv"),
+        std::fs::read_to_string(&csv_named).expect("csv")
+    );
 
     // eval --json and a plot.
     let png = p(dir, "eval.png");

@@ -378,6 +378,9 @@ pub fn step(data: &[u8]) {
         y_bounds: (b.f64(), b.f64()),
         x0_mean: b.f64(),
         x0_var: b.f64(),
+        q_scale: b.f64(),
+        r_scale: b.f64(),
+        std_scale: b.f64(),
     };
     let mode = if b.byte() & 1 == 0 { Mode::Ekf } else { Mode::EkfBlr };
     let config = cfg(&mut b, mode);

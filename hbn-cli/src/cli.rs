@@ -352,6 +352,10 @@ pub struct TrainArgs {
     /// BLR window as a fraction of each coordinate's range.
     #[arg(long, allow_negative_numbers = true, default_value_t = params().blr_window)]
     pub blr_window: f64,
+    /// Fraction of the data held out to learn the filter's noise scales and default mode
+    /// (the end of every log); 0 turns filter tuning off.
+    #[arg(long, allow_negative_numbers = true, default_value_t = params().validation)]
+    pub validation: f64,
     /// Log reading options.
     #[command(flatten)]
     pub read: ReadArgs,
@@ -375,9 +379,10 @@ pub struct EstimateArgs {
     /// Log with the input and sensor signals.
     #[arg(long)]
     pub log: PathBuf,
-    /// Estimation mode.
-    #[arg(long, value_enum, default_value_t = Mode::default().into())]
-    pub mode: ModeArg,
+    /// Estimation mode (default: the model's, the mode with the best held-out score at
+    /// training; see `hbn inspect`).
+    #[arg(long, value_enum)]
+    pub mode: Option<ModeArg>,
     /// Input signal (default: the path the model was trained with).
     #[arg(long, value_parser = parse_path)]
     pub input: Option<SignalPath>,

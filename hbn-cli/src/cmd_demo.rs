@@ -90,7 +90,7 @@ pub fn run(ui: &mut Ui<'_>, args: &DemoArgs) -> anyhow::Result<()> {
         let est = EstimateArgs {
             model: model.clone(),
             log: test.out.clone(),
-            mode,
+            mode: Some(mode),
             input: None,
             output: None,
             out: Some(p(&format!("{stem}.mcap"))),

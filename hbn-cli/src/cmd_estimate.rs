@@ -65,7 +65,7 @@ pub fn run(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<LogEstimate> 
         &model,
         &args.log,
         &signals,
-        args.mode.into(),
+        args.mode.map_or(model.default_mode(), Into::into),
         opts,
         &outputs,
         &mut |e| render.event(ui, e),

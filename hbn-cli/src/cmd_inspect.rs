@@ -64,6 +64,7 @@ pub fn model_json(model: &HbnModel) -> Value {
             "starts": s.starts,
         },
         "observability": s.observability,
+        "filter": {"tuning": model.tuning(), "validation": s.validation},
         "warnings": s.warnings,
     })
 }
@@ -155,6 +156,8 @@ pub fn model_text(model: &HbnModel, file: &std::path::Path) -> String {
             l.window_fraction()
         ));
     }
+    t.push_str("\nfilter\n");
+    t.push_str(&crate::report::validation_table(model));
     match &s.observability {
         Some(o) => t.push_str(&format!(
             "\nobservability (first training trajectory)\n  lambda_min: min {:.3e}, median {:.3e}; lambda_max {:.3e}; \

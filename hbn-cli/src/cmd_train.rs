@@ -27,6 +27,7 @@ impl TrainArgs {
             normalize: !self.no_normalize,
             noise_floor: self.noise_floor,
             blr_window: self.blr_window,
+            validation: self.validation,
             ..d
         }
     }
@@ -90,6 +91,7 @@ pub fn print_summary(
             report::terminations(s, role)
         ));
     }
+    text.push_str(&report::validation_table(model));
     if s.warnings.is_empty() {
         text.push_str("  no warnings\n");
     } else {

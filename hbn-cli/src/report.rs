@@ -26,6 +26,7 @@ pub fn flag(setting: Setting) -> &'static str {
             Param::NoiseFloor => "--noise-floor",
             Param::BlrWindow => "--blr-window",
             Param::Blr => "the BLR prior (set in the Rust API)",
+            Param::Validation => "--validation",
         },
         Setting::Log(o) => match o {
             LogOption::Rate => "--rate",
@@ -196,4 +197,48 @@ mod tests {
             }
         }
     }
+}
+
+/// The validation table of filter-aware training (`hbn train`, `hbn inspect`): per mode the
+/// learned noise scales and the held-out scores before and after; empty without tuning.
+pub fn validation_table(model: &hbn_model::HbnModel) -> String {
+    let Some(v) = &model.summary().validation else {
+        return "  filter not tuned (trained with --validation 0, or too little data): noise \
+                scales 1, default mode ekf\n"
+            .to_owned();
+    };
+    let mut s = format!(
+        "  filter tuned on held-out data ({}; {} samples scored):\n    {:<8} {:>8} {:>8} {:>9} \
+         {:>17} {:>17} {:>17}\n",
+        v.holdout,
+        v.samples,
+        "mode",
+        "Q scale",
+        "R scale",
+        "std scale",
+        "nRMSE before/now",
+        "in 2 sd before/now",
+        "NLPD before/now"
+    );
+    for r in &v.rows {
+        let star = if r.mode == v.default_mode { "*" } else { " " };
+        s.push_str(&format!(
+            "    {:<7}{star} {:>8.3} {:>8.3} {:>9.3} {:>8.4}/{:<8.4} {:>7.1}%/{:<8} {:>8.3}/{:<8.3}\n",
+            r.mode.name(),
+            r.scales.q,
+            r.scales.r,
+            r.scales.std,
+            r.untuned.nrmse,
+            r.tuned.nrmse,
+            100.0 * r.untuned.calibration.coverage_2sigma,
+            format!("{:.1}%", 100.0 * r.tuned.calibration.coverage_2sigma),
+            r.untuned.calibration.nlpd,
+            r.tuned.calibration.nlpd,
+        ));
+    }
+    s.push_str(&format!(
+        "    * default mode: {} (lowest held-out NLPD; `hbn estimate` uses it without --mode)\n",
+        v.default_mode.name()
+    ));
+    s
 }

@@ -58,6 +58,7 @@ fn param_keyword(p: Param) -> &'static str {
         Param::NoiseFloor => "noise_floor",
         Param::BlrWindow => "blr_window",
         Param::Blr => "blr",
+        Param::Validation => "validation",
     }
 }
 
@@ -374,9 +375,10 @@ fn slice<'a>(a: &'a PyReadonlyArray1<'_, f64>, name: &str) -> PyResult<&'a [f64]
         .map_err(|e| PyValueError::new_err(format!("{name}: {e}")))
 }
 
-fn parse_mode(py: Python<'_>, mode: Option<&str>) -> PyResult<Mode> {
+/// `mode=` as a [`Mode`]; `None` is the model's default mode (chosen on held-out data).
+fn parse_mode(py: Python<'_>, mode: Option<&str>, default: Mode) -> PyResult<Mode> {
     match mode {
-        None => Ok(Mode::default()),
+        None => Ok(default),
         Some(m) => {
             Mode::from_str(m).map_err(|e| raise(py, Fail::config("mode", format!("{m:?}: {e}"))))
         }
@@ -900,7 +902,7 @@ impl HysteresisModelCore {
         y: PyReadonlyArray1<'_, f64>,
         mode: Option<&str>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let mode = parse_mode(py, mode)?;
+        let mode = parse_mode(py, mode, self.inner.default_mode())?;
         let (u, y) = (slice(&u, "u")?.to_vec(), slice(&y, "y")?.to_vec());
         let est = detached(py, || Ok(self.inner.estimate(&u, &y, mode)?))?;
         estimate_dict(py, est)
@@ -922,7 +924,7 @@ impl HysteresisModelCore {
         time_source: Option<&str>,
         max_gap: Option<f64>,
     ) -> PyResult<(Arr<'py>, Bound<'py, PyDict>)> {
-        let mode = parse_mode(py, mode)?;
+        let mode = parse_mode(py, mode, self.inner.default_mode())?;
         let opts = log_options(py, None, time_source, max_gap)?;
         let signals = SignalChoice {
             input: input
@@ -952,7 +954,7 @@ impl HysteresisModelCore {
     /// A streaming filter over this model (sharing it, not copying it).
     #[pyo3(signature = (mode))]
     fn filter(&self, py: Python<'_>, mode: Option<&str>) -> PyResult<FilterCore> {
-        let mode = parse_mode(py, mode)?;
+        let mode = parse_mode(py, mode, self.inner.default_mode())?;
         let inner = Filter::new(self.inner.clone(), mode).map_err(|e| raise(py, e))?;
         Ok(FilterCore { inner })
     }
@@ -971,7 +973,7 @@ impl HysteresisModelCore {
     /// Default filter settings of a mode, as a dict.
     #[pyo3(signature = (mode))]
     fn ekf_config<'py>(&self, py: Python<'py>, mode: Option<&str>) -> PyResult<Bound<'py, PyAny>> {
-        let mode = parse_mode(py, mode)?;
+        let mode = parse_mode(py, mode, self.inner.default_mode())?;
         to_py(py, &self.inner.ekf_config(mode))
     }
     /// Prior `(mean, variance)` of `x_0` given the first measurement, or `None`.
@@ -998,6 +1000,14 @@ impl HysteresisModelCore {
         // Wall-clock time is not saved in model files; report it while it is known.
         d.set_item("seconds", s.seconds)?;
         Ok(d)
+    }
+    /// The mode estimation uses without `mode=` (chosen on held-out data at training).
+    fn default_mode(&self) -> &'static str {
+        self.inner.default_mode().name()
+    }
+    /// Noise scales per mode and the default mode, as a dict.
+    fn tuning<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_py(py, self.inner.tuning())
     }
     /// The transition GP.
     fn transition(&self) -> GaussianProcessCore {

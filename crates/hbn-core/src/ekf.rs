@@ -192,6 +192,22 @@ pub struct EkfConfig {
     pub x0_mean: f64,
     /// Initial variance of `x` (e.g. the training variance); see `x0_mean`.
     pub x0_var: f64,
+    /// Scale of the process noise `Q` (both `q_x` and `q_s`, model floors included), learned
+    /// on held-out data by filter-aware training (`1` = the GP variances as they are).
+    #[cfg_attr(feature = "serde", serde(default = "one"))]
+    pub q_scale: f64,
+    /// Scale of the measurement noise `R` (model floor included); see `q_scale`.
+    #[cfg_attr(feature = "serde", serde(default = "one"))]
+    pub r_scale: f64,
+    /// Scale of the reported standard deviation of `x` (calibration: the filter's own `P` is
+    /// not changed); see `q_scale`.
+    #[cfg_attr(feature = "serde", serde(default = "one"))]
+    pub std_scale: f64,
+}
+
+#[cfg(feature = "serde")]
+fn one() -> f64 {
+    1.0
 }
 
 impl EkfConfig {
@@ -229,6 +245,11 @@ impl EkfConfig {
         if !(ok_box(self.x_bounds) && ok_box(self.y_bounds)) {
             return Err(CoreError::InvalidSpec(
                 "state bounds must be finite with lo < hi",
+            ));
+        }
+        if !(pos(self.q_scale) && pos(self.r_scale) && pos(self.std_scale)) {
+            return Err(CoreError::InvalidSpec(
+                "q_scale, r_scale and std_scale must be finite and > 0",
             ));
         }
         if !(self.x0_mean.is_finite() && pos(self.x0_var)) {
@@ -527,8 +548,7 @@ impl<'m> Ekf<'m> {
         let (f_mat, g_vec, q_x, q_s, s_pred);
         let mut r = cfg
             .r_floor
-            .max(self.model.sensor.noise_variance())
-            .max(cfg.r_model_floor);
+            .max(cfg.r_scale * self.model.sensor.noise_variance().max(cfg.r_model_floor));
         match tr {
             Some(t) => {
                 let xk = clamp_flag(t.mean, cfg.x_bounds, &mut flags);
@@ -543,21 +563,25 @@ impl<'m> Ekf<'m> {
                         f_mat = Matrix3::new(a1, a2, 0.0, 1.0, 0.0, 0.0, c + f * a1, f * a2, e);
                         g_vec = Vector3::new(1.0, 0.0, f);
                         q_x = floor_flag(
-                            (t.noise + t.epistemic).max(cfg.qx_model_floor),
+                            cfg.q_scale * (t.noise + t.epistemic).max(cfg.qx_model_floor),
                             cfg.q_floor,
                             &mut flags,
                         );
-                        q_s = floor_flag(s.epistemic, cfg.q_floor, &mut flags);
+                        q_s = floor_flag(cfg.q_scale * s.epistemic, cfg.q_floor, &mut flags);
                         s_pred = clamp_flag(s.mean, cfg.y_bounds, &mut flags);
                         st.z = Vector3::new(xk, x1, s_pred);
-                        r = floor_flag(s.noise.max(cfg.r_model_floor), cfg.r_floor, &mut flags);
+                        r = floor_flag(
+                            cfg.r_scale * s.noise.max(cfg.r_model_floor),
+                            cfg.r_floor,
+                            &mut flags,
+                        );
                     }
                     None => {
                         f_mat =
                             Matrix3::new(t.grad[0], t.grad[1], 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
                         g_vec = Vector3::new(1.0, 0.0, 0.0);
                         q_x = floor_flag(
-                            (t.noise + t.epistemic).max(cfg.qx_model_floor),
+                            cfg.q_scale * (t.noise + t.epistemic).max(cfg.qx_model_floor),
                             cfg.q_floor,
                             &mut flags,
                         );
@@ -590,7 +614,7 @@ impl<'m> Ekf<'m> {
         *state = Some(st);
         StepOutput {
             x: st.z.x,
-            x_std: sqrt(st.p.m11.max(0.0)),
+            x_std: cfg.std_scale * sqrt(st.p.m11.max(0.0)),
             y_pred: s_pred,
             innovation,
             innovation_var: s_var,
@@ -620,8 +644,7 @@ impl<'m> Ekf<'m> {
         };
         let r = cfg
             .r_floor
-            .max(self.model.sensor.noise_variance())
-            .max(cfg.r_model_floor);
+            .max(cfg.r_scale * self.model.sensor.noise_variance().max(cfg.r_model_floor));
         let s0 = if y_k.is_finite() {
             clamp_flag(y_k, cfg.y_bounds, &mut flags)
         } else {
@@ -641,7 +664,7 @@ impl<'m> Ekf<'m> {
         };
         let out = StepOutput {
             x: st.z.x,
-            x_std: sqrt(st.p.m11),
+            x_std: cfg.std_scale * sqrt(st.p.m11),
             y_pred: s0,
             innovation: 0.0,
             innovation_var: s_var,

@@ -42,6 +42,7 @@ mod local;
 pub mod metrics;
 mod model;
 mod params;
+pub mod tuning;
 
 pub use dataset::{Dataset, MIN_SAMPLES, Sequence, Table, build_dataset};
 pub use error::{DataError, ModelError, ModelFileProblem, Signal};
@@ -56,3 +57,4 @@ pub use params::{
     CheckedHbnParams, ConfigError, DEFAULT_INDUCING, HbnParams, KernelChoice, KernelFamily, Param,
     ParamValue, Problem, SignalInfo, Signals, UnknownKernel,
 };
+pub use tuning::{FilterTuning, NoiseScales, ValidationReport};

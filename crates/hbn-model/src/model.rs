@@ -7,8 +7,9 @@ use crate::dataset::{
 use crate::error::ModelFileProblem;
 use crate::local::LocalData;
 use crate::params::{CheckedHbnParams, HbnParams, Signals};
+use crate::tuning::FilterTuning;
 use hbn_core::{EkfConfig, HbnView, InitPrior, Mode};
-use hbn_gp::{FitProgress, GaussianProcess, Termination};
+use hbn_gp::{FitProgress, GaussianProcess, Hyperparameters, Termination};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use std::time::Instant;
@@ -124,6 +125,10 @@ pub struct TrainingSummary {
     /// Every optimiser start of both GPs, in order: what it reached and why it stopped.
     #[serde(default)]
     pub starts: Vec<StartSummary>,
+    /// Filter-aware training on held-out data (`None`: not tuned, e.g. `validation = 0` or
+    /// too little data, or a model file from before tuning existed).
+    #[serde(default)]
+    pub validation: Option<crate::tuning::ValidationReport>,
 }
 
 /// The trained Hysteresis Bayesian Network.
@@ -140,6 +145,9 @@ pub struct HbnModel {
     /// Training `(y, x)` pairs sorted by `y` (then `x`), for initialising the filter.
     #[serde(default)]
     init_pairs: Vec<[f64; 2]>,
+    /// Noise scales per mode and the default mode, learned on held-out data.
+    #[serde(default)]
+    tuning: FilterTuning,
     summary: TrainingSummary,
 }
 
@@ -163,9 +171,66 @@ impl HbnModel {
 
     /// Learns both relations with parameters checked beforehand, reporting each optimiser
     /// start to `observe` as `(which GP, progress)`.
+    ///
+    /// With `params.validation > 0` (the default) this is filter-aware training: the GPs are
+    /// fitted on the training part of the runs, the filter's noise scales of every mode are
+    /// learned on the held-out part ([`crate::tuning`]), and the GPs are then refitted on every
+    /// run with the hyperparameters found (no second search). The held-out table is in
+    /// [`TrainingSummary::validation`].
     pub fn fit_checked(
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
+        observe: &mut dyn FnMut(GpRole, &FitProgress),
+    ) -> Result<Self, ModelError> {
+        let t0 = Instant::now();
+        let Some(split) = crate::tuning::split(trajectories, params.validation) else {
+            let mut model = Self::fit_gps(trajectories, params, None, observe)?;
+            if params.validation > 0.0 {
+                model.summary.warnings.push(format!(
+                    "filter not tuned: too little data to hold out {:.0}% for validation \
+                     (each held-out block needs {} samples)",
+                    100.0 * params.validation,
+                    crate::tuning::MIN_TUNING_SAMPLES
+                ));
+            }
+            model.summary.seconds = t0.elapsed().as_secs_f64();
+            return Ok(model);
+        };
+        let trial = Self::fit_gps(&split.train, params, None, observe)?;
+        let tuned = crate::tuning::tune(&trial, &split)?;
+        let mut model = Self::fit_gps(
+            trajectories,
+            params,
+            Some((&trial.transition, &trial.sensor)),
+            &mut |_, _| {},
+        )?;
+        for w in trial.summary.warnings {
+            if !model.summary.warnings.contains(&w) {
+                model.summary.warnings.push(w);
+            }
+        }
+        model.summary.starts = trial.summary.starts;
+        match tuned {
+            Some((tuning, report)) => {
+                model.tuning = tuning;
+                model.summary.validation = Some(report);
+            }
+            None => model.summary.warnings.push(
+                "filter not tuned: the filter failed on the held-out data; default noise \
+                 scales kept"
+                    .to_owned(),
+            ),
+        }
+        model.summary.seconds = t0.elapsed().as_secs_f64();
+        Ok(model)
+    }
+
+    /// Fits both GPs and the local data on `trajectories`; with `fixed`, every GP keeps the
+    /// hyperparameters of the given one (no optimisation: a refit on more data).
+    fn fit_gps(
+        trajectories: &[Sequence<'_>],
+        params: &CheckedHbnParams,
+        fixed: Option<(&GaussianProcess, &GaussianProcess)>,
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
         let t0 = Instant::now();
@@ -176,11 +241,20 @@ impl HbnModel {
         let se_spec = params.sensor_kernel.spec(SENSOR_DIM, SENSOR_DIRECTION);
         let mut starts = Vec::new();
         let mut fit_gp = |which: GpRole, spec, table: &crate::dataset::Table| {
-            let mut gp = hbn_gp::fit_observed(
-                &params.gp_params(spec),
-                &table.inputs,
-                &table.targets,
-                &mut |p| {
+            let mut gp_params = params.gp_params(spec);
+            if let Some(pair) = fixed {
+                let gp = match which {
+                    GpRole::Transition => pair.0,
+                    GpRole::Sensor => pair.1,
+                };
+                gp_params.init = Some(Hyperparameters {
+                    theta: gp.theta().to_vec(),
+                    noise_variance: gp.noise_variance_std(),
+                });
+                gp_params.optimize = false;
+            }
+            let mut gp =
+                hbn_gp::fit_observed(&gp_params, &table.inputs, &table.targets, &mut |p| {
                     starts.push(StartSummary {
                         gp: which,
                         start: p.start,
@@ -188,9 +262,8 @@ impl HbnModel {
                         termination: p.termination.clone(),
                     });
                     observe(which, &p);
-                },
-            )
-            .map_err(|source| ModelError::Gp { which, source })?;
+                })
+                .map_err(|source| ModelError::Gp { which, source })?;
             gp.forget_timing();
             Ok::<_, ModelError>(gp)
         };
@@ -228,6 +301,7 @@ impl HbnModel {
             x_stats: SignalStats::of(x_all.iter()),
             y_stats: SignalStats::of(y_all.iter()),
             init_pairs,
+            tuning: FilterTuning::default(),
             summary: TrainingSummary {
                 trajectories: trajectories.len(),
                 rows: data.transition.len(),
@@ -235,6 +309,7 @@ impl HbnModel {
                 warnings,
                 observability: None,
                 starts,
+                validation: None,
             },
         };
         // Observability diagnostic (Sec. 4.2) along the first training trajectory.
@@ -283,8 +358,27 @@ impl HbnModel {
         )?))
     }
 
-    /// Default filter settings from the training ranges (see `docs/ekf.md`).
+    /// Filter settings of `mode`: [`HbnModel::untuned_config`] with the noise scales learned
+    /// on held-out data ([`HbnModel::tuning`]).
     pub fn ekf_config(&self, mode: Mode) -> EkfConfig {
+        let mut c = self.untuned_config(mode);
+        self.tuning.scales(mode).apply(&mut c);
+        c
+    }
+
+    /// The mode estimation uses when none is asked for: the one with the best held-out score
+    /// (the EKF for a model trained without validation).
+    pub fn default_mode(&self) -> Mode {
+        self.tuning.default_mode
+    }
+
+    /// Noise scales per mode and the default mode.
+    pub fn tuning(&self) -> &FilterTuning {
+        &self.tuning
+    }
+
+    /// Filter settings from the training ranges, at noise scale 1 (see `docs/ekf.md`).
+    pub fn untuned_config(&self, mode: Mode) -> EkfConfig {
         let sx = self.x_stats.span();
         let sy = self.y_stats.span();
         EkfConfig {
@@ -302,6 +396,9 @@ impl HbnModel {
             y_bounds: (self.y_stats.min - 0.1 * sy, self.y_stats.max + 0.1 * sy),
             x0_mean: self.x_stats.mean,
             x0_var: self.x_stats.var.max(1e-12 * sx * sx),
+            q_scale: 1.0,
+            r_scale: 1.0,
+            std_scale: 1.0,
         }
     }
 

@@ -218,6 +218,12 @@ pub struct HbnParams {
     pub blr_window: f64,
     /// BLR prior settings.
     pub blr: LocalRegression,
+    /// Fraction of the data held out to learn the filter's noise scales and default mode
+    /// (filter-aware training, [`crate::tuning`]): the end of every run. `0` turns tuning off
+    /// (noise scales 1, EKF by default).
+    /// Model files written before tuning existed read as `0`.
+    #[serde(default)]
+    pub validation: f64,
     /// Signal names, paths and units.
     pub signals: Signals,
 }
@@ -238,6 +244,7 @@ impl Default for HbnParams {
             noise_floor: 1e-4,
             blr_window: 0.025,
             blr: LocalRegression::default(),
+            validation: 0.25,
             signals: Signals::default(),
         }
     }
@@ -276,11 +283,13 @@ pub enum Param {
     BlrWindow,
     /// [`HbnParams::blr`] (the local regression's prior; set in Rust only).
     Blr,
+    /// [`HbnParams::validation`].
+    Validation,
 }
 
 impl Param {
     /// Every parameter, in the order front ends list them.
-    pub const ALL: [Param; 14] = [
+    pub const ALL: [Param; 15] = [
         Param::Rate,
         Param::Kernel,
         Param::TransitionKernel,
@@ -295,6 +304,7 @@ impl Param {
         Param::NoiseFloor,
         Param::BlrWindow,
         Param::Blr,
+        Param::Validation,
     ];
 
     /// The Rust name (the field of [`HbnParams`]; `kernel` for the shorthand).
@@ -314,6 +324,7 @@ impl Param {
             Param::NoiseFloor => "noise_floor",
             Param::BlrWindow => "blr_window",
             Param::Blr => "blr",
+            Param::Validation => "validation",
         }
     }
 }
@@ -339,6 +350,16 @@ pub enum Problem {
         /// The value given.
         value: f64,
         /// Exclusive lower bound.
+        min: f64,
+        /// Inclusive upper bound.
+        max: f64,
+    },
+    /// Must lie in `[min, max]`.
+    #[error("must be in [{min}, {max}], got {value}")]
+    Between {
+        /// The value given.
+        value: f64,
+        /// Inclusive lower bound.
         min: f64,
         /// Inclusive upper bound.
         max: f64,
@@ -514,6 +535,16 @@ impl HbnParams {
                 },
             ));
         }
+        if !(self.validation.is_finite() && (0.0..=0.5).contains(&self.validation)) {
+            return Err(ConfigError::new(
+                Param::Validation,
+                Problem::Between {
+                    value: self.validation,
+                    min: 0.0,
+                    max: 0.5,
+                },
+            ));
+        }
         self.blr.validate().map_err(|e| {
             ConfigError::new(
                 Param::Blr,
@@ -619,7 +650,11 @@ impl HbnParams {
             (Param::Normalize, ParamValue::Bool(v)) => self.normalize = v,
             (Param::NoiseFloor, ParamValue::Real(v)) => self.noise_floor = v,
             (Param::BlrWindow, ParamValue::Real(v)) => self.blr_window = v,
-            (Param::Rate | Param::NoiseFloor | Param::BlrWindow, _) => return wrong("a number"),
+            (Param::Validation, ParamValue::Real(v)) => self.validation = v,
+            (Param::Validation, ParamValue::Int(v)) => self.validation = v as f64,
+            (Param::Rate | Param::NoiseFloor | Param::BlrWindow | Param::Validation, _) => {
+                return wrong("a number");
+            }
             (Param::Kernel | Param::TransitionKernel | Param::SensorKernel, _) => {
                 return wrong("a kernel name");
             }
@@ -654,6 +689,7 @@ impl HbnParams {
             Param::Normalize => ParamValue::Bool(self.normalize),
             Param::NoiseFloor => ParamValue::Real(self.noise_floor),
             Param::BlrWindow => ParamValue::Real(self.blr_window),
+            Param::Validation => ParamValue::Real(self.validation),
             Param::Blr => return None,
         })
     }
@@ -677,11 +713,13 @@ mod tests {
     #[test]
     fn every_check_names_its_parameter() {
         type Spoil = fn(&mut HbnParams);
-        let bad: [(Param, Spoil); 10] = [
+        let bad: [(Param, Spoil); 12] = [
             (Param::Rate, |p| p.rate_hz = 0.0),
             (Param::Rate, |p| p.rate_hz = f64::NAN),
             (Param::MaxPoints, |p| p.max_points = 1),
             (Param::Inducing, |p| p.n_inducing = Some(0)),
+            (Param::Validation, |p| p.validation = 0.6),
+            (Param::Validation, |p| p.validation = f64::NAN),
             (Param::Starts, |p| p.n_starts = 0),
             (Param::MaxIters, |p| p.max_iters = 0),
             (Param::NoiseFloor, |p| p.noise_floor = 0.0),

@@ -589,7 +589,9 @@ class HysteresisModel:
     :data:`DEFAULT_INDUCING`), ``max_points``, ``subset`` (``"farthest-point"`` or ``"random"``),
     ``n_restarts`` (optimiser starts per GP), ``max_iter`` (L-BFGS iterations per start),
     ``seed``, ``normalize``, ``noise_floor``, ``blr_window`` (half-width of the EKF+BLR window as a
-    fraction of each coordinate's range). They are the flags of ``hbn train``. A bad value
+    fraction of each coordinate's range), ``validation`` (fraction of every run, at its end,
+    held out to learn the filter's noise scales and default mode; 0 turns this filter-aware
+    training off; see :attr:`tuning`). They are the flags of ``hbn train``. A bad value
     raises :class:`ConfigError` whose ``keyword`` names it.
 
     >>> import hbn
@@ -812,6 +814,20 @@ class HysteresisModel:
         """Training parameters by keyword argument (as :func:`default_params`), with ``blr`` and
         ``signals``."""
         return self._core.params()
+
+    @property
+    def default_mode(self) -> str:
+        """The mode :meth:`estimate` and :meth:`filter` use without ``mode=``: the one with the
+        best held-out score at training (filter-aware training, ``validation=``), ``"ekf"`` for
+        a model trained with ``validation=0``."""
+        return self._core.default_mode()
+
+    @property
+    def tuning(self) -> Dict[str, Any]:
+        """The filter's noise scales learned on held-out data, per mode (``q``: process noise,
+        ``r``: measurement noise, ``std``: reported standard deviation; all 1 untuned), and the
+        ``default_mode``. The held-out table is ``summary["validation"]``."""
+        return self._core.tuning()
 
     @property
     def summary(self) -> Dict[str, Any]:

@@ -95,6 +95,9 @@ fn config(mode: Mode) -> EkfConfig {
         y_bounds: (-1.0, 2.0),
         x0_mean: 0.5,
         x0_var: 0.1,
+        q_scale: 1.0,
+        r_scale: 1.0,
+        std_scale: 1.0,
     }
 }
 

@@ -1,0 +1,137 @@
+//! Filter-aware training judged on data it never saw: runs of a simulator, each with its own
+//! input, trained once without tuning (`validation = 0`) and once with it (the default); a
+//! fresh test run scores both. Tuning must make the default estimate's uncertainty honest
+//! (mean NEES near 1, the 2-sigma band holding most of the truth) and its predictive density
+//! better, without losing accuracy. The noise scales must reach the step: the `std` scale
+//! multiplies the reported standard deviation exactly, and `q`/`r` change the filter.
+
+use hbn::core::Mode;
+use hbn::model::metrics::{calibration, nrmse};
+use hbn::model::{HbnModel, HbnParams};
+use hbn::pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
+use hbn::pipeline::sequences;
+use hbn::sim::{SystemKind, Trajectory};
+
+fn runs(system: SystemKind, cfg: &ExperimentConfig) -> Vec<Trajectory> {
+    (0..6u64)
+        .flat_map(|r| training_set(system, 1.0, 40 + r, cfg).expect("simulate"))
+        .collect()
+}
+
+#[test]
+fn tuning_makes_the_uncertainty_honest_on_unseen_data() {
+    let system = SystemKind::Duhem;
+    let cfg = ExperimentConfig {
+        train_steps: 500,
+        repeats: 1,
+        test_steps: 800,
+        ..ExperimentConfig::default()
+    };
+    let train = runs(system, &cfg);
+    let test = test_trajectory(system, 1.0, 7, &cfg).expect("test run");
+    let fit = |validation: f64| {
+        let params = HbnParams {
+            max_points: 300,
+            n_starts: 1,
+            seed: 1,
+            validation,
+            ..HbnParams::default()
+        };
+        HbnModel::fit(&sequences(&train), &params).expect("fit")
+    };
+    let untuned = fit(0.0);
+    let tuned = fit(HbnParams::default().validation);
+    assert!(untuned.summary().validation.is_none());
+    assert_eq!(untuned.default_mode(), Mode::Ekf);
+    let report = tuned
+        .summary()
+        .validation
+        .as_ref()
+        .expect("validation table");
+    assert_eq!(report.rows.len(), 2);
+    assert_eq!(report.holdout.from, vec![375; 6]);
+
+    let score = |m: &HbnModel| {
+        let est = m
+            .estimate(&test.u, &test.y, m.default_mode())
+            .expect("estimate");
+        (
+            nrmse(&est.x, &test.x),
+            calibration(&est.x, &est.x_std, &test.x),
+        )
+    };
+    let (e0, c0) = score(&untuned);
+    let (e1, c1) = score(&tuned);
+    println!(
+        "untuned: nRMSE {e0:.4} {c0:?}\ntuned ({:?}): nRMSE {e1:.4} {c1:?}",
+        tuned.tuning()
+    );
+    // Honest: NEES near 1, the 2-sigma band holds most of the truth.
+    assert!(
+        (0.25..=2.5).contains(&c1.mean_nees),
+        "tuned mean NEES {}",
+        c1.mean_nees
+    );
+    assert!(
+        c1.coverage_2sigma >= 0.85,
+        "tuned 2-sigma coverage {}",
+        c1.coverage_2sigma
+    );
+    // Better predictive density than the untuned default, and no worse accuracy (10% slack).
+    assert!(c1.nlpd < c0.nlpd - 0.2, "NLPD {} vs {}", c1.nlpd, c0.nlpd);
+    assert!(e1 <= 1.1 * e0, "nRMSE {e1} vs {e0}");
+}
+
+#[test]
+fn noise_scales_reach_the_step() {
+    let cfg = ExperimentConfig {
+        train_steps: 300,
+        repeats: 2,
+        test_steps: 300,
+        ..ExperimentConfig::default()
+    };
+    let train = training_set(SystemKind::BoucWen, 1.0, 3, &cfg).expect("simulate");
+    let params = HbnParams {
+        max_points: 100,
+        n_starts: 1,
+        validation: 0.0,
+        ..HbnParams::default()
+    };
+    let model = HbnModel::fit(&sequences(&train), &params).expect("fit");
+    let test = test_trajectory(SystemKind::BoucWen, 1.0, 3, &cfg).expect("test");
+    for mode in Mode::ALL {
+        let base = model.ekf_config(mode);
+        assert_eq!(
+            (base.q_scale, base.r_scale, base.std_scale),
+            (1.0, 1.0, 1.0)
+        );
+        let run = |f: &dyn Fn(&mut hbn::core::EkfConfig)| {
+            let mut c = base;
+            f(&mut c);
+            model.estimate_with(&test.u, &test.y, &c).expect("estimate")
+        };
+        let a = run(&|_| {});
+        // The std scale only scales what is reported.
+        let b = run(&|c| c.std_scale = 3.0);
+        assert_eq!(a.x, b.x);
+        for (sa, sb) in a.x_std.iter().zip(&b.x_std) {
+            assert!(
+                (sb - 3.0 * sa).abs() <= 1e-12 * sb.abs().max(1e-300),
+                "{sa} {sb}"
+            );
+        }
+        // R scales the measurement noise (in the plain EKF the sensor GP's noise is the same
+        // at every step; with BLR it depends on the state, which R changes).
+        let c = run(&|c| c.r_scale = 4.0);
+        if mode == Mode::Ekf {
+            for (ra, rc) in a.r.iter().zip(&c.r) {
+                assert!((rc - 4.0 * ra).abs() <= 1e-9 * rc.abs(), "r {ra} {rc}");
+            }
+        }
+        assert!(a.x.iter().zip(&c.x).any(|(p, q)| p != q), "{mode:?}");
+        // Q scales the process noise: the estimate changes.
+        let d = run(&|c| c.q_scale = 10.0);
+        assert!(a.x.iter().zip(&d.x).any(|(p, q)| p != q), "{mode:?}");
+        assert!(d.q_x.iter().zip(&a.q_x).skip(1).any(|(qd, qa)| qd > qa));
+    }
+}
