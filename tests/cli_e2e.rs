@@ -361,7 +361,7 @@ fn model_rate_differs_from_log_rate_prints_a_notice() {
     // --quiet suppresses notices, not the summary.
     let (out, err) = ok(&["--quiet", "estimate", "--model", &model, "--log", &test]);
     assert!(err.is_empty(), "{err}");
-    assert!(out.contains("ekf: 150 samples"), "{out}");
+    assert!(out.contains("150 samples"), "{out}");
 }
 
 #[test]

@@ -3,8 +3,10 @@
 
 Methods (see ``docs/baselines.md``):
 
-* ``hbn-ekf`` / ``hbn-ekf-blr``: ``hbn.HysteresisModel.fit`` with its defaults on the arrays of
-  ``hbn.read_mcap`` (rate from the log), then ``estimate(mode="ekf" | "ekf-blr")``;
+* ``hbn`` / ``hbn-ekf`` / ``hbn-ekf-blr``: ``hbn.HysteresisModel.fit`` with its defaults on the
+  arrays of ``hbn.read_mcap`` (rate from the log; filter-aware training on the end of every
+  training log), then ``estimate()`` in the model's default mode (what a user gets), and in
+  each mode;
 * ``sk-gp-ekf``: scikit-learn SE-ARD GPs on 600 random rows of each training set driving a
   numpy EKF (``gp_ekf.py``);
 * ``lstm``: a causal 2-layer LSTM ``(u, y) -> x`` in torch (``lstm.py``; skipped with a notice
@@ -60,7 +62,9 @@ import gp_ekf  # noqa: E402
 import lstm  # noqa: E402
 
 #: Every method, in report order.
-METHODS: Tuple[str, ...] = ("hbn-ekf", "hbn-ekf-blr", "sk-gp-ekf", "lstm")
+METHODS: Tuple[str, ...] = ("hbn", "hbn-ekf", "hbn-ekf-blr", "sk-gp-ekf", "lstm")
+#: hbn's methods: the default mode, then each mode.
+HBN_METHODS: Tuple[str, ...] = ("hbn", "hbn-ekf", "hbn-ekf-blr")
 #: The baselines (what hbn is compared with in the ratio).
 BASELINES: Tuple[str, ...] = ("sk-gp-ekf", "lstm")
 #: Metric keys of one method's result.
@@ -142,8 +146,8 @@ def simulate_logs(
 def run_hbn(
     train: Sequence[common.Log], test: common.Log, seed: int, paths: Mapping[str, str]
 ) -> Dict[str, Dict[str, Any]]:
-    """hbn with its defaults: one fit (``rate`` from the logs), then both filter modes.
-    Returns ``{"hbn-ekf": {...}, "hbn-ekf-blr": {...}}`` with ``x``, ``x_std``, seconds (the
+    """hbn with its defaults: one fit (``rate`` from the logs), then the default mode and both
+    filter modes. Returns ``{"hbn": {...}, "hbn-ekf": {...}, "hbn-ekf-blr": {...}}`` with ``x``, ``x_std``, seconds (the
     training time is the same fit's for both), the guard ``flags`` counts and ``model_rate``."""
     import hbn
 
@@ -158,10 +162,11 @@ def run_hbn(
     )
     t_fit = time.perf_counter() - t0
     out: Dict[str, Dict[str, Any]] = {}
-    for mode in ("ekf", "ekf-blr"):
+    for name, mode in (("hbn", None), ("hbn-ekf", "ekf"), ("hbn-ekf-blr", "ekf-blr")):
         t1 = time.perf_counter()
         est = model.estimate(test.u, test.y, mode=mode)
-        out[f"hbn-{mode}"] = {
+        out[name] = {
+            "mode": mode or model.default_mode,
             "x": np.asarray(est.x),
             "x_std": np.asarray(est.x_std),
             "train_seconds": t_fit,
@@ -217,12 +222,12 @@ def evaluate(
         report["notices"].append(msg)
         print(msg, file=log or sys.stderr)
 
-    if any(m.startswith("hbn-") for m in methods):
+    if any(m in HBN_METHODS for m in methods):
         try:
             raw.update({k: v for k, v in run_hbn(train, test, seed, paths).items() if k in methods})
         except Exception as e:  # a failing method must not hide the others' figures
             for m in methods:
-                if m.startswith("hbn-"):
+                if m in HBN_METHODS:
                     raw[m] = {"error": f"{type(e).__name__}: {e}"}
             note(f"hbn failed: {e}")
     if "sk-gp-ekf" in methods:
@@ -325,7 +330,7 @@ def summarise(runs: Sequence[Mapping[str, Any]]) -> List[Dict[str, Any]]:
             }
         base = [row["methods"][b]["nrmse"] for b in BASELINES if b in row["methods"] and row["methods"][b]["nrmse"] is not None]
         best = min(base) if base else None
-        for h in ("hbn-ekf", "hbn-ekf-blr"):
+        for h in HBN_METHODS:
             hm = row["methods"].get(h)
             ok = hm is not None and hm["nrmse"] is not None and best is not None and best > 0
             row[f"ratio_{h}"] = hm["nrmse"] / best if ok else None
@@ -343,8 +348,8 @@ def markdown_tables(rows: Sequence[Mapping[str, Any]]) -> str:
         return format(m[key], fmt)
 
     out = [
-        "| system | gain | runs | nRMSE hbn EKF | nRMSE hbn EKF+BLR | nRMSE sklearn GP-EKF | nRMSE LSTM | hbn EKF / best baseline | hbn EKF+BLR / best baseline |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| system | gain | runs | nRMSE hbn (default mode) | nRMSE hbn EKF | nRMSE hbn EKF+BLR | nRMSE sklearn GP-EKF | nRMSE LSTM | hbn / best baseline | hbn EKF / best baseline | hbn EKF+BLR / best baseline |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         ms = r["methods"]
@@ -357,16 +362,17 @@ def markdown_tables(rows: Sequence[Mapping[str, Any]]) -> str:
                 nr.append(f"{m['nrmse']:.4f} +- {m['nrmse_sd']:.4f}")
         out.append(
             f"| {r['system']} | {r['gain']:g} | {r['runs']} | " + " | ".join(nr)
-            + f" | {cell(r, 'ratio_hbn-ekf', '.2f')} | {cell(r, 'ratio_hbn-ekf-blr', '.2f')} |"
+            + f" | {cell(r, 'ratio_hbn', '.2f')} | {cell(r, 'ratio_hbn-ekf', '.2f')}"
+            + f" | {cell(r, 'ratio_hbn-ekf-blr', '.2f')} |"
         )
     out += [
         "",
-        "| system | gain | 1-sigma / 2-sigma coverage, mean NEES: hbn EKF | hbn EKF+BLR | sklearn GP-EKF |",
-        "|---|---|---|---|---|",
+        "| system | gain | 1-sigma / 2-sigma coverage, mean NEES: hbn (default mode) | hbn EKF | hbn EKF+BLR | sklearn GP-EKF |",
+        "|---|---|---|---|---|---|",
     ]
     for r in rows:
         cols = []
-        for name in ("hbn-ekf", "hbn-ekf-blr", "sk-gp-ekf"):
+        for name in ("hbn", "hbn-ekf", "hbn-ekf-blr", "sk-gp-ekf"):
             m = r["methods"].get(name)
             cols.append(
                 f"{cell(m, 'coverage_1sigma', '.3f')} / {cell(m, 'coverage_2sigma', '.3f')}, {cell(m, 'mean_nees', '.3g')}"

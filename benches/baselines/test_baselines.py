@@ -322,15 +322,18 @@ def test_runner_end_to_end_on_simulated_logs(
     rep = json.loads(out.read_text())
     assert rep["rate"] == 100.0 and rep["n_test"] == 150 and rep["n_train"] == [150] * 3
     ms = rep["methods"]
-    for name in ("hbn-ekf", "hbn-ekf-blr", "sk-gp-ekf"):
+    for name in ("hbn", "hbn-ekf", "hbn-ekf-blr", "sk-gp-ekf"):
         m = ms[name]
         assert "error" not in m, m
         assert 0.0 < m["nrmse"] < 0.5, (name, m["nrmse"])
         assert 0.0 <= m["coverage_1sigma"] <= m["coverage_2sigma"] <= 1.0
         assert m["mean_nees"] > 0 and m["samples"] == 150
         assert m["train_seconds"] > 0 and m["estimate_seconds"] > 0
-        if name.startswith("hbn-"):
+        if name.startswith("hbn"):
             assert m["model_rate"] == rep["rate"]  # hbn is trained at the logs' rate
+    # The default mode is one of the two modes, and gives exactly that mode's estimate.
+    assert ms["hbn"]["mode"] in ("ekf", "ekf-blr")
+    assert ms["hbn"]["nrmse"] == ms["hbn-" + ms["hbn"]["mode"]]["nrmse"]
     printed = capsys.readouterr()
     if lstm.available():
         assert ms["lstm"]["coverage_1sigma"] is None and ms["lstm"]["mean_nees"] is None
@@ -377,7 +380,7 @@ def test_grid_writes_json_and_a_markdown_table(tmp_path: Path, capsys: pytest.Ca
     assert row["ratio_hbn-ekf"] == pytest.approx(hbn_nr / sk_nr)
     md = (tmp_path / "grid.md").read_text()
     assert md.startswith("| system | gain | runs |")
-    assert f"| duhem | 1 | 1 | {hbn_nr:.4f} +- 0.0000 | - | {sk_nr:.4f}" in md
+    assert f"| duhem | 1 | 1 | - | {hbn_nr:.4f} +- 0.0000 | - | {sk_nr:.4f}" in md
     # --table re-renders the same tables from the saved JSON.
     assert run.main(["--table", str(tmp_path / "grid.json")]) == 0
     assert capsys.readouterr().out == md

@@ -16,7 +16,7 @@ def test_numpy_filter_matches_hbn(kernel, tmp_path):
     path = tmp_path / "model.hbn"
     model.save(path)
     test = hbn.simulate("duhem", 300, seed=4, noise_gain=1.0)
-    est = model.estimate(test["u"], test["y"])
+    est = model.estimate(test["u"], test["y"], mode="ekf")  # the numpy filter is the EKF
     x_np, std_np = numpy_filter.numpy_estimate(
         numpy_filter.load_model_json(str(path)), test["u"], test["y"]
     )
@@ -35,7 +35,7 @@ def test_numpy_filter_matches_hbn_with_sparse_gps(tmp_path):
     path = tmp_path / "model.hbn"
     model.save(path)
     test = hbn.simulate("duhem", 300, seed=4, noise_gain=1.0)
-    est = model.estimate(test["u"], test["y"])
+    est = model.estimate(test["u"], test["y"], mode="ekf")  # the numpy filter is the EKF
     x_np, std_np = numpy_filter.numpy_estimate(
         numpy_filter.load_model_json(str(path)), test["u"], test["y"]
     )
