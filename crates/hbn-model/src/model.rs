@@ -172,54 +172,47 @@ impl HbnModel {
     /// Learns both relations with parameters checked beforehand, reporting each optimiser
     /// start to `observe` as `(which GP, progress)`.
     ///
-    /// With `params.validation > 0` (the default) this is filter-aware training: the GPs are
-    /// fitted on the training part of the runs, the filter's noise scales of every mode are
-    /// learned on the held-out part ([`crate::tuning`]), and the GPs are then refitted on every
-    /// run with the hyperparameters found (no second search). The held-out table is in
-    /// [`TrainingSummary::validation`].
+    /// With `params.validation > 0` (the default) this is filter-aware training: after the GPs
+    /// are fitted on every run, they are refitted on the training part of the runs with the
+    /// hyperparameters found (no second search), and the filter's noise scales of every mode
+    /// are learned on the held-out part ([`crate::tuning`]). The GPs of the returned model are
+    /// those of `validation = 0`; the held-out table is in [`TrainingSummary::validation`].
     pub fn fit_checked(
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
         let t0 = Instant::now();
-        let Some(split) = crate::tuning::split(trajectories, params.validation) else {
-            let mut model = Self::fit_gps(trajectories, params, None, observe)?;
-            if params.validation > 0.0 {
-                model.summary.warnings.push(format!(
-                    "filter not tuned: too little data to hold out {:.0}% for validation \
-                     (each held-out block needs {} samples)",
-                    100.0 * params.validation,
-                    crate::tuning::MIN_TUNING_SAMPLES
-                ));
+        let mut model = Self::fit_gps(trajectories, params, None, observe)?;
+        match crate::tuning::split(trajectories, params.validation) {
+            Some(split) => {
+                // The GPs of the training part, with the hyperparameters learned on everything
+                // (no second search): the filter is tuned on data their posterior never saw.
+                let trial = Self::fit_gps(
+                    &split.train,
+                    params,
+                    Some((&model.transition, &model.sensor)),
+                    &mut |_, _| {},
+                )?;
+                match crate::tuning::tune(&trial, &split)? {
+                    Some((tuning, report)) => {
+                        model.tuning = tuning;
+                        model.summary.validation = Some(report);
+                    }
+                    None => model.summary.warnings.push(
+                        "filter not tuned: the filter failed on the held-out data; default \
+                         noise scales kept"
+                            .to_owned(),
+                    ),
+                }
             }
-            model.summary.seconds = t0.elapsed().as_secs_f64();
-            return Ok(model);
-        };
-        let trial = Self::fit_gps(&split.train, params, None, observe)?;
-        let tuned = crate::tuning::tune(&trial, &split)?;
-        let mut model = Self::fit_gps(
-            trajectories,
-            params,
-            Some((&trial.transition, &trial.sensor)),
-            &mut |_, _| {},
-        )?;
-        for w in trial.summary.warnings {
-            if !model.summary.warnings.contains(&w) {
-                model.summary.warnings.push(w);
-            }
-        }
-        model.summary.starts = trial.summary.starts;
-        match tuned {
-            Some((tuning, report)) => {
-                model.tuning = tuning;
-                model.summary.validation = Some(report);
-            }
-            None => model.summary.warnings.push(
-                "filter not tuned: the filter failed on the held-out data; default noise \
-                 scales kept"
-                    .to_owned(),
-            ),
+            None if params.validation > 0.0 => model.summary.warnings.push(format!(
+                "filter not tuned: too little data to hold out {:.0}% for validation (the \
+                 held-out and the training part each need {} samples)",
+                100.0 * params.validation,
+                crate::tuning::MIN_TUNING_SAMPLES
+            )),
+            None => {}
         }
         model.summary.seconds = t0.elapsed().as_secs_f64();
         Ok(model)
