@@ -173,32 +173,6 @@ impl Drop for Renderer {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Every setting has a flag, and the flags of distinct settings are distinct (except the
-    /// rate, which is one flag for the log grid and the model).
-    #[test]
-    fn every_setting_has_its_own_flag() {
-        let mut seen = std::collections::BTreeMap::new();
-        let settings = Param::ALL
-            .iter()
-            .map(|&p| Setting::Param(p))
-            .chain(LogOption::ALL.iter().map(|&o| Setting::Log(o)));
-        for s in settings {
-            let f = flag(s);
-            assert!(
-                f.starts_with("--") || s == Setting::Param(Param::Blr),
-                "{s:?}"
-            );
-            if let Some(prev) = seen.insert(f, s) {
-                assert_eq!(f, "--rate", "{prev:?} and {s:?} share {f}");
-            }
-        }
-    }
-}
-
 /// The validation table of filter-aware training (`hbn train`, `hbn inspect`): per mode the
 /// learned noise scales and the held-out scores before and after; empty without tuning.
 pub fn validation_table(model: &hbn_model::HbnModel) -> String {
@@ -241,4 +215,30 @@ pub fn validation_table(model: &hbn_model::HbnModel) -> String {
         v.default_mode.name()
     ));
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every setting has a flag, and the flags of distinct settings are distinct (except the
+    /// rate, which is one flag for the log grid and the model).
+    #[test]
+    fn every_setting_has_its_own_flag() {
+        let mut seen = std::collections::BTreeMap::new();
+        let settings = Param::ALL
+            .iter()
+            .map(|&p| Setting::Param(p))
+            .chain(LogOption::ALL.iter().map(|&o| Setting::Log(o)));
+        for s in settings {
+            let f = flag(s);
+            assert!(
+                f.starts_with("--") || s == Setting::Param(Param::Blr),
+                "{s:?}"
+            );
+            if let Some(prev) = seen.insert(f, s) {
+                assert_eq!(f, "--rate", "{prev:?} and {s:?} share {f}");
+            }
+        }
+    }
 }

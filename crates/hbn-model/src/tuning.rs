@@ -421,9 +421,8 @@ pub(crate) fn tune(
         scales.apply(&mut tuned_cfg);
         let untuned = scores(model, &runs, &base)?;
         let tuned = scores(model, &runs, &tuned_cfg)?;
-        if !(tuned.nrmse.is_finite() && tuned.calibration.nlpd.is_finite())
-            || !(untuned.nrmse.is_finite() && untuned.calibration.nlpd.is_finite())
-        {
+        let finite = |s: &HeldOutScores| s.nrmse.is_finite() && s.calibration.nlpd.is_finite();
+        if !(finite(&tuned) && finite(&untuned)) {
             return Ok(None);
         }
         tuning.set(mode, scales);
