@@ -145,8 +145,13 @@ impl Renderer {
                 });
                 bar.inc(1);
                 bar.set_message(format!(
-                    "{} gain {} seed {}: nRMSE EKF {:.4}",
-                    row.system, row.noise_gain, row.seed, row.nrmse_ekf
+                    "{} gain {} seed {}: nRMSE {:.4} ({}), 2-sigma coverage {:.0}%",
+                    row.system,
+                    row.noise_gain,
+                    row.seed,
+                    row.nrmse_default,
+                    row.default_mode.name(),
+                    100.0 * row.calibration_default.coverage_2sigma
                 ));
             }
         }

@@ -10,7 +10,7 @@ use crate::error::PipelineError;
 use crate::log::{Event, Observer};
 use crate::sim::sequences;
 use hbn_core::Mode;
-use hbn_model::metrics::{correlation, nrmse, rmse};
+use hbn_model::metrics::{Calibration, calibration, correlation, nrmse, rmse};
 use hbn_model::{HbnModel, HbnParams};
 use hbn_sim::{InputKind, SimConfig, SystemKind, Trajectory, generate_input, simulate};
 use serde::Serialize;
@@ -76,6 +76,12 @@ pub struct ExperimentRow {
     pub noise_state_corr_ekf: f64,
     /// Correlation of the EKF+BLR's process-noise estimate with the state.
     pub noise_state_corr_ekf_blr: f64,
+    /// The model's default mode (chosen on held-out data at training).
+    pub default_mode: Mode,
+    /// nRMSE of the default mode.
+    pub nrmse_default: f64,
+    /// Calibration of the default mode's standard deviation on the test run.
+    pub calibration_default: Calibration,
     /// Whether any estimate was non-finite (never expected).
     pub non_finite: bool,
     /// Training seconds.
@@ -147,6 +153,11 @@ pub fn run_case(
     let ekf = model.estimate(&test.u, &test.y, Mode::Ekf)?;
     let blr = model.estimate(&test.u, &test.y, Mode::EkfBlr)?;
     let open = model.simulate_open_loop(&test.u)?;
+    let default_mode = model.default_mode();
+    let default = match default_mode {
+        Mode::Ekf => &ekf,
+        Mode::EkfBlr => &blr,
+    };
     let non_finite = ekf
         .x
         .iter()
@@ -166,6 +177,9 @@ pub fn run_case(
         rmse_open_loop: rmse(&open, &test.x),
         noise_state_corr_ekf: correlation(&ekf.q_x, &test.x),
         noise_state_corr_ekf_blr: correlation(&blr.q_x, &test.x),
+        default_mode,
+        nrmse_default: nrmse(&default.x, &test.x),
+        calibration_default: calibration(&default.x, &default.x_std, &test.x),
         non_finite,
         train_seconds: model.summary().seconds,
     })
@@ -210,7 +224,7 @@ pub fn markdown_table(rows: &[ExperimentRow]) -> String {
         }
     }
     let mut out = String::from(
-        "| system | noise gain | runs | nRMSE EKF | nRMSE EKF+BLR | nRMSE open loop | corr(q, x) EKF | corr(q, x) EKF+BLR |\n|---|---|---|---|---|---|---|---|\n",
+        "| system | noise gain | runs | nRMSE EKF | nRMSE EKF+BLR | nRMSE open loop | nRMSE default mode | 2-sigma coverage | mean NEES | corr(q, x) EKF | corr(q, x) EKF+BLR |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for (s, g) in keys {
         let sel: Vec<&ExperimentRow> = rows
@@ -220,11 +234,14 @@ pub fn markdown_table(rows: &[ExperimentRow]) -> String {
         let mean =
             |f: fn(&ExperimentRow) -> f64| sel.iter().map(|r| f(r)).sum::<f64>() / sel.len() as f64;
         out.push_str(&format!(
-            "| {s} | {g} | {} | {:.4} | {:.4} | {:.4} | {:.2} | {:.2} |\n",
+            "| {s} | {g} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {:.1}% | {:.2} | {:.2} | {:.2} |\n",
             sel.len(),
             mean(|r| r.nrmse_ekf),
             mean(|r| r.nrmse_ekf_blr),
             mean(|r| r.nrmse_open_loop),
+            mean(|r| r.nrmse_default),
+            100.0 * mean(|r| r.calibration_default.coverage_2sigma),
+            mean(|r| r.calibration_default.mean_nees),
             mean(|r| r.noise_state_corr_ekf),
             mean(|r| r.noise_state_corr_ekf_blr),
         ));
