@@ -109,6 +109,8 @@ pub enum ModeArg {
     Ekf,
     /// EKF with local Bayesian linear regression (Jacobians and noise).
     EkfBlr,
+    /// Unscented (sigma-point) filter through the GP means.
+    Ukf,
 }
 
 impl From<Mode> for ModeArg {
@@ -116,6 +118,7 @@ impl From<Mode> for ModeArg {
         match m {
             Mode::Ekf => ModeArg::Ekf,
             Mode::EkfBlr => ModeArg::EkfBlr,
+            Mode::Ukf => ModeArg::Ukf,
         }
     }
 }
@@ -125,6 +128,7 @@ impl From<ModeArg> for Mode {
         match m {
             ModeArg::Ekf => Mode::Ekf,
             ModeArg::EkfBlr => Mode::EkfBlr,
+            ModeArg::Ukf => Mode::Ukf,
         }
     }
 }
@@ -163,7 +167,9 @@ pub enum EvalModeArg {
     Ekf,
     /// EKF with local Bayesian linear regression.
     EkfBlr,
-    /// Both EKF modes.
+    /// Unscented filter.
+    Ukf,
+    /// Every mode.
     All,
 }
 

@@ -60,6 +60,7 @@ pub fn run(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<Evaluation> {
     let modes: &[Mode] = match args.mode {
         EvalModeArg::Ekf => &[Mode::Ekf],
         EvalModeArg::EkfBlr => &[Mode::EkfBlr],
+        EvalModeArg::Ukf => &[Mode::Ukf],
         EvalModeArg::All => &Mode::ALL,
     };
     let opts = args.read.options(None);

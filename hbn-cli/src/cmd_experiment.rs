@@ -20,9 +20,10 @@ pub fn panels(rows: &[ExperimentRow]) -> Vec<(String, Vec<GainLine>)> {
             systems.push(r.system.clone());
         }
     }
-    let methods: [Method; 3] = [
+    let methods: [Method; 4] = [
         ("EKF", |r| r.nrmse_ekf),
         ("EKF+BLR", |r| r.nrmse_ekf_blr),
+        ("UKF", |r| r.nrmse_ukf),
         ("open loop", |r| r.nrmse_open_loop),
     ];
     systems

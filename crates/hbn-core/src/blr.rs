@@ -11,9 +11,11 @@
 //! and the intercept's prior variance `Sigma / Lambda0_00` equals the GP's own latent variance
 //! `s_epi^2` at `z` (where the GP is sure of its mean, the neighbours cannot move it; where it
 //! is unsure, they can),
-//! `Sigma ~ IW(nu0, V0)` with `V0 = (nu0 - m - 1) Sigma_hat` and `Sigma_hat` the GP predictive
-//! variance of an observation (latent variance + learned noise). This scaling makes
-//! `E[Sigma] = Sigma_hat` under the prior, so an empty window gives exactly the plain EKF.
+//! `Sigma ~ IW(nu0, V0)` with `V0 = (nu0 - m - 1) Sigma_hat` and `Sigma_hat` the GP's learned
+//! noise variance. This scaling makes `E[Sigma] = Sigma_hat` under the prior. The EKF adds the
+//! GP's latent variance to `E[Sigma]` itself, so `Sigma_hat` leaves it out (the thesis' "GP
+//! predictive variance" would count it twice); an empty window returns the prior exactly and the
+//! EKF+BLR step then equals the plain EKF's bit for bit.
 //!
 //! Posterior: `Lambda_n = Lambda0 + X^T X`, `B_n = Lambda_n^{-1} (Lambda0 B_bar + X^T Y)`,
 //! `nu_n = nu0 + n`, `V_n = V0 + (Y - X B_n)^T (Y - X B_n) + (B_n - B_bar)^T Lambda0 (B_n - B_bar)`,
@@ -103,12 +105,20 @@ impl LocalRegression {
         for (b, g) in b_bar.iter_mut().skip(1).zip(gp_grad).take(d) {
             *b = *g;
         }
-        let sigma_hat = gp_latent_var.max(0.0) + gp_noise_var.max(0.0);
+        // The prior noise level is the GP's learned noise alone: the EKF adds the GP's latent
+        // (epistemic) variance to the BLR noise itself, so including it here would count it
+        // twice. The latent variance enters as the intercept's prior variance below.
+        let sigma_hat = gp_noise_var.max(0.0);
         let sigma_hat = if sigma_hat.is_finite() && sigma_hat > 0.0 {
             sigma_hat
         } else {
             f64::MIN_POSITIVE
         };
+        if n == 0 {
+            // No local data: the posterior is the prior, exactly (the EKF+BLR step then equals
+            // the plain EKF's bit for bit).
+            return Posterior::prior(gp_grad, d, sigma_hat, n, capped);
+        }
         let mut lambda0 = [0.0; P];
         // Intercept prior variance Sigma / Lambda0_00 = the GP's own uncertainty about its mean.
         let latent = gp_latent_var.max(sigma_hat * 1e-12);
@@ -670,7 +680,8 @@ mod tests {
         let cfg = LocalRegression::default();
         let z = [0.505, 0.2];
         let post = cfg.posterior(&nb, &z, 1.02, &[2.0, 1.0], 0.004, 0.006);
-        let (b0, b, noise) = closed_form(&x, &y, z, 1.02, [2.0, 1.0], 0.01, 0.01 / 0.004, s, &cfg);
+        let (b0, b, noise) =
+            closed_form(&x, &y, z, 1.02, [2.0, 1.0], 0.006, 0.006 / 0.004, s, &cfg);
         assert_eq!(post.n, 6);
         assert!(
             (post.intercept - b0).abs() < 1e-12,
@@ -698,11 +709,9 @@ mod tests {
         assert_eq!(post.n, 0);
         assert_eq!(post.intercept, 0.0);
         assert!((post.grad[0] - 0.7).abs() < 1e-15 && (post.grad[1] + 0.2).abs() < 1e-15);
-        assert!(
-            (post.noise - 0.04).abs() < 1e-15,
-            "E[Sigma] under the prior is Sigma_hat: {}",
-            post.noise
-        );
+        // E[Sigma] under the prior is the GP's learned noise, exactly: the latent variance
+        // (0.01) is not added, because the EKF adds it to the BLR noise itself.
+        assert_eq!(post.noise, 0.03);
     }
 
     #[test]

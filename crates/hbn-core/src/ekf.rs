@@ -73,6 +73,9 @@ impl Flags {
     pub const BLR_CAPPED: u32 = 1 << 11;
     /// The first sample: the filter was initialised.
     pub const INITIALISED: u32 = 1 << 12;
+    /// Either GP's latent variance exceeded [`EXTRAPOLATION_RATIO`] of its prior variance:
+    /// the operating point is outside the training data and the prediction is mostly prior.
+    pub const EXTRAPOLATION: u32 = 1 << 13;
 
     /// Whether `bit` is set.
     pub fn has(self, bit: u32) -> bool {
@@ -80,7 +83,7 @@ impl Flags {
     }
 
     /// Name of each bit, in bit order (bit `i` is `NAMES[i]`).
-    pub const NAMES: [&'static str; 13] = [
+    pub const NAMES: [&'static str; 14] = [
         "input_invalid",
         "measurement_invalid",
         "model_invalid",
@@ -94,6 +97,7 @@ impl Flags {
         "blr_empty_sensor",
         "blr_capped",
         "initialised",
+        "extrapolation",
     ];
 
     /// Names of the set flags, for logs (`no_std`: yields `&'static str`).
@@ -117,17 +121,22 @@ pub enum Mode {
     Ekf,
     /// EKF with local Bayesian linear regression for the Jacobians and the noise (Sec. 4.3).
     EkfBlr,
+    /// Unscented (sigma-point) filter, thesis Sec. 6.3: the prediction passes 8 sigma points
+    /// of `[x_{k-1}, x_{k-2}, s_{k-1}, w]` (`w` the transition noise) through the GP means
+    /// instead of linearising them; the GP variances are the noise as in the EKF.
+    Ukf,
 }
 
 impl Mode {
     /// Every mode, in the order of their names.
-    pub const ALL: [Mode; 2] = [Mode::Ekf, Mode::EkfBlr];
+    pub const ALL: [Mode; 3] = [Mode::Ekf, Mode::EkfBlr, Mode::Ukf];
 
-    /// The mode's name: `ekf` or `ekf-blr` (what [`core::str::FromStr`] accepts).
+    /// The mode's name: `ekf`, `ekf-blr` or `ukf` (what [`core::str::FromStr`] accepts).
     pub const fn name(self) -> &'static str {
         match self {
             Mode::Ekf => "ekf",
             Mode::EkfBlr => "ekf-blr",
+            Mode::Ukf => "ukf",
         }
     }
 }
@@ -140,11 +149,13 @@ impl core::fmt::Display for Mode {
 
 impl core::str::FromStr for Mode {
     type Err = CoreError;
-    /// Parses `ekf` or `ekf-blr` (also `ekf+blr`, `ekf_blr`; case-insensitive).
+    /// Parses `ekf`, `ekf-blr` (also `ekf+blr`, `ekf_blr`) or `ukf`; case-insensitive.
     fn from_str(s: &str) -> Result<Self, CoreError> {
         let t = s.trim();
         if t.eq_ignore_ascii_case("ekf") {
             Ok(Mode::Ekf)
+        } else if t.eq_ignore_ascii_case("ukf") {
+            Ok(Mode::Ukf)
         } else if ["ekf-blr", "ekf+blr", "ekf_blr"]
             .iter()
             .any(|n| t.eq_ignore_ascii_case(n))
@@ -152,7 +163,7 @@ impl core::str::FromStr for Mode {
             Ok(Mode::EkfBlr)
         } else {
             Err(CoreError::InvalidSpec(
-                "unknown mode; choose \"ekf\" or \"ekf-blr\"",
+                "unknown mode; choose \"ekf\", \"ekf-blr\" or \"ukf\"",
             ))
         }
     }
@@ -181,7 +192,9 @@ pub struct EkfConfig {
     pub jac_max: f64,
     /// Smallest innovation variance accepted for an update.
     pub innovation_min: f64,
-    /// Outlier gate on the normalised innovation squared; `0` disables it.
+    /// Outlier gate on the normalised innovation squared; `0` disables it. A measurement whose
+    /// NIS exceeds the gate is skipped, unless [`MAX_REJECTED_RUN`] measurements in a row were:
+    /// a run that long means the state, not the sensor, is off, and the filter takes it.
     pub nis_gate: f64,
     /// State box: `x` and `s` are clamped to `[lo, hi]` (from the training ranges).
     pub x_bounds: (f64, f64),
@@ -260,6 +273,15 @@ impl EkfConfig {
         Ok(())
     }
 }
+
+/// Latent-to-prior variance ratio above which a GP prediction counts as extrapolation
+/// ([`Flags::EXTRAPOLATION`]): the training data explain less than half of the prior
+/// uncertainty there.
+pub const EXTRAPOLATION_RATIO: f64 = 0.5;
+
+/// Most consecutive measurements the outlier gate ([`EkfConfig::nis_gate`]) rejects; the next
+/// one is taken whatever its NIS.
+pub const MAX_REJECTED_RUN: u32 = 10;
 
 /// Prior of `x_0` from the first measurement: training `(y, x)` pairs sorted by `y`. Hysteresis
 /// makes `x` given `y` ambiguous; the spread of `x` over the training samples whose `y` is
@@ -456,6 +478,8 @@ pub struct EkfState {
     pub u_prev: f64,
     /// Steps taken.
     pub steps: u64,
+    /// Measurements rejected in a row by the outlier gate (see [`MAX_REJECTED_RUN`]).
+    pub rejected_run: u32,
 }
 
 /// One linearised GP: value, input gradient, noise variance.
@@ -474,6 +498,40 @@ enum Relation {
     Transition,
     /// `H_S`, the sensor.
     Sensor,
+}
+
+/// What a prediction hands to the update and the step's output.
+#[derive(Clone, Copy, Debug)]
+struct Predicted {
+    q_x: f64,
+    r: f64,
+    s_pred: f64,
+    jacobian: Matrix3<f64>,
+}
+
+/// Lower Cholesky factor of a symmetric positive-definite 3x3 matrix, `None` if it is not
+/// (written out: no indexing, no panic path).
+fn cholesky3(p: &Matrix3<f64>) -> Option<Matrix3<f64>> {
+    let pos = |v: f64| v.is_finite() && v > 0.0;
+    let d1 = p.m11;
+    if !pos(d1) {
+        return None;
+    }
+    let l11 = sqrt(d1);
+    let l21 = p.m21 / l11;
+    let l31 = p.m31 / l11;
+    let d2 = p.m22 - l21 * l21;
+    if !pos(d2) {
+        return None;
+    }
+    let l22 = sqrt(d2);
+    let l32 = (p.m32 - l31 * l21) / l22;
+    let d3 = p.m33 - l31 * l31 - l32 * l32;
+    if !pos(d3) {
+        return None;
+    }
+    let l33 = sqrt(d3);
+    Some(Matrix3::new(l11, 0.0, 0.0, l21, l22, 0.0, l31, l32, l33))
 }
 
 /// A checked model view and filter settings: the per-sample step as a function of the
@@ -542,86 +600,28 @@ impl<'m> Ekf<'m> {
         };
 
         // ---- predict ----
-        let (x1, x2, s1) = (st.z.x, st.z.y, st.z.z);
-        let a_in = [x1, x2, st.u_last, st.u_prev];
-        let tr = self.linearise(Relation::Transition, &a_in, scratch, &mut flags);
-        let (f_mat, g_vec, q_x, q_s, s_pred);
-        let mut r = cfg
-            .r_floor
-            .max(cfg.r_scale * self.model.sensor.noise_variance().max(cfg.r_model_floor));
-        match tr {
-            Some(t) => {
-                let xk = clamp_flag(t.mean, cfg.x_bounds, &mut flags);
-                let b_in = [x1, s1, xk];
-                match self.linearise(Relation::Sensor, &b_in, scratch, &mut flags) {
-                    Some(s) => {
-                        let a1 = clamp_jac(t.grad[0], cfg.jac_max, &mut flags);
-                        let a2 = clamp_jac(t.grad[1], cfg.jac_max, &mut flags);
-                        let c = clamp_jac(s.grad[0], cfg.jac_max, &mut flags);
-                        let e = clamp_jac(s.grad[1], cfg.jac_max, &mut flags);
-                        let f = clamp_jac(s.grad[2], cfg.jac_max, &mut flags);
-                        f_mat = Matrix3::new(a1, a2, 0.0, 1.0, 0.0, 0.0, c + f * a1, f * a2, e);
-                        g_vec = Vector3::new(1.0, 0.0, f);
-                        q_x = floor_flag(
-                            cfg.q_scale * (t.noise + t.epistemic).max(cfg.qx_model_floor),
-                            cfg.q_floor,
-                            &mut flags,
-                        );
-                        q_s = floor_flag(cfg.q_scale * s.epistemic, cfg.q_floor, &mut flags);
-                        s_pred = clamp_flag(s.mean, cfg.y_bounds, &mut flags);
-                        st.z = Vector3::new(xk, x1, s_pred);
-                        r = floor_flag(
-                            cfg.r_scale * s.noise.max(cfg.r_model_floor),
-                            cfg.r_floor,
-                            &mut flags,
-                        );
-                    }
-                    None => {
-                        f_mat =
-                            Matrix3::new(t.grad[0], t.grad[1], 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
-                        g_vec = Vector3::new(1.0, 0.0, 0.0);
-                        q_x = floor_flag(
-                            cfg.q_scale * (t.noise + t.epistemic).max(cfg.qx_model_floor),
-                            cfg.q_floor,
-                            &mut flags,
-                        );
-                        q_s = cfg.p_max * 0.01;
-                        s_pred = s1;
-                        st.z = Vector3::new(xk, x1, s1);
-                    }
-                }
-            }
-            None => {
-                // Random walk fallback.
-                f_mat = Matrix3::new(1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
-                g_vec = Vector3::new(1.0, 0.0, 0.0);
-                q_x = cfg.p_max * 0.01;
-                q_s = cfg.p_max * 0.01;
-                s_pred = s1;
-                st.z = Vector3::new(x1, x1, s1);
-            }
-        }
-        let q = g_vec * q_x * g_vec.transpose()
-            + Matrix3::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, q_s);
-        st.p = f_mat * st.p * f_mat.transpose() + q;
+        let pred = match cfg.mode {
+            Mode::Ukf => self.predict_unscented(&mut st, scratch, &mut flags),
+            Mode::Ekf | Mode::EkfBlr => self.predict_linearised(&mut st, scratch, &mut flags),
+        };
         st.p = bound_covariance(st.p, cfg.p_min, cfg.p_max, &mut flags);
         st.u_prev = st.u_last;
         st.u_last = u_k;
 
         // ---- update ----
-        let (innovation, s_var, nis) = update(&mut st, y_k, r, &cfg, &mut flags);
-        st.steps += 1;
+        let (innovation, s_var, nis) = update(&mut st, y_k, pred.r, &cfg, &mut flags);
+        st.steps = st.steps.saturating_add(1);
         *state = Some(st);
         StepOutput {
             x: st.z.x,
             x_std: cfg.std_scale * sqrt(st.p.m11.max(0.0)),
-            y_pred: s_pred,
+            y_pred: pred.s_pred,
             innovation,
             innovation_var: s_var,
             nis,
-            q_x,
-            r,
-            jacobian: f_mat,
+            q_x: pred.q_x,
+            r: pred.r,
+            jacobian: pred.jacobian,
             flags: Flags(flags),
         }
     }
@@ -661,6 +661,7 @@ impl<'m> Ekf<'m> {
             u_last: u0,
             u_prev: u0,
             steps: 1,
+            rejected_run: 0,
         };
         let out = StepOutput {
             x: st.z.x,
@@ -675,6 +676,237 @@ impl<'m> Ekf<'m> {
             flags: Flags(f),
         };
         (st, out)
+    }
+
+    /// The prediction's noise variances at the linearisation point: `q_x` (transition) and
+    /// `q_s` (sensor) of `Q`, and `R`.
+    fn noises(&self, t: &Local, s: &Local, flags: &mut u32) -> (f64, f64, f64) {
+        let cfg = &self.config;
+        let q_x = floor_flag(
+            cfg.q_scale * (t.noise + t.epistemic).max(cfg.qx_model_floor),
+            cfg.q_floor,
+            flags,
+        );
+        let q_s = floor_flag(cfg.q_scale * s.epistemic, cfg.q_floor, flags);
+        let r = floor_flag(
+            cfg.r_scale * s.noise.max(cfg.r_model_floor),
+            cfg.r_floor,
+            flags,
+        );
+        (q_x, q_s, r)
+    }
+
+    /// `R` when the sensor GP could not be evaluated: its learned noise, scaled and floored.
+    fn fallback_r(&self) -> f64 {
+        let cfg = &self.config;
+        cfg.r_floor
+            .max(cfg.r_scale * self.model.sensor.noise_variance().max(cfg.r_model_floor))
+    }
+
+    /// The HBN's Jacobian `F` (module docs) from the transition gradient `a` and the sensor
+    /// gradient `b` (w.r.t. `x_{k-1}, s_{k-1}, x_k`).
+    fn jacobian(a1: f64, a2: f64, c: f64, e: f64, f: f64) -> Matrix3<f64> {
+        Matrix3::new(a1, a2, 0.0, 1.0, 0.0, 0.0, c + f * a1, f * a2, e)
+    }
+
+    /// Prediction when the transition GP failed: a random walk with a large process noise.
+    fn random_walk(&self, st: &mut EkfState) -> Predicted {
+        let big = self.config.p_max * 0.01;
+        let f_mat = Matrix3::new(1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
+        let (x1, s1) = (st.z.x, st.z.z);
+        st.z = Vector3::new(x1, x1, s1);
+        st.p =
+            f_mat * st.p * f_mat.transpose() + Matrix3::from_diagonal(&Vector3::new(big, 0.0, big));
+        Predicted {
+            q_x: big,
+            r: self.fallback_r(),
+            s_pred: s1,
+            jacobian: f_mat,
+        }
+    }
+
+    /// EKF / EKF+BLR prediction: linearise both GPs at the estimate, `P = F P F^T + Q`.
+    fn predict_linearised(
+        &self,
+        st: &mut EkfState,
+        scratch: &mut [f64],
+        flags: &mut u32,
+    ) -> Predicted {
+        let cfg = self.config;
+        let (x1, x2, s1) = (st.z.x, st.z.y, st.z.z);
+        let a_in = [x1, x2, st.u_last, st.u_prev];
+        let Some(t) = self.linearise(Relation::Transition, &a_in, scratch, flags) else {
+            return self.random_walk(st);
+        };
+        let xk = clamp_flag(t.mean, cfg.x_bounds, flags);
+        let a1 = clamp_jac(t.grad[0], cfg.jac_max, flags);
+        let a2 = clamp_jac(t.grad[1], cfg.jac_max, flags);
+        let b_in = [x1, s1, xk];
+        let (f_mat, g_vec, q_x, q_s, r, s_pred) =
+            match self.linearise(Relation::Sensor, &b_in, scratch, flags) {
+                Some(s) => {
+                    let c = clamp_jac(s.grad[0], cfg.jac_max, flags);
+                    let e = clamp_jac(s.grad[1], cfg.jac_max, flags);
+                    let f = clamp_jac(s.grad[2], cfg.jac_max, flags);
+                    let (q_x, q_s, r) = self.noises(&t, &s, flags);
+                    let s_pred = clamp_flag(s.mean, cfg.y_bounds, flags);
+                    (
+                        Self::jacobian(a1, a2, c, e, f),
+                        Vector3::new(1.0, 0.0, f),
+                        q_x,
+                        q_s,
+                        r,
+                        s_pred,
+                    )
+                }
+                None => {
+                    let q_x = floor_flag(
+                        cfg.q_scale * (t.noise + t.epistemic).max(cfg.qx_model_floor),
+                        cfg.q_floor,
+                        flags,
+                    );
+                    (
+                        Matrix3::new(a1, a2, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0),
+                        Vector3::new(1.0, 0.0, 0.0),
+                        q_x,
+                        cfg.p_max * 0.01,
+                        self.fallback_r(),
+                        s1,
+                    )
+                }
+            };
+        st.z = Vector3::new(xk, x1, s_pred);
+        let q = g_vec * q_x * g_vec.transpose()
+            + Matrix3::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, q_s);
+        st.p = f_mat * st.p * f_mat.transpose() + q;
+        Predicted {
+            q_x,
+            r,
+            s_pred,
+            jacobian: f_mat,
+        }
+    }
+
+    /// Unscented prediction (spherical-cubature rule: the UKF with `alpha = 1`, `beta = 0`,
+    /// `kappa = 0`, all weights `1/8`, so the predicted covariance is positive semi-definite by
+    /// construction). The augmented state `[x_{k-1}, x_{k-2}, s_{k-1}, w]` with covariance
+    /// `diag(P, q_x)` gives 8 sigma points `mean +- 2 L_i` (`L` its Cholesky factor); each
+    /// passes through `x_k = H_D(x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}) + w` and
+    /// `s_k = H_S(x_{k-1}, s_{k-1}, x_k)` (GP means). `P` is their covariance plus `q_s`
+    /// on `s`. `q_x`, `q_s` and `R` come from the GP variances at the mean, as in the EKF; the
+    /// reported Jacobian is the EKF's at the mean (a diagnostic: the UKF does not use it).
+    fn predict_unscented(
+        &self,
+        st: &mut EkfState,
+        scratch: &mut [f64],
+        flags: &mut u32,
+    ) -> Predicted {
+        let cfg = self.config;
+        let (x1, x2, s1) = (st.z.x, st.z.y, st.z.z);
+        let (u1, u2) = (st.u_last, st.u_prev);
+        let Some(t) = self.linearise(Relation::Transition, &[x1, x2, u1, u2], scratch, flags)
+        else {
+            return self.random_walk(st);
+        };
+        let xk_mean = clamp_to(t.mean, cfg.x_bounds.0, cfg.x_bounds.1);
+        let Some(s) = self.linearise(Relation::Sensor, &[x1, s1, xk_mean], scratch, flags) else {
+            *flags |= Flags::MODEL_INVALID;
+            return self.random_walk(st);
+        };
+        let (q_x, q_s, r) = self.noises(&t, &s, flags);
+        let Some(l) = cholesky3(&st.p) else {
+            *flags |= Flags::MODEL_INVALID;
+            return self.random_walk(st);
+        };
+        // sqrt(n) with n = 4 augmented dimensions.
+        let spread = 2.0;
+        let w_dev = spread * sqrt(q_x);
+        let mut sum = Vector3::zeros();
+        let mut points = [Vector3::zeros(); 8];
+        let mut ok = true;
+        for (i, point) in points.iter_mut().enumerate() {
+            let sign = if i % 2 == 0 { spread } else { -spread };
+            // Points 0..6: the state columns of `L`; points 6, 7: the noise `w`.
+            let column = match i / 2 {
+                0 => Some(Vector3::new(l.m11, l.m21, l.m31)),
+                1 => Some(Vector3::new(0.0, l.m22, l.m32)),
+                2 => Some(Vector3::new(0.0, 0.0, l.m33)),
+                _ => None,
+            };
+            let (dz, w) = match column {
+                Some(col) => (col * sign, 0.0),
+                None => (Vector3::zeros(), if i % 2 == 0 { w_dev } else { -w_dev }),
+            };
+            let (a, b, c) = (x1 + dz.x, x2 + dz.y, s1 + dz.z);
+            let xk = if dz.x == 0.0 && dz.y == 0.0 {
+                Some(t.mean)
+            } else {
+                self.mean_of(Relation::Transition, &[a, b, u1, u2], scratch)
+            };
+            let Some(xk) = xk else {
+                ok = false;
+                break;
+            };
+            let xk = clamp_to(xk + w, cfg.x_bounds.0, cfg.x_bounds.1);
+            let Some(sk) = self.mean_of(Relation::Sensor, &[a, c, xk], scratch) else {
+                ok = false;
+                break;
+            };
+            let sk = clamp_to(sk, cfg.y_bounds.0, cfg.y_bounds.1);
+            *point = Vector3::new(xk, a, sk);
+            sum += *point;
+        }
+        if !ok {
+            *flags |= Flags::MODEL_INVALID;
+            return self.random_walk(st);
+        }
+        let mean = sum / 8.0;
+        let mut p = Matrix3::zeros();
+        for point in &points {
+            let dev = point - mean;
+            p += dev * dev.transpose();
+        }
+        p /= 8.0;
+        p.m33 += q_s;
+        let cj = |v: f64| {
+            if v.is_finite() {
+                clamp_to(v, -cfg.jac_max, cfg.jac_max)
+            } else {
+                0.0
+            }
+        };
+        let jacobian = Self::jacobian(
+            cj(t.grad[0]),
+            cj(t.grad[1]),
+            cj(s.grad[0]),
+            cj(s.grad[1]),
+            cj(s.grad[2]),
+        );
+        st.z = Vector3::new(
+            clamp_flag(mean.x, cfg.x_bounds, flags),
+            clamp_flag(mean.y, cfg.x_bounds, flags),
+            clamp_flag(mean.z, cfg.y_bounds, flags),
+        );
+        st.p = p;
+        Predicted {
+            q_x,
+            r,
+            s_pred: st.z.z,
+            jacobian,
+        }
+    }
+
+    /// The GP mean of one relation at `input` (no variance, no gradient), `None` on failure.
+    fn mean_of(&self, which: Relation, input: &[f64], scratch: &mut [f64]) -> Option<f64> {
+        let gp = match which {
+            Relation::Transition => &self.model.transition,
+            Relation::Sensor => &self.model.sensor,
+        };
+        let input = input.get(..gp.dim())?;
+        gp.predict(input, Want::default(), scratch)
+            .ok()
+            .map(|p| p.mean)
+            .filter(|m| m.is_finite())
     }
 
     /// Linearises one relation of the HBN at `input` in the configured mode.
@@ -716,6 +948,9 @@ impl<'m> Ekf<'m> {
             noise: gp.noise_variance(),
             epistemic: p.variance,
         };
+        if p.variance > EXTRAPOLATION_RATIO * p.prior_variance {
+            *flags |= Flags::EXTRAPOLATION;
+        }
         for (g, pg) in out.grad.iter_mut().zip(&p.grad_mean).take(d) {
             *g = *pg;
         }
@@ -840,10 +1075,12 @@ fn update(
     }
     let innovation = y_k - st.z.z;
     let nis = innovation * innovation / s_var;
-    if cfg.nis_gate > 0.0 && nis > cfg.nis_gate {
+    if cfg.nis_gate > 0.0 && nis > cfg.nis_gate && st.rejected_run < MAX_REJECTED_RUN {
         *flags |= Flags::OUTLIER_REJECTED;
+        st.rejected_run = st.rejected_run.saturating_add(1);
         return (innovation, s_var, nis);
     }
+    st.rejected_run = 0;
     let gain: Vector3<f64> = st.p.column(2) / s_var;
     let z = st.z + gain * innovation;
     // Joseph form: P = (I - K H) P (I - K H)^T + K R K^T, H = [0, 0, 1].

@@ -54,6 +54,10 @@ pub struct Prediction {
     pub mean: f64,
     /// Predictive variance of the latent function, `>= 0` (0 if not requested).
     pub variance: f64,
+    /// The GP's prior variance `k(x, x)` at this input, in the same units as `variance` (0 if
+    /// the variance was not requested): `variance / prior_variance` near 1 means the data say
+    /// nothing here (extrapolation).
+    pub prior_variance: f64,
     /// `d mean / d x` (first `dim` entries; zero if not requested).
     pub grad_mean: [f64; MAX_DIM],
     /// `d variance / d x` (first `dim` entries; zero if not requested).
@@ -345,6 +349,7 @@ impl<'a> GpView<'a> {
         let mut out = Prediction {
             mean: self.output_mean + self.output_scale * mean_std,
             variance: 0.0,
+            prior_variance: 0.0,
             grad_mean: [0.0; MAX_DIM],
             grad_variance: [0.0; MAX_DIM],
         };
@@ -390,6 +395,7 @@ impl<'a> GpView<'a> {
                 }
             };
             out.variance = s2 * var_std.max(0.0);
+            out.prior_variance = s2 * kss;
             if want.grad_variance {
                 // dvar/du* = -2 sum_i w_i dk_i/du* = 4 sum_i w_i c_i (u_i - u*).
                 let mut gv_u = [0.0; MAX_DIM];

@@ -60,6 +60,9 @@ pub struct FilterTuning {
     pub ekf: NoiseScales,
     /// Scales of the EKF with local regression.
     pub ekf_blr: NoiseScales,
+    /// Scales of the unscented filter (model files from before it existed: scale 1).
+    #[serde(default)]
+    pub ukf: NoiseScales,
     /// The mode with the best held-out score (the EKF for untuned models).
     pub default_mode: Mode,
 }
@@ -69,6 +72,7 @@ impl Default for FilterTuning {
         Self {
             ekf: NoiseScales::default(),
             ekf_blr: NoiseScales::default(),
+            ukf: NoiseScales::default(),
             default_mode: Mode::Ekf,
         }
     }
@@ -80,6 +84,7 @@ impl FilterTuning {
         match mode {
             Mode::Ekf => self.ekf,
             Mode::EkfBlr => self.ekf_blr,
+            Mode::Ukf => self.ukf,
         }
     }
 
@@ -87,6 +92,7 @@ impl FilterTuning {
         match mode {
             Mode::Ekf => self.ekf = scales,
             Mode::EkfBlr => self.ekf_blr = scales,
+            Mode::Ukf => self.ukf = scales,
         }
     }
 }

@@ -22,11 +22,12 @@ pub enum Method {
 }
 
 impl Method {
-    /// `ekf`, `ekf_blr` or `open_loop` (keys of the JSON result).
+    /// `ekf`, `ekf_blr`, `ukf` or `open_loop` (keys of the JSON result).
     pub const fn key(self) -> &'static str {
         match self {
             Method::Filter(Mode::Ekf) => "ekf",
             Method::Filter(Mode::EkfBlr) => "ekf_blr",
+            Method::Filter(Mode::Ukf) => "ukf",
             Method::OpenLoop => "open_loop",
         }
     }

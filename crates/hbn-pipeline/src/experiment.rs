@@ -64,12 +64,16 @@ pub struct ExperimentRow {
     pub nrmse_ekf: f64,
     /// nRMSE of the EKF+BLR.
     pub nrmse_ekf_blr: f64,
+    /// nRMSE of the unscented filter.
+    pub nrmse_ukf: f64,
     /// nRMSE of open-loop GP simulation.
     pub nrmse_open_loop: f64,
     /// RMSE of the plain EKF.
     pub rmse_ekf: f64,
     /// RMSE of the EKF+BLR.
     pub rmse_ekf_blr: f64,
+    /// RMSE of the unscented filter.
+    pub rmse_ukf: f64,
     /// RMSE of open-loop GP simulation.
     pub rmse_open_loop: f64,
     /// Correlation of the EKF's process-noise estimate with the state.
@@ -152,18 +156,17 @@ pub fn run_case(
     let test = test_trajectory(system, noise_gain, seed, cfg)?;
     let ekf = model.estimate(&test.u, &test.y, Mode::Ekf)?;
     let blr = model.estimate(&test.u, &test.y, Mode::EkfBlr)?;
+    let ukf = model.estimate(&test.u, &test.y, Mode::Ukf)?;
     let open = model.simulate_open_loop(&test.u)?;
     let default_mode = model.default_mode();
     let default = match default_mode {
         Mode::Ekf => &ekf,
         Mode::EkfBlr => &blr,
+        Mode::Ukf => &ukf,
     };
-    let non_finite = ekf
-        .x
+    let non_finite = [&ekf, &blr, &ukf]
         .iter()
-        .chain(&blr.x)
-        .chain(&ekf.x_std)
-        .chain(&blr.x_std)
+        .flat_map(|e| e.x.iter().chain(&e.x_std))
         .any(|v| !v.is_finite());
     Ok(ExperimentRow {
         system: system.name().into(),
@@ -171,9 +174,11 @@ pub fn run_case(
         noise_gain,
         nrmse_ekf: nrmse(&ekf.x, &test.x),
         nrmse_ekf_blr: nrmse(&blr.x, &test.x),
+        nrmse_ukf: nrmse(&ukf.x, &test.x),
         nrmse_open_loop: nrmse(&open, &test.x),
         rmse_ekf: rmse(&ekf.x, &test.x),
         rmse_ekf_blr: rmse(&blr.x, &test.x),
+        rmse_ukf: rmse(&ukf.x, &test.x),
         rmse_open_loop: rmse(&open, &test.x),
         noise_state_corr_ekf: correlation(&ekf.q_x, &test.x),
         noise_state_corr_ekf_blr: correlation(&blr.q_x, &test.x),
@@ -224,7 +229,7 @@ pub fn markdown_table(rows: &[ExperimentRow]) -> String {
         }
     }
     let mut out = String::from(
-        "| system | noise gain | runs | nRMSE EKF | nRMSE EKF+BLR | nRMSE open loop | nRMSE default mode | 2-sigma coverage | mean NEES | corr(q, x) EKF | corr(q, x) EKF+BLR |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| system | noise gain | runs | nRMSE EKF | nRMSE EKF+BLR | nRMSE UKF | nRMSE open loop | nRMSE default mode | 2-sigma coverage | mean NEES | corr(q, x) EKF | corr(q, x) EKF+BLR |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for (s, g) in keys {
         let sel: Vec<&ExperimentRow> = rows
@@ -234,10 +239,11 @@ pub fn markdown_table(rows: &[ExperimentRow]) -> String {
         let mean =
             |f: fn(&ExperimentRow) -> f64| sel.iter().map(|r| f(r)).sum::<f64>() / sel.len() as f64;
         out.push_str(&format!(
-            "| {s} | {g} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {:.1}% | {:.2} | {:.2} | {:.2} |\n",
+            "| {s} | {g} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.1}% | {:.2} | {:.2} | {:.2} |\n",
             sel.len(),
             mean(|r| r.nrmse_ekf),
             mean(|r| r.nrmse_ekf_blr),
+            mean(|r| r.nrmse_ukf),
             mean(|r| r.nrmse_open_loop),
             mean(|r| r.nrmse_default),
             100.0 * mean(|r| r.calibration_default.coverage_2sigma),
