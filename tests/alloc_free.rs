@@ -64,6 +64,8 @@ fn the_step_never_allocates() {
         (&exact, Mode::EkfBlr),
         (&sparse, Mode::Ekf),
         (&sparse, Mode::EkfBlr),
+        (&exact, Mode::Ukf),
+        (&sparse, Mode::Ukf),
     ] {
         let view = model.view().unwrap();
         let kind = if model.transition().is_sparse() {

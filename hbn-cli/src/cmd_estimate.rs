@@ -91,5 +91,8 @@ pub fn run(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<LogEstimate> 
         text.push_str("  (no --out or --csv given: nothing written)\n");
     }
     ui.print(text)?;
+    for w in est.warnings() {
+        ui.warn(w);
+    }
     Ok(est)
 }

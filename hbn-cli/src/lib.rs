@@ -59,6 +59,13 @@ impl<'a> Ui<'a> {
         }
     }
 
+    /// Prints a warning (`warning: ...`) to stderr, even when quiet: something the user should
+    /// act on.
+    pub fn warn(&mut self, msg: impl std::fmt::Display) {
+        // A closed stderr must not turn into an error of the command.
+        let _ = writeln!(self.err, "warning: {msg}");
+    }
+
     /// Prints summary text to stdout.
     pub fn print(&mut self, text: impl std::fmt::Display) -> anyhow::Result<()> {
         write!(self.out, "{text}").context("cannot write to stdout")?;

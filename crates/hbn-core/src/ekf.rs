@@ -73,8 +73,9 @@ impl Flags {
     pub const BLR_CAPPED: u32 = 1 << 11;
     /// The first sample: the filter was initialised.
     pub const INITIALISED: u32 = 1 << 12;
-    /// Either GP's latent variance exceeded [`EXTRAPOLATION_RATIO`] of its prior variance:
-    /// the operating point is outside the training data and the prediction is mostly prior.
+    /// Either GP's latent variance exceeded [`EXTRAPOLATION_RATIO`] of its prior variance or of
+    /// the variance of its training targets, whichever is smaller: the operating point is
+    /// outside the training data, and the GP's uncertainty there is as large as the signal.
     pub const EXTRAPOLATION: u32 = 1 << 13;
 
     /// Whether `bit` is set.
@@ -274,9 +275,11 @@ impl EkfConfig {
     }
 }
 
-/// Latent-to-prior variance ratio above which a GP prediction counts as extrapolation
-/// ([`Flags::EXTRAPOLATION`]): the training data explain less than half of the prior
-/// uncertainty there.
+/// Latent variance, as a fraction of the GP's prior variance or of the variance of its
+/// training targets (the smaller), above which a prediction counts as extrapolation
+/// ([`Flags::EXTRAPOLATION`]). The second reference matters for kernels fitted with a large
+/// signal variance and long length scales, whose latent variance stays a small fraction of the
+/// prior far outside the data.
 pub const EXTRAPOLATION_RATIO: f64 = 0.5;
 
 /// Most consecutive measurements the outlier gate ([`EkfConfig::nis_gate`]) rejects; the next
@@ -948,7 +951,7 @@ impl<'m> Ekf<'m> {
             noise: gp.noise_variance(),
             epistemic: p.variance,
         };
-        if p.variance > EXTRAPOLATION_RATIO * p.prior_variance {
+        if p.variance > EXTRAPOLATION_RATIO * p.prior_variance.min(gp.output_variance()) {
             *flags |= Flags::EXTRAPOLATION;
         }
         for (g, pg) in out.grad.iter_mut().zip(&p.grad_mean).take(d) {

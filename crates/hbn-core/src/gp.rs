@@ -249,6 +249,12 @@ impl<'a> GpView<'a> {
         self.noise_var * self.output_scale * self.output_scale
     }
 
+    /// Variance of the training targets the GP was fitted to (its output scale squared):
+    /// the spread of the signal it predicts.
+    pub fn output_variance(&self) -> f64 {
+        self.output_scale * self.output_scale
+    }
+
     /// Number of `f64` scratch values [`GpView::predict`] needs for `want`.
     pub fn predict_scratch(&self, want: Want) -> usize {
         predict_scratch(self.len(), self.is_sparse(), want)

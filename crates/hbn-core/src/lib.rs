@@ -40,8 +40,8 @@ pub mod rng;
 
 pub use blr::{LocalRegression, Neighbourhood, NeighbourhoodParts, Posterior};
 pub use ekf::{
-    Ekf, EkfConfig, EkfState, Estimator, Flags, HbnView, InitPrior, Mode, StepOutput,
-    observability_eigenvalues,
+    EXTRAPOLATION_RATIO, Ekf, EkfConfig, EkfState, Estimator, Flags, HbnView, InitPrior,
+    MAX_REJECTED_RUN, Mode, StepOutput, observability_eigenvalues,
 };
 pub use error::CoreError;
 pub use gp::{GpParts, GpView, Prediction, Variance, Want};

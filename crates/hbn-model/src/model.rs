@@ -154,6 +154,12 @@ pub struct HbnModel {
 /// Training samples consulted by [`HbnModel::initial_state`].
 pub const INIT_NEIGHBOURS: usize = 50;
 
+/// The outlier gate every trained model's filter ships with ([`EkfConfig::nis_gate`]): a
+/// measurement whose normalised innovation squared exceeds 25 (5 standard deviations; a
+/// Gaussian innovation does so once in 1.7 million samples) is skipped, at most
+/// [`hbn_core::MAX_REJECTED_RUN`] in a row.
+pub const OUTLIER_GATE: f64 = 25.0;
+
 #[derive(Serialize, Deserialize)]
 struct ModelFile {
     format: String,
@@ -384,7 +390,7 @@ impl HbnModel {
             p_max: 4.0 * sx.max(sy).powi(2),
             jac_max: 20.0 * (sy / sx).max(sx / sy).max(1.0),
             innovation_min: 1e-14 * sy * sy,
-            nis_gate: 0.0,
+            nis_gate: OUTLIER_GATE,
             x_bounds: (self.x_stats.min - 0.1 * sx, self.x_stats.max + 0.1 * sx),
             y_bounds: (self.y_stats.min - 0.1 * sy, self.y_stats.max + 0.1 * sy),
             x0_mean: self.x_stats.mean,

@@ -59,6 +59,89 @@ pub struct LogEstimate {
     pub mode: Mode,
 }
 
+/// Share of samples flagged [`hbn_core::Flags::EXTRAPOLATION`] above which an estimate
+/// carries an [`EstimateWarning::Extrapolation`].
+pub const EXTRAPOLATION_WARNING: f64 = 0.05;
+
+/// Something about an estimate a user should know before trusting it.
+#[derive(Clone, Debug, PartialEq)]
+pub enum EstimateWarning {
+    /// Many samples were outside the training data (either GP's uncertainty as large as its
+    /// signal).
+    Extrapolation {
+        /// Samples flagged.
+        samples: usize,
+        /// Samples in all.
+        total: usize,
+    },
+    /// A signal's native rate differs from the rate the model was trained at: the log was
+    /// resampled, and a hysteresis model learned at one rate predicts another rate's steps.
+    RateMismatch {
+        /// The signal.
+        path: String,
+        /// Its native rate (Hz).
+        native_hz: f64,
+        /// The model's rate (Hz).
+        model_hz: f64,
+    },
+}
+
+impl std::fmt::Display for EstimateWarning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            EstimateWarning::Extrapolation { samples, total } => write!(
+                f,
+                "{samples} of {total} samples ({:.1}%) are outside the training data \
+                 (flag `extrapolation`): the estimate there is mostly the model's prior; \
+                 train with data that cover these inputs and states",
+                100.0 * *samples as f64 / (*total).max(1) as f64
+            ),
+            EstimateWarning::RateMismatch {
+                path,
+                native_hz,
+                model_hz,
+            } => write!(
+                f,
+                "{path} is recorded at {native_hz:.1} Hz but the model was trained at \
+                 {model_hz:.1} Hz: the log was resampled to the model's rate; train a model \
+                 at this log's rate for best results"
+            ),
+        }
+    }
+}
+
+impl LogEstimate {
+    /// What a user should know about this estimate: many samples outside the training data
+    /// (more than [`EXTRAPOLATION_WARNING`]), signals recorded at another rate than the
+    /// model's (by more than [`crate::RATE_NOTICE_TOLERANCE`]).
+    pub fn warnings(&self) -> Vec<EstimateWarning> {
+        let mut out = Vec::new();
+        let total = self.estimate.len();
+        let samples = self
+            .estimate
+            .flags
+            .iter()
+            .filter(|&&f| hbn_core::Flags(f).has(hbn_core::Flags::EXTRAPOLATION))
+            .count();
+        if samples as f64 > EXTRAPOLATION_WARNING * total as f64 {
+            out.push(EstimateWarning::Extrapolation { samples, total });
+        }
+        let model_hz = self.log.rate_hz();
+        for (path, native) in self.log.paths.iter().zip(&self.log.native_rates) {
+            if let Some(native_hz) = *native
+                && (native_hz - model_hz).abs() > crate::RATE_NOTICE_TOLERANCE * model_hz
+            {
+                out.push(EstimateWarning::RateMismatch {
+                    path: path.to_string(),
+                    native_hz,
+                    model_hz,
+                });
+            }
+        }
+        out
+    }
+}
+
 /// Where to write an estimate.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Outputs {

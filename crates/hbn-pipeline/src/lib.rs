@@ -33,8 +33,8 @@ mod train;
 
 pub use error::{LogOption, OptionError, PipelineError, Setting};
 pub use estimate::{
-    CSV_HEADER, ESTIMATE_SCHEMA, ESTIMATE_TOPIC, LogEstimate, Outputs, SignalChoice, estimate_log,
-    estimate_schema, read_at_model_rate,
+    CSV_HEADER, ESTIMATE_SCHEMA, ESTIMATE_TOPIC, EXTRAPOLATION_WARNING, EstimateWarning,
+    LogEstimate, Outputs, SignalChoice, estimate_log, estimate_schema, read_at_model_rate,
 };
 pub use eval::{Evaluation, Method, Score, evaluate_log};
 pub use log::{
