@@ -48,7 +48,7 @@ fn tuning_makes_the_uncertainty_honest_on_unseen_data() {
         .validation
         .as_ref()
         .expect("validation table");
-    assert_eq!(report.rows.len(), 2);
+    assert_eq!(report.rows.len(), Mode::ALL.len());
     assert_eq!(report.holdout.from, vec![375; 6]);
 
     let score = |m: &HbnModel| {

@@ -79,6 +79,7 @@ pub struct GpView<'a> {
     alpha: &'a [f64],
     variance: Variance<'a>,
     noise_var: f64,
+    mean_input: Option<usize>,
 }
 
 /// How a [`GpView`] computes the latent variance: the exact GP's Cholesky factor, or the two
@@ -216,7 +217,29 @@ impl<'a> GpView<'a> {
             alpha: parts.alpha,
             variance: parts.variance,
             noise_var: parts.noise_var,
+            mean_input: None,
         })
+    }
+
+    /// The same GP with the raw input `j` as its prior mean: predictions become
+    /// `x[j] + GP(x)` (mean gradient `+1` in `j`; variances unchanged). For a GP fitted to the
+    /// increments `t - x[j]` of its targets, e.g. `x_k - x_{k-1}`.
+    pub fn with_mean_input(self, j: usize) -> Result<Self, CoreError> {
+        if j >= self.dim() {
+            return Err(CoreError::DimensionMismatch {
+                expected: self.dim(),
+                got: j,
+            });
+        }
+        Ok(Self {
+            mean_input: Some(j),
+            ..self
+        })
+    }
+
+    /// The input added to the mean ([`GpView::with_mean_input`]), if any.
+    pub fn mean_input(&self) -> Option<usize> {
+        self.mean_input
     }
 
     /// Number of support points (exact) or inducing points (sparse).
@@ -368,6 +391,15 @@ impl<'a> GpView<'a> {
                 self.input_scale,
                 &mut out.grad_mean,
             );
+        }
+        if let Some(j) = self.mean_input {
+            // `with_mean_input` checked `j < dim`, so both exist.
+            out.mean += x_raw.get(j).copied().unwrap_or(0.0);
+            if want.grad_mean
+                && let Some(g) = out.grad_mean.get_mut(j)
+            {
+                *g += 1.0;
+            }
         }
         if want_var {
             let kss = acc.sf2 * spec.direction_factor(g_star, g_star);

@@ -161,7 +161,7 @@ impl HbnModel {
     /// Open-loop GP simulation: `x_k = mean H_D(x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2})` from the
     /// training mean, without measurements (the baseline the EKF must beat).
     pub fn simulate_open_loop(&self, u: &[f64]) -> Result<Vec<f64>, ModelError> {
-        let view = self.transition().view()?;
+        let view = self.gp_view(crate::GpRole::Transition)?;
         let mut scratch = vec![0.0; view.predict_scratch(Want::default())];
         let cfg = self.ekf_config(Mode::Ekf);
         let mut x = Vec::with_capacity(u.len());

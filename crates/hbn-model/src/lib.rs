@@ -54,7 +54,7 @@ pub use model::{
     StartSummary, TrainingSummary,
 };
 pub use params::{
-    CheckedHbnParams, ConfigError, DEFAULT_INDUCING, HbnParams, KernelChoice, KernelFamily, Param,
-    ParamValue, Problem, SignalInfo, Signals, UnknownKernel,
+    CheckedHbnParams, ConfigError, DEFAULT_INDUCING, HbnParams, Increments, KernelChoice,
+    KernelFamily, Param, ParamValue, Problem, SignalInfo, Signals, UnknownKernel,
 };
 pub use tuning::{FilterTuning, NoiseScales, ValidationReport};

@@ -8,7 +8,7 @@ use crate::error::ModelFileProblem;
 use crate::local::LocalData;
 use crate::params::{CheckedHbnParams, HbnParams, Signals};
 use crate::tuning::FilterTuning;
-use hbn_core::{EkfConfig, HbnView, InitPrior, Mode};
+use hbn_core::{EkfConfig, GpView, HbnView, InitPrior, Mode};
 use hbn_gp::{FitProgress, GaussianProcess, Hyperparameters, Termination};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -266,8 +266,20 @@ impl HbnModel {
             gp.forget_timing();
             Ok::<_, ModelError>(gp)
         };
-        let transition = fit_gp(GpRole::Transition, tr_spec, &data.transition)?;
-        let sensor = fit_gp(GpRole::Sensor, se_spec, &data.sensor)?;
+        let transition = fit_gp(
+            GpRole::Transition,
+            tr_spec,
+            &data
+                .transition
+                .increments(params.increments.mean_input(GpRole::Transition)),
+        )?;
+        let sensor = fit_gp(
+            GpRole::Sensor,
+            se_spec,
+            &data
+                .sensor
+                .increments(params.increments.mean_input(GpRole::Sensor)),
+        )?;
         let transition_local = LocalData::build(&data.transition, params.blr_window)?;
         let sensor_local = LocalData::build(&data.sensor, params.blr_window)?;
         let cat = |f: fn(&Sequence<'_>) -> Vec<f64>| {
@@ -334,12 +346,22 @@ impl HbnModel {
     /// once, not per step).
     pub fn view(&self) -> Result<HbnView<'_>, ModelError> {
         Ok(HbnView {
-            transition: self.transition.view()?,
-            sensor: self.sensor.view()?,
+            transition: self.gp_view(GpRole::Transition)?,
+            sensor: self.gp_view(GpRole::Sensor)?,
             transition_local: Some(self.transition_local.view()?),
             sensor_local: Some(self.sensor_local.view()?),
             blr: self.params.blr,
             init: self.init_prior()?,
+        })
+    }
+
+    /// The borrowed predictor of one relation, in the signal's own units (with the previous
+    /// sample added back for a GP that learned increments, [`crate::Increments`]).
+    pub fn gp_view(&self, role: GpRole) -> Result<GpView<'_>, ModelError> {
+        let view = self.gp(role).view()?;
+        Ok(match self.params.increments.mean_input(role) {
+            Some(j) => view.with_mean_input(j)?,
+            None => view,
         })
     }
 

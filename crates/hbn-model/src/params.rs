@@ -182,6 +182,64 @@ impl Default for Signals {
 /// 10 but up to 2.8x less accurate at gains 0 and 1 (`docs/results.md`, "Sparse or exact").
 pub const DEFAULT_INDUCING: usize = 64;
 
+/// What the GPs learn: the signal itself, or its change from the previous sample.
+///
+/// With increments, the transition GP is fitted to `x_k - x_{k-1}` and predicts
+/// `x_{k-1} + GP(...)` (and the sensor GP, with [`Increments::Both`], to `y_k - y_{k-1}`): a
+/// prior mean of "no change" instead of "the average level", so the kernel spends its
+/// flexibility on how the state moves rather than on where it is.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Increments {
+    /// Both GPs learn the signals themselves (the thesis; model files from before this option).
+    #[default]
+    None,
+    /// The transition GP learns `x_k - x_{k-1}`; the sensor GP learns `y_k`.
+    Transition,
+    /// The transition GP learns `x_k - x_{k-1}`, the sensor GP `y_k - y_{k-1}`.
+    Both,
+}
+
+impl Increments {
+    /// Every choice, in the order of their names.
+    pub const ALL: [Increments; 3] = [Increments::None, Increments::Transition, Increments::Both];
+
+    /// `none`, `transition` or `both`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Increments::None => "none",
+            Increments::Transition => "transition",
+            Increments::Both => "both",
+        }
+    }
+
+    /// The input whose value is the prior mean of `role`'s GP (`x_{k-1}` of the transition,
+    /// `y_{k-1}` of the sensor), if it learns increments.
+    pub const fn mean_input(self, role: crate::GpRole) -> Option<usize> {
+        match (self, role) {
+            (Increments::Transition | Increments::Both, crate::GpRole::Transition) => Some(0),
+            (Increments::Both, crate::GpRole::Sensor) => Some(1),
+            _ => None,
+        }
+    }
+}
+
+impl std::fmt::Display for Increments {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Increments {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Increments::ALL
+            .into_iter()
+            .find(|i| i.name().eq_ignore_ascii_case(s.trim()))
+            .ok_or_else(|| format!("unknown increments `{s}`; choose none, transition or both"))
+    }
+}
+
 /// Training parameters of the HBN. [`HbnParams::default`] is the one place hbn's defaults are
 /// written; [`HbnParams::check`] is the one place they are checked.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -224,6 +282,10 @@ pub struct HbnParams {
     /// Model files written before tuning existed read as `0`.
     #[serde(default)]
     pub validation: f64,
+    /// What the GPs learn: levels or increments ([`Increments`]). Model files written before
+    /// this option read as [`Increments::None`].
+    #[serde(default)]
+    pub increments: Increments,
     /// Signal names, paths and units.
     pub signals: Signals,
 }
@@ -245,6 +307,7 @@ impl Default for HbnParams {
             blr_window: 0.025,
             blr: LocalRegression::default(),
             validation: 0.25,
+            increments: Increments::None,
             signals: Signals::default(),
         }
     }

@@ -114,8 +114,10 @@ fn a_50_hz_log_trains_a_50_hz_model_and_estimates_are_written() {
         &mut |_| {},
     )
     .unwrap();
-    assert_eq!(ev.scores.len(), 3);
-    assert!(ev.scores[0].nrmse < ev.scores[2].nrmse, "{:?}", ev.scores);
+    // One score per mode, then the open loop.
+    assert_eq!(ev.scores.len(), Mode::ALL.len() + 1);
+    let open_loop = ev.scores[Mode::ALL.len()];
+    assert!(ev.scores[0].nrmse < open_loop.nrmse, "{:?}", ev.scores);
     assert_eq!(ev.estimates[1].1.x, est.estimate.x);
 }
 
