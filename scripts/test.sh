@@ -8,6 +8,9 @@ ROOT=$(pwd)
 echo "== hbn-core builds without std and without alloc"
 cargo build -p hbn-core --no-default-features
 
+echo "== hbn-core: the estimator step links with no panic path (no-panic, fat LTO)"
+cargo test --release --manifest-path crates/hbn-core/nopanic/Cargo.toml
+
 echo "== Rust tests (release: the end-to-end tests train GPs; also builds target/release/hbn)"
 cargo test --release --workspace --exclude hbn-py
 

@@ -40,7 +40,7 @@ use crate::CoreError;
 use crate::blr::{LocalRegression, Neighbourhood};
 use crate::gp::{GpView, Want};
 use crate::kernel::clamp_to;
-use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use nalgebra::{Matrix3, Vector3};
 
 /// Guard flags of one step (a bit set).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -1133,17 +1133,11 @@ fn bound_covariance(p: Matrix3<f64>, lo: f64, hi: f64, flags: &mut u32) -> Matri
     if inside {
         return sym;
     }
-    // The link-time no-panic proof (`crates/hbn-core/nopanic`) builds with
-    // `--cfg hbn_no_panic_proof`, which replaces this one call by its `None` branch: nalgebra's
-    // iterative eigensolver indexes by loop state and unwraps a 2x2 solve, which the optimiser
-    // cannot prove in bounds, so the proof covers the whole step except this call.
-    #[cfg(not(hbn_no_panic_proof))]
-    let eig = SymmetricEigen::try_new(sym, 1e-14, 64);
-    #[cfg(hbn_no_panic_proof)]
-    let eig: Option<SymmetricEigen<f64, nalgebra::U3>> = None;
-    match eig {
-        Some(eig) => {
-            let mut vals = eig.eigenvalues;
+    // Our own Jacobi solver, written without indexing: the link-time no-panic proof
+    // (`crates/hbn-core/nopanic`) covers it with the rest of the step.
+    match crate::eigen::symmetric_eigen3(&sym) {
+        Some((eigenvalues, eigenvectors)) => {
+            let mut vals = eigenvalues;
             let mut changed = false;
             for v in vals.iter_mut() {
                 let c = clamp_to(*v, lo, hi);
@@ -1156,7 +1150,7 @@ fn bound_covariance(p: Matrix3<f64>, lo: f64, hi: f64, flags: &mut u32) -> Matri
                 return sym;
             }
             *flags |= Flags::COVARIANCE_CLAMPED;
-            let q = eig.eigenvectors;
+            let q = eigenvectors;
             let out = q * Matrix3::from_diagonal(&vals) * q.transpose();
             (out + out.transpose()) * 0.5
         }
@@ -1221,8 +1215,7 @@ pub fn observability_eigenvalues(jacobians: &[Matrix3<f64>], r: &[f64]) -> Optio
         let w = 1.0 / rk.max(f64::MIN_POSITIVE);
         gram += row.transpose() * row * w;
     }
-    let eig = SymmetricEigen::try_new(gram, 1e-14, 64)?;
-    let v = eig.eigenvalues;
+    let (v, _) = crate::eigen::symmetric_eigen3(&gram)?;
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for x in v.iter() {
         lo = lo.min(*x);

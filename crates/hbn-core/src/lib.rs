@@ -38,6 +38,7 @@ pub mod gp;
 pub mod kernel;
 pub mod rng;
 
+pub mod eigen;
 pub use blr::{LocalRegression, Neighbourhood, NeighbourhoodParts, Posterior};
 pub use ekf::{
     EXTRAPOLATION_RATIO, Ekf, EkfConfig, EkfState, Estimator, Flags, HbnView, InitPrior,

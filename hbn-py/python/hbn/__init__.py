@@ -700,8 +700,8 @@ class HysteresisModel:
 
     def estimate(self, u: Any, y: Any, mode: Optional[str] = None) -> Estimate:
         """Estimates the state from the input ``u`` and the sensor output ``y`` (same length, at
-        the model's rate). ``mode``: one of :data:`MODES` (``None``: ``"ekf"``, the default of
-        ``hbn estimate``).
+        the model's rate). ``mode``: one of :data:`MODES` (``"ekf"``, ``"ekf-blr"``, ``"ukf"``;
+        ``None``: the model's :attr:`default_mode`, as ``hbn estimate`` without ``--mode``).
 
         NaN/Inf samples are allowed (sensor drop-outs): the filter holds the last input or skips
         the update and says so in ``flags``. Equal, sample for sample, to stepping

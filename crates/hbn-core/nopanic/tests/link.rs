@@ -5,7 +5,7 @@
 use hbn_core::blr::{LocalRegression, Neighbourhood, NeighbourhoodParts};
 use hbn_core::gp::{GpParts, GpView, Variance, Want};
 use hbn_core::kernel::{Kernel, KernelSpec};
-use hbn_core::{EkfConfig, Estimator, HbnView, Mode};
+use hbn_core::{EkfConfig, Estimator, HbnView, InitPrior, Mode};
 
 /// A 2-point GP on `d` inputs with an identity Cholesky factor.
 struct Gp {
@@ -31,7 +31,17 @@ impl Gp {
             spec,
         }
     }
-    fn view(&self) -> GpView<'_> {
+    fn view(&self, sparse: bool) -> GpView<'_> {
+        let variance = if sparse {
+            Variance::Sparse {
+                kmm_inv_factor: &self.chol,
+                sigma_factor: &self.chol,
+            }
+        } else {
+            Variance::Exact {
+                chol_packed: &self.chol,
+            }
+        };
         GpView::new(GpParts {
             kernel: Kernel::new(self.spec, &self.theta, &[]).unwrap(),
             input_mean: &self.mean,
@@ -41,9 +51,7 @@ impl Gp {
             features: &self.feats,
             directions: &[],
             alpha: &self.alpha,
-            variance: Variance::Exact {
-                chol_packed: &self.chol,
-            },
+            variance,
             noise_var: 0.01,
         })
         .unwrap()
@@ -79,6 +87,7 @@ impl Local {
     }
 }
 
+/// Settings for `mode`; every field is set here once, so a new field breaks one place.
 fn config(mode: Mode) -> EkfConfig {
     EkfConfig {
         mode,
@@ -90,7 +99,7 @@ fn config(mode: Mode) -> EkfConfig {
         p_max: 4.0,
         jac_max: 20.0,
         innovation_min: 1e-12,
-        nis_gate: 0.0,
+        nis_gate: 9.0,
         x_bounds: (-1.0, 2.0),
         y_bounds: (-1.0, 2.0),
         x0_mean: 0.5,
@@ -106,14 +115,17 @@ fn step_links_without_panic_paths_and_stays_finite() {
     let (tr, se) = (Gp::new(4), Gp::new(3));
     let (tl, sl) = (Local::new(4), Local::new(3));
     static ZERO: [f64; 4] = [0.0; 4];
-    let view = HbnView {
-        transition: tr.view(),
-        sensor: se.view(),
+    let pairs = [[0.0, 0.1], [0.5, 0.4], [0.5, 0.6], [1.0, 0.9]];
+    let init = InitPrior::new(&pairs, 2, 1e-6).unwrap();
+    let views = [false, true].map(|sparse| HbnView {
+        transition: tr.view(sparse),
+        sensor: se.view(sparse),
         transition_local: Some(tl.view(4, &ZERO)),
         sensor_local: Some(sl.view(3, &ZERO)),
         blr: LocalRegression::default(),
-    };
-    for mode in [Mode::Ekf, Mode::EkfBlr] {
+        init: Some(init),
+    });
+    for (view, mode) in views.iter().flat_map(|v| Mode::ALL.map(|m| (*v, m))) {
         let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
         let mut est = Estimator::new(view, config(mode), &mut scratch).unwrap();
         let inputs = [0.1, f64::NAN, 1e300, -f64::INFINITY, 0.3, 0.0, -1e-300];
@@ -127,7 +139,7 @@ fn step_links_without_panic_paths_and_stays_finite() {
             }
         }
     }
-    let gp = tr.view();
+    let gp = tr.view(false);
     let mut scratch = [0.0; 16];
     assert!(hbn_core_nopanic::predict(&gp, &[0.1; 4], Want::ALL, &mut scratch).is_ok());
     assert!(hbn_core_nopanic::predict(&gp, &[0.1; 3], Want::ALL, &mut scratch).is_err());
@@ -143,5 +155,7 @@ fn step_links_without_panic_paths_and_stays_finite() {
     }
     let mut v = [0.0; 3];
     assert!(hbn_core_nopanic::substitute(&[1.0, 0.0, 1.0], &[1.0; 3], &mut v).is_err());
-    assert!(hbn_core_nopanic::substitute(&[1.0, 0.0, 1.0, 0.0, 0.0, 1.0], &[1.0; 3], &mut v).is_ok());
+    assert!(
+        hbn_core_nopanic::substitute(&[1.0, 0.0, 1.0, 0.0, 0.0, 1.0], &[1.0; 3], &mut v).is_ok()
+    );
 }
