@@ -6,6 +6,11 @@
 //! rename survives a power cut. A failure at any point leaves the target untouched and no
 //! temporary file behind. Outputs get ordinary permissions (0644 on Unix), not the owner-only
 //! mode of temporary files.
+//!
+//! Two kinds of target are not renamed over: an existing target that is not a regular file
+//! (`/dev/stdout`, `/dev/null`, a pipe) is written in place, since renaming would replace the
+//! device node or pipe itself; and a symbolic link is followed, so the file it points to is
+//! replaced atomically and the link stays.
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 #![cfg_attr(
@@ -58,6 +63,37 @@ where
     E: From<WriteError>,
     F: FnOnce(&mut BufWriter<File>) -> Result<(), E>,
 {
+    let err = |op, source| WriteError {
+        path: path.to_owned(),
+        op,
+        source,
+    };
+    // A symbolic link: replace the file it points to, keep the link.
+    let resolved;
+    let path = match std::fs::symlink_metadata(path) {
+        Ok(m) if m.file_type().is_symlink() => match std::fs::canonicalize(path) {
+            Ok(p) => {
+                resolved = p;
+                resolved.as_path()
+            }
+            Err(_) => path,
+        },
+        _ => path,
+    };
+    // A device or pipe: write in place (no temporary file, no rename).
+    if let Ok(m) = std::fs::metadata(path)
+        && !m.is_file()
+        && !m.is_dir()
+    {
+        let handle = std::fs::OpenOptions::new()
+            .write(true)
+            .open(path)
+            .map_err(|e| err("open", e))?;
+        let mut w = BufWriter::new(handle);
+        fill(&mut w)?;
+        w.flush().map_err(|e| err("write", e))?;
+        return Ok(());
+    }
     let err = |op, source| WriteError {
         path: path.to_owned(),
         op,
@@ -117,6 +153,52 @@ mod tests {
             let mode = std::fs::metadata(&f).unwrap().permissions().mode() & 0o777;
             assert_eq!(mode, 0o644);
         }
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn devices_are_written_in_place_not_replaced() {
+        use std::os::unix::fs::FileTypeExt;
+        // /dev/null takes anything and stays a device.
+        write_atomic(Path::new("/dev/null"), b"gone").unwrap();
+        assert!(
+            std::fs::metadata("/dev/null")
+                .unwrap()
+                .file_type()
+                .is_char_device()
+        );
+        // /dev/full fails with "no space" and stays a device.
+        if Path::new("/dev/full").exists() {
+            let e = write_atomic(Path::new("/dev/full"), &[0u8; 1 << 16]).unwrap_err();
+            assert_eq!(e.path, Path::new("/dev/full"));
+            assert_eq!(e.source.raw_os_error(), Some(28), "{e}"); // ENOSPC
+            assert!(e.to_string().contains("/dev/full"), "{e}");
+            assert!(
+                std::fs::metadata("/dev/full")
+                    .unwrap()
+                    .file_type()
+                    .is_char_device()
+            );
+        }
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_symbolic_link_keeps_pointing_at_the_replaced_file() {
+        let d = tempfile::tempdir().unwrap();
+        let target = d.path().join("real.txt");
+        let link = d.path().join("link.txt");
+        write_atomic(&target, b"old").unwrap();
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        write_atomic(&link, b"new").unwrap();
+        assert!(
+            std::fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink()
+        );
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+        assert!(leftovers(d.path()).is_empty());
     }
 
     #[test]
