@@ -69,3 +69,51 @@ fn a_million_noisy_steps_stay_finite_and_bounded() {
         );
     }
 }
+
+/// A sensor dropout of 3 s (300 samples of `y` missing): the filter predicts through it with a
+/// growing standard deviation and, once `y` returns, its error is back to the level before the
+/// dropout within 100 samples (docs/reliability.md gives the 10^7-step figures).
+#[test]
+fn a_sensor_dropout_is_recovered_within_100_samples() {
+    let (model, _) = common::train_model(SystemKind::GeneralizedPi, 1.0, 100, 6);
+    let test = common::test_run(SystemKind::GeneralizedPi, 1.0, 3_000, 6);
+    let (start, len) = (1_500, 300);
+    for mode in Mode::ALL {
+        let view = model.view().unwrap();
+        let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
+        let mut est = Estimator::new(view, model.ekf_config(mode), &mut scratch).unwrap();
+        let mut before = Vec::new();
+        let mut std_at_end = 0.0;
+        let mut std_before = 0.0;
+        let mut after = Vec::new();
+        for k in 0..test.u.len() {
+            let dropped = (start..start + len).contains(&k);
+            let out = est.step(test.u[k], if dropped { f64::NAN } else { test.y[k] });
+            assert!(
+                out.x.is_finite() && out.x_std.is_finite(),
+                "{mode} step {k}"
+            );
+            let err = (out.x - test.x[k]).abs();
+            if (start - 500..start).contains(&k) {
+                before.push(err * err);
+                std_before = out.x_std;
+            }
+            if k == start + len - 1 {
+                std_at_end = out.x_std;
+            }
+            if (start + len + 100..start + len + 400).contains(&k) {
+                after.push(err);
+            }
+        }
+        let rms = (before.iter().sum::<f64>() / before.len() as f64).sqrt();
+        assert!(
+            std_at_end > std_before,
+            "{mode}: the standard deviation grows while y is missing ({std_before} -> {std_at_end})"
+        );
+        let worst = after.iter().fold(0.0f64, |m, e| m.max(*e));
+        assert!(
+            worst <= 5.0 * rms,
+            "{mode}: error {worst} after the dropout vs RMS {rms} before"
+        );
+    }
+}

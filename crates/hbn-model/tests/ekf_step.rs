@@ -598,3 +598,43 @@ fn ukf_estimates_as_well_as_the_ekf_on_unseen_data() {
     );
     assert!(nees.is_finite(), "NEES {nees}");
 }
+
+#[test]
+fn increments_models_add_the_previous_sample_back() {
+    let f = train(
+        SystemKind::Duhem,
+        &HbnParams {
+            increments: hbn_model::Increments::Both,
+            ..params()
+        },
+    );
+    let mut scratch = vec![0.0; 4096];
+    for (role, x) in [
+        (hbn_model::GpRole::Transition, vec![0.3, 0.25, 0.5, 0.45]),
+        (hbn_model::GpRole::Sensor, vec![0.3, 0.4, 0.32]),
+    ] {
+        let raw = f.model.gp(role).view().unwrap();
+        let full = f.model.gp_view(role).unwrap();
+        let j = if role == hbn_model::GpRole::Transition {
+            0
+        } else {
+            1
+        };
+        assert_eq!(full.mean_input(), Some(j));
+        let a = raw.predict(&x, Want::EKF, &mut scratch).unwrap();
+        let b = full.predict(&x, Want::EKF, &mut scratch).unwrap();
+        assert_eq!(b.mean, a.mean + x[j], "{role:?}");
+        assert_eq!(b.grad_mean[j], a.grad_mean[j] + 1.0);
+        assert_eq!(b.variance, a.variance);
+    }
+    // The filter runs on the level, not the increment.
+    let est = f.model.estimate(&f.test.u, &f.test.y, Mode::Ekf).unwrap();
+    let err = est
+        .x
+        .iter()
+        .zip(&f.test.x)
+        .map(|(a, b)| (a - b).powi(2))
+        .sum::<f64>();
+    let span = f.model.stats().1.span();
+    assert!((err / est.x.len() as f64).sqrt() < 0.1 * span);
+}
