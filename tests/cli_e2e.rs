@@ -247,7 +247,13 @@ fn simulate_train_inspect_estimate_eval() {
     assert!(bytes.starts_with(b"\x89PNG"), "PNG written");
     // The table form.
     let (out, _) = ok(&["eval", "--model", &model, "--log", &test, "--mode", "ekf"]);
-    assert!(out.contains("ekf") && out.contains("open_loop") && !out.contains("ekf_blr"));
+    // The table names methods as the flags do (`ekf-blr`, not the JSON key `ekf_blr`).
+    assert!(out.contains("ekf") && out.contains("open-loop") && !out.contains("ekf-blr"));
+    let (all, _) = ok(&["eval", "--model", &model, "--log", &test, "--mode", "all"]);
+    assert!(
+        all.contains("ekf-blr") && all.contains("ukf") && !all.contains("ekf_blr"),
+        "{all}"
+    );
     assert!(
         out.contains("in 2 sd") && out.contains("mean NEES"),
         "{out}"
@@ -393,6 +399,6 @@ fn demo_writes_everything() {
     ] {
         assert!(dir.join(f).is_file(), "demo did not write {f}: {out}");
     }
-    assert!(out.contains("open_loop") && out.contains("nRMSE"), "{out}");
+    assert!(out.contains("open-loop") && out.contains("nRMSE"), "{out}");
     assert!(secs < 60.0, "demo took {secs:.1} s");
 }

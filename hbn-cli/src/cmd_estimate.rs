@@ -75,7 +75,7 @@ pub fn run(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<LogEstimate> 
         .map_err(|e| report::error(e, opts.time_source))
         .with_context(|| format!("estimation on `{}` failed", args.log.display()))?;
     let mut text = format!(
-        "estimated `{}` with `{}` at {:.1} Hz ({:.2} s)\n",
+        "estimated `{}` with `{}` at {:.1} Hz (a {:.2} s log)\n",
         args.log.display(),
         args.model.display(),
         model.rate_hz(),

@@ -22,7 +22,7 @@ pub fn table(ev: &Evaluation) -> String {
     for sc in &ev.scores {
         s.push_str(&format!(
             "{:<10} {:>12.6} {:>10.4}",
-            sc.method.key(),
+            sc.method.name(),
             sc.rmse,
             sc.nrmse
         ));
@@ -69,8 +69,30 @@ pub fn run(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<Evaluation> {
         render.event(ui, e)
     });
     render.finish();
+    let state_topic = signals
+        .resolve(&model, hbn_pipeline::LogOption::State)
+        .ok()
+        .map(|p| p.topic);
     let ev = result
-        .map_err(|e| report::error(e, opts.time_source))
+        .map_err(|e| {
+            let no_state = matches!(
+                &e,
+                hbn_pipeline::PipelineError::Read {
+                    source: hbn_io::IoError::MissingTopic { topic, .. },
+                    ..
+                } if Some(topic) == state_topic.as_ref()
+            );
+            let e = report::error(e, opts.time_source);
+            if no_state {
+                e.context(format!(
+                    "`{}` does not record the state, so there is nothing to score against; \
+                     to estimate the state of this log use `hbn estimate`",
+                    args.log.display()
+                ))
+            } else {
+                e
+            }
+        })
         .with_context(|| format!("evaluation on `{}` failed", args.log.display()))?;
     if let Some(p) = &args.plot {
         let series: Vec<Series<'_>> = ev

@@ -121,7 +121,7 @@ pub fn model_text(model: &HbnModel, file: &std::path::Path) -> String {
         |i: &hbn_model::SignalInfo| i.path.clone().unwrap_or_else(|| "(not from a log)".into());
     let mut t = format!(
         "model `{}`\nsignals\n  input  {} = {}\n  state  {} = {}\n  output {} = {}\nrate {:.1} Hz\n\
-         trained on {} trajectories, {} rows per GP\n\n",
+         trained on {} trajector{}, {} rows per GP\n\n",
         file.display(),
         sig.input.name,
         path(&sig.input),
@@ -131,6 +131,7 @@ pub fn model_text(model: &HbnModel, file: &std::path::Path) -> String {
         path(&sig.output),
         model.rate_hz(),
         s.trajectories,
+        if s.trajectories == 1 { "y" } else { "ies" },
         s.rows,
     );
     for role in GpRole::ALL {

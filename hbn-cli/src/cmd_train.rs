@@ -67,9 +67,11 @@ pub fn print_summary(
     let s = model.summary();
     let p = model.params();
     let mut text = format!(
-        "trained `{}` from {} log(s): {} samples at {:.1} Hz, {} rows per GP, {:.1} s\n",
+        "trained `{}` from {} log{}: {} samples at {:.1} Hz, {} rows per GP; training took \
+         {:.1} s\n",
         out.display(),
         s.trajectories,
+        if s.trajectories == 1 { "" } else { "s" },
         samples,
         model.rate_hz(),
         s.rows,

@@ -101,9 +101,9 @@ where
         Err(e) => {
             use clap::error::ErrorKind;
             return match e.kind() {
-                ErrorKind::DisplayHelp
-                | ErrorKind::DisplayVersion
-                | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
+                // Bare `hbn` (no subcommand) prints the help too, but as a usage error
+                // (exit 2), like any other command line that does nothing.
+                ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
                     write!(out, "{}", e.render()).context("cannot write to stdout")?;
                     Ok(())
                 }
@@ -133,11 +133,26 @@ pub fn main_exit_code(result: anyhow::Result<()>) -> i32 {
                 eprint!("{}", c.render());
                 2
             } else {
-                eprintln!("error: {e:#}");
+                eprintln!("error: {}", error_message(&e));
                 1
             }
         }
     }
+}
+
+/// The error and its causes on one line, each said once: a cause whose text its parent's
+/// message already contains (library errors often name their source in their own message) is
+/// skipped.
+pub fn error_message(e: &anyhow::Error) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if text.is_empty() || parts.iter().any(|p| p.contains(&text)) {
+            continue;
+        }
+        parts.push(text);
+    }
+    parts.join(": ")
 }
 
 /// Fails early (before any long computation) when `file` cannot be created: its directory

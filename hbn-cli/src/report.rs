@@ -65,6 +65,13 @@ pub fn error(e: PipelineError, time_source: TimeSource) -> anyhow::Error {
         } => " (options --max-gap, --rate)",
         PipelineError::UnknownRate { .. } => " (--rate)",
         PipelineError::SignalPath { .. } => " (--input, --state, --output)",
+        PipelineError::Read {
+            source: IoError::MissingTopic { .. } | IoError::MissingField { .. },
+            ..
+        } => {
+            " (the signals are the model's training paths unless --input, --output or --state \
+             say otherwise)"
+        }
         _ => "",
     };
     if hint.is_empty() {

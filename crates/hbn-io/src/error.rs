@@ -24,6 +24,19 @@ fn secs(t_ns: u64) -> f64 {
     t_ns as f64 * 1e-9
 }
 
+/// Where a gap starts, in words: seconds after the start of the signals' common time span, or
+/// before it (a gap that begins before every signal has started).
+fn gap_start(at_s: f64) -> String {
+    if at_s >= 0.0 {
+        format!("starting {at_s:.3} s after the start of the signals' common time span")
+    } else {
+        format!(
+            "starting {:.3} s before the signals' common time span begins",
+            -at_s
+        )
+    }
+}
+
 /// Everything that can go wrong reading, resampling or writing logs.
 ///
 /// Every message names the file, topic or field involved and says what would fix it.
@@ -106,8 +119,8 @@ pub enum IoError {
     /// A signal's times decrease.
     #[error(
         "`{path}` goes back in time from t = {} s to t = {} s ({t_prev} ns -> {t} ns); \
-         if the header stamps are unreliable read with the log time (TimeSource::LogTime), \
-         or sort the log", secs(*t_prev), secs(*t)
+         if the header stamps are unreliable read with the log time (`--time-source log`, \
+         Python `time_source=\"log\"`), or sort the log", secs(*t_prev), secs(*t)
     )]
     TimeBackwards {
         /// The signal path.
@@ -119,9 +132,9 @@ pub enum IoError {
     },
     /// A gap between consecutive samples inside the resampling window is too long.
     #[error(
-        "`{path}` has a gap of {gap_s:.3} s starting at {at_s:.3} s (seconds since the start of the \
-         common time span), longer than max_gap_s = {max_gap_s} s; raise max_gap_s or cut the log \
-         around the gap"
+        "`{path}` has a gap of {gap_s:.3} s {}, longer than the largest gap allowed \
+         ({max_gap_s} s); raise it (`--max-gap`, Python `max_gap=`) or cut the log around the gap",
+        gap_start(*at_s)
     )]
     Gap {
         /// The signal path.
@@ -189,7 +202,7 @@ pub enum IoError {
     /// A message's `header.stamp` is not a valid time.
     #[error(
         "topic `{topic}`: header.stamp is invalid ({reason}); read with the log time \
-         (TimeSource::LogTime) instead"
+         (`--time-source log`, Python `time_source=\"log\"`) instead"
     )]
     BadStamp {
         /// The topic.

@@ -410,8 +410,9 @@ fn stamp_missing(topic: &str, e: WalkError, t_ns: u64) -> IoError {
         WalkError::Missing { available, .. } => IoError::MissingField {
             topic: topic.to_owned(),
             path: format!("{topic}.header.stamp"),
-            missing: "header.stamp.{sec,nanosec|nsec} (needed by TimeSource::HeaderStamp; \
-                      use TimeSource::LogTime for messages without a header)"
+            missing: "header.stamp.{sec,nanosec|nsec} (needed to read header stamps; read \
+                      messages without a header with the log time: `--time-source log`, \
+                      Python `time_source=\"log\"`)"
                 .to_owned(),
             available,
         },

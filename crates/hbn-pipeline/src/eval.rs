@@ -33,6 +33,17 @@ impl Method {
     }
 }
 
+impl Method {
+    /// The name a user reads in tables and flags: `ekf`, `ekf-blr`, `ukf` (the mode names) or
+    /// `open-loop`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Method::Filter(m) => m.name(),
+            Method::OpenLoop => "open-loop",
+        }
+    }
+}
+
 /// Scores of one method.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Score {
