@@ -141,6 +141,16 @@ fn summaries_count_in_words() {
         out.contains("from 1 log:") && out.contains("training took"),
         "{out}"
     );
+    // Keeping a subset of support points is normal, not a warning; optimiser stops are said
+    // in words, not argmin's.
+    assert!(
+        out.contains("support points (chosen from 298 samples by farthest-point selection)"),
+        "{out}"
+    );
+    assert!(
+        !out.contains("warning:") && !out.contains("solver exit"),
+        "{out}"
+    );
     let (_, out) = hbn(&["inspect", &p("m.hbn")]);
     assert!(out.contains("trained on 1 trajectory,"), "{out}");
     let (_, out) = hbn(&["estimate", "--model", &p("m.hbn"), "--log", &p("a.mcap")]);

@@ -84,8 +84,13 @@ pub fn print_summary(
         } else {
             ("support points", "LML")
         };
+        let chosen = gp
+            .report()
+            .subset_note()
+            .map_or(String::new(), |n| format!(" ({n})"));
         text.push_str(&format!(
-            "  {:<10} GP: {:>4} {points}, {score} {:>10.2}, kernel {}; starts: {}\n",
+            "  {:<10} GP: {:>4} {points}{chosen}, {score} {:>10.2}, kernel {}; optimiser \
+             starts: {}\n",
             role.name(),
             gp.n_support(),
             gp.log_marginal_likelihood(),

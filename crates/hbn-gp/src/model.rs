@@ -71,15 +71,26 @@ impl TrainingReport {
         self.max_jitter = self.max_jitter.max(stats.max_jitter);
     }
 
-    /// Human-readable warnings (jitter, subset, failed starts); empty when all went cleanly.
+    /// How the support points were chosen, when they are a subset of the samples (normal for
+    /// the exact GP on a long log; not a warning): e.g. "chosen from 2994 samples by
+    /// farthest-point selection".
+    pub fn subset_note(&self) -> Option<String> {
+        self.subset_policy.map(|p| {
+            format!(
+                "chosen from {} samples by {}",
+                self.n_samples,
+                match p {
+                    crate::SubsetPolicy::FarthestPoint => "farthest-point selection",
+                    crate::SubsetPolicy::Random => "random selection",
+                }
+            )
+        })
+    }
+
+    /// Human-readable warnings (jitter, failed starts, fewer inducing points than asked);
+    /// empty when all went cleanly.
     pub fn warnings(&self) -> Vec<String> {
         let mut w = Vec::new();
-        if let Some(p) = self.subset_policy {
-            w.push(format!(
-                "{} samples exceed the maximum; kept {} support points by {:?}",
-                self.n_samples, self.n_support, p
-            ));
-        }
         if let Some(asked) = self.n_inducing_requested
             && asked > self.n_support
         {

@@ -60,7 +60,10 @@ impl std::fmt::Display for Termination {
         match self {
             Termination::Converged => f.write_str("converged"),
             Termination::MaxIters => f.write_str("stopped at the iteration limit"),
-            Termination::SolverExit { reason } => write!(f, "solver exit: {reason}"),
+            Termination::SolverExit { reason } if reason.to_lowercase().contains("line search") => {
+                f.write_str("stopped where no step improves further")
+            }
+            Termination::SolverExit { reason } => write!(f, "stopped by the optimiser ({reason})"),
             Termination::Failed { failure } => write!(f, "failed: {failure}"),
         }
     }
