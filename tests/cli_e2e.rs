@@ -154,10 +154,20 @@ fn simulate_train_inspect_estimate_eval() {
     assert!(!err.contains("resampling"), "same rate: no notice: {err}");
     let text = std::fs::read_to_string(&csv).expect("csv");
     let mut lines = text.lines();
-    assert_eq!(lines.next(), Some("t,x,x_std,y_pred,innovation,nis,flags"));
+    assert_eq!(
+        lines.next(),
+        Some("t,x,x_std,y_pred,innovation,nis,flags,flag_names")
+    );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 600);
-    assert!(rows.iter().all(|r| r.len() == 7));
+    assert!(rows.iter().all(|r| r.len() == 8));
+    // The flag names spell out the bit mask.
+    for r in &rows {
+        let bits: u32 = r[6].parse().expect("flags");
+        let names: Vec<&str> = hbn_core::Flags(bits).names().collect();
+        assert_eq!(r[7], names.join("|"));
+    }
+    assert!(rows[0][7].contains("initialised"), "{:?}", rows[0]);
     assert_eq!(rows[0][0], "0");
     let t_last: f64 = rows[599][0].parse().expect("t");
     assert!((t_last - 5.99).abs() < 1e-9, "{t_last}");

@@ -153,6 +153,12 @@ fn summaries_count_in_words() {
     );
     let (_, out) = hbn(&["inspect", &p("m.hbn")]);
     assert!(out.contains("trained on 1 trajectory,"), "{out}");
+    // Length scales named by the input they belong to.
+    assert!(out.contains("length scales     x[k-1] "), "{out}");
+    assert!(
+        out.contains("u[k-2] ") && out.contains("y[k-1] ") && out.contains("x[k] "),
+        "{out}"
+    );
     let (_, out) = hbn(&["estimate", "--model", &p("m.hbn"), "--log", &p("a.mcap")]);
     assert!(out.contains("s log)"), "{out}");
     assert!(Path::new(&p("m.hbn")).exists());

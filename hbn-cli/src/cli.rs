@@ -376,7 +376,8 @@ pub struct TrainArgs {
     after_help = "Example:\n  hbn estimate --model model.hbn --log test.mcap --mode ekf-blr --out est.mcap --csv est.csv\n\n\
      The MCAP output has one JSON channel /hbn/estimate (x, x_std, y_pred, innovation, nis,\n\
      flags, flag_names) on the input log's clock: open it in Foxglove beside the input log.\n\
-     CSV columns: t,x,x_std,y_pred,innovation,nis,flags (t in seconds from the first sample)."
+     CSV columns: t,x,x_std,y_pred,innovation,nis,flags,flag_names (t in seconds from the first \
+     sample; flags as a bit mask and as names joined by |, explained in docs/ekf.md)."
 )]
 pub struct EstimateArgs {
     /// Model file from `hbn train`.

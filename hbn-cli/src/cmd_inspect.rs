@@ -8,10 +8,11 @@ use crate::Ui;
 use crate::cli::InspectArgs;
 use crate::cmd_estimate::load_model;
 
-fn gp_json(gp: &GaussianProcess, kernel: KernelChoice) -> Value {
+fn gp_json(gp: &GaussianProcess, kernel: KernelChoice, inputs: &[String]) -> Value {
     let r = gp.report();
     json!({
         "kernel": kernel.to_string(),
+        "inputs": inputs,
         "signal_variance": gp.signal_variance(),
         "length_scales": gp.length_scales(),
         "noise_variance": gp.noise_variance(),
@@ -52,8 +53,16 @@ pub fn model_json(model: &HbnModel) -> Value {
         "signals": model.signals(),
         "rate_hz": model.rate_hz(),
         "training_ranges": {"u": us, "x": xs, "y": ys},
-        "transition": gp_json(model.transition(), p.transition_kernel),
-        "sensor": gp_json(model.sensor(), p.sensor_kernel),
+        "transition": gp_json(
+            model.transition(),
+            p.transition_kernel,
+            &input_names(model, GpRole::Transition)
+        ),
+        "sensor": gp_json(
+            model.sensor(),
+            p.sensor_kernel,
+            &input_names(model, GpRole::Sensor)
+        ),
         "blr": {
             "transition": blr_json(model.transition_local()),
             "sensor": blr_json(model.sensor_local()),
@@ -76,14 +85,44 @@ fn fmt_list(v: &[f64]) -> String {
         .join(", ")
 }
 
-fn gp_text(name: &str, gp: &GaussianProcess, kernel: KernelChoice) -> String {
+/// The inputs of one GP by the model's signal names: `x[k-1], x[k-2], u[k-1], u[k-2]` for the
+/// transition, `x[k-1], y[k-1], x[k]` for the sensor.
+pub fn input_names(model: &HbnModel, role: GpRole) -> Vec<String> {
+    let s = model.signals();
+    let (u, x, y) = (&s.input.name, &s.state.name, &s.output.name);
+    match role {
+        GpRole::Transition => vec![
+            format!("{x}[k-1]"),
+            format!("{x}[k-2]"),
+            format!("{u}[k-1]"),
+            format!("{u}[k-2]"),
+        ],
+        GpRole::Sensor => vec![format!("{x}[k-1]"), format!("{y}[k-1]"), format!("{x}[k]")],
+    }
+}
+
+/// Length scales labelled by their input (`x[k-1] 0.52, ...`) when there is one per input.
+fn named_length_scales(gp: &GaussianProcess, names: &[String]) -> String {
+    let ls = gp.length_scales();
+    if ls.len() == names.len() {
+        ls.iter()
+            .zip(names)
+            .map(|(l, n)| format!("{n} {l:.4e}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    } else {
+        format!("[{}]", fmt_list(&ls))
+    }
+}
+
+fn gp_text(name: &str, gp: &GaussianProcess, kernel: KernelChoice, inputs: &[String]) -> String {
     let r = gp.report();
     let failed = r.starts.iter().filter(|s| s.error.is_some()).count();
     let mut s = format!(
-        "{name} GP\n  kernel            {kernel}\n  signal variance   {:.4e}\n  length scales     [{}]\n  \
+        "{name} GP\n  kernel            {kernel}\n  signal variance   {:.4e}\n  length scales     {}\n  \
          noise variance    {:.4e}\n  {}    {} of {} samples",
         gp.signal_variance(),
-        fmt_list(&gp.length_scales()),
+        named_length_scales(gp, inputs),
         gp.noise_variance(),
         if gp.is_sparse() {
             "inducing points"
@@ -138,7 +177,12 @@ pub fn model_text(model: &HbnModel, file: &std::path::Path) -> String {
         if role == GpRole::Sensor {
             t.push('\n');
         }
-        t.push_str(&gp_text(role.name(), model.gp(role), p.kernel(role)));
+        t.push_str(&gp_text(
+            role.name(),
+            model.gp(role),
+            p.kernel(role),
+            &input_names(model, role),
+        ));
         let ends = crate::report::terminations(s, role);
         if !ends.is_empty() {
             t.push_str(&format!("  start endings      {ends}\n"));

@@ -18,7 +18,7 @@ pub const ESTIMATE_TOPIC: &str = "/hbn/estimate";
 /// Schema name of the estimate messages.
 pub const ESTIMATE_SCHEMA: &str = "hbn/Estimate";
 /// CSV header (`t` in seconds from the first grid sample).
-pub const CSV_HEADER: &str = "t,x,x_std,y_pred,innovation,nis,flags";
+pub const CSV_HEADER: &str = "t,x,x_std,y_pred,innovation,nis,flags,flag_names";
 
 /// The signal paths to read for a model: explicit ones, else those the model was trained
 /// with, else the defaults.
@@ -215,15 +215,17 @@ impl LogEstimate {
         s.push('\n');
         for (k, t) in self.log.aligned.t_s.iter().enumerate() {
             let g = |v: &Vec<f64>| v.get(k).copied().unwrap_or(f64::NAN);
+            let flags = est.flags.get(k).copied().unwrap_or(0);
+            let names: Vec<&str> = hbn_core::Flags(flags).names().collect();
             let _ = writeln!(
                 s,
-                "{t},{},{},{},{},{},{}",
+                "{t},{},{},{},{},{},{flags},{}",
                 g(&est.x),
                 g(&est.x_std),
                 g(&est.y_pred),
                 g(&est.innovation),
                 g(&est.nis),
-                est.flags.get(k).copied().unwrap_or(0)
+                names.join("|")
             );
         }
         s
