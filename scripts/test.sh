@@ -26,3 +26,6 @@ fi
 echo "== Python tests (the wheel, then the baselines of benches/baselines; the LSTM skips without torch)"
 HBN_BIN="$ROOT/target/release/hbn" "$VENV/bin/python" -m pytest -q hbn-py/tests
 HBN_BIN="$ROOT/target/release/hbn" "$VENV/bin/python" -m pytest -q benches/baselines
+
+echo "== The README's Python snippets run as written"
+"$VENV/bin/python" scripts/check_docs.py
