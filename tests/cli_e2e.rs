@@ -392,9 +392,9 @@ fn demo_writes_everything() {
     let d = tempfile::tempdir().expect("tempdir");
     let dir = d.path().join("demo");
     let dir_s = dir.to_string_lossy().into_owned();
-    let t0 = std::time::Instant::now();
+    // (How long the demo takes is a benchmark figure, docs/benchmarks.md, not a test: a timed
+    // test fails on a loaded machine.)
     let (out, _) = ok(&["-q", "demo", "--out", &dir_s, "--system", "duhem"]);
-    let secs = t0.elapsed().as_secs_f64();
     for f in [
         "train-1.mcap",
         "train-2.mcap",
@@ -410,5 +410,4 @@ fn demo_writes_everything() {
         assert!(dir.join(f).is_file(), "demo did not write {f}: {out}");
     }
     assert!(out.contains("open-loop") && out.contains("nRMSE"), "{out}");
-    assert!(secs < 60.0, "demo took {secs:.1} s");
 }
