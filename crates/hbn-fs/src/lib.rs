@@ -7,6 +7,12 @@
 //! temporary file behind. Outputs get ordinary permissions (0644 on Unix), not the owner-only
 //! mode of temporary files.
 //!
+//! On Linux the temporary file has no name while it is written (`O_TMPFILE`): a process killed
+//! then (SIGKILL, a power cut) leaves nothing in the directory. It is given a temporary name
+//! only after its content is synced, just before the rename; only a kill between those two
+//! system calls can leave a `.hbn-tmp-*` file. Where the file system has no `O_TMPFILE`, the
+//! temporary file is named from the start.
+//!
 //! Two kinds of target are not renamed over: an existing target that is not a regular file
 //! (`/dev/stdout`, `/dev/null`, a pipe) is written in place, since renaming would replace the
 //! device node or pipe itself; and a symbolic link is followed, so the file it points to is
@@ -107,15 +113,27 @@ where
         use std::os::unix::fs::PermissionsExt;
         builder.permissions(std::fs::Permissions::from_mode(0o644));
     }
-    let tmp = builder
-        .tempfile_in(dir)
-        .map_err(|e| err("create a temporary file for", e))?;
-    let (handle, tmp_path) = tmp.into_parts();
+    // An unnamed file where the platform has them, else a named temporary file.
+    let (handle, named) = match unnamed_in(dir) {
+        Some(handle) => (handle, None),
+        None => {
+            let tmp = builder
+                .tempfile_in(dir)
+                .map_err(|e| err("create a temporary file for", e))?;
+            let (handle, tmp_path) = tmp.into_parts();
+            (handle, Some(tmp_path))
+        }
+    };
     let mut w = BufWriter::new(handle);
-    // On error `tmp_path` is dropped here, which deletes the temporary file.
+    // On error the temporary file is dropped here: deleted if named, gone if unnamed.
     fill(&mut w)?;
-    let handle = w.into_inner().map_err(|e| err("write", e.into_error()))?;
+    let mut handle = w.into_inner().map_err(|e| err("write", e.into_error()))?;
     handle.sync_all().map_err(|e| err("sync", e))?;
+    let tmp_path = match named {
+        Some(tmp_path) => tmp_path,
+        None => name_unnamed(&builder, dir, &mut handle)
+            .map_err(|e| err("create a temporary file for", e))?,
+    };
     drop(handle);
     tmp_path
         .persist(path)
@@ -125,6 +143,63 @@ where
         let _ = d.sync_all();
     }
     Ok(())
+}
+
+/// A new unnamed regular file in `dir` (Linux `O_TMPFILE`), readable and writable, mode 0644;
+/// `None` where the platform or file system has none (the caller names one instead).
+#[cfg(target_os = "linux")]
+fn unnamed_in(dir: &Path) -> Option<File> {
+    use rustix::fs::{CWD, Mode, OFlags};
+    let mode = Mode::from_raw_mode(0o644);
+    let fd = rustix::fs::openat(
+        CWD,
+        dir,
+        OFlags::TMPFILE | OFlags::RDWR | OFlags::CLOEXEC,
+        mode,
+    )
+    .ok()?;
+    // The umask applied to the open: outputs get 0644 like any file hbn writes.
+    rustix::fs::fchmod(&fd, mode).ok()?;
+    Some(File::from(fd))
+}
+
+#[cfg(not(target_os = "linux"))]
+fn unnamed_in(_dir: &Path) -> Option<File> {
+    None
+}
+
+/// Gives the unnamed file `handle` a temporary name in `dir` (a hard link), to be renamed onto
+/// the target. If no link can be made (no `/proc`, no capability), copies the content into a
+/// named temporary file instead.
+fn name_unnamed(
+    builder: &tempfile::Builder<'_, '_>,
+    dir: &Path,
+    handle: &mut File,
+) -> std::io::Result<tempfile::TempPath> {
+    #[cfg(target_os = "linux")]
+    {
+        use rustix::fs::{AtFlags, CWD};
+        use std::os::fd::AsRawFd;
+        let proc_path = format!("/proc/self/fd/{}", handle.as_raw_fd());
+        let linked = builder.make_in(dir, |p| {
+            // By descriptor (needs CAP_DAC_READ_SEARCH), else through /proc.
+            rustix::fs::linkat(&*handle, "", CWD, p, AtFlags::EMPTY_PATH)
+                .or_else(|_| {
+                    rustix::fs::linkat(CWD, proc_path.as_str(), CWD, p, AtFlags::SYMLINK_FOLLOW)
+                })
+                .map_err(std::io::Error::from)
+        });
+        if let Ok(named) = linked {
+            return Ok(named.into_temp_path());
+        }
+    }
+    use std::io::{Seek, SeekFrom};
+    let tmp = builder.tempfile_in(dir)?;
+    let (mut copy, tmp_path) = tmp.into_parts();
+    handle.seek(SeekFrom::Start(0))?;
+    std::io::copy(handle, &mut copy)?;
+    copy.sync_all()?;
+    Ok(tmp_path)
 }
 
 #[cfg(test)]
@@ -153,6 +228,58 @@ mod tests {
             let mode = std::fs::metadata(&f).unwrap().permissions().mode() & 0o777;
             assert_eq!(mode, 0o644);
         }
+    }
+
+    /// On Linux, while the content is written the directory holds no new name, so a kill at
+    /// that moment leaves nothing behind (`O_TMPFILE`; this machine's /tmp has it).
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn nothing_is_named_while_the_content_is_written() {
+        let d = tempfile::tempdir().unwrap();
+        let f = d.path().join("out.bin");
+        let names = |dir: &Path| -> Vec<String> {
+            let mut v: Vec<String> = std::fs::read_dir(dir)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            v.sort();
+            v
+        };
+        for round in 0..2 {
+            write_atomic_with::<WriteError, _>(&f, |w| {
+                w.write_all(&vec![round as u8; 1 << 20]).unwrap();
+                w.flush().unwrap();
+                let seen = names(d.path());
+                let expect: &[&str] = if round == 0 { &[] } else { &["out.bin"] };
+                assert_eq!(seen, expect, "a name exists while writing");
+                Ok(())
+            })
+            .unwrap();
+            assert_eq!(names(d.path()), ["out.bin"]);
+            assert_eq!(std::fs::read(&f).unwrap(), vec![round as u8; 1 << 20]);
+        }
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let mode = std::fs::metadata(&f).unwrap().permissions().mode() & 0o777;
+            assert_eq!(mode, 0o644);
+        }
+    }
+
+    /// Naming an unnamed file keeps its content; a directory that does not exist is an error
+    /// (the link and the copy fallback both fail), not a panic.
+    #[test]
+    fn naming_an_unnamed_file_keeps_its_content() {
+        use std::io::Seek;
+        let d = tempfile::tempdir().unwrap();
+        let mut handle = tempfile::tempfile_in(d.path()).unwrap();
+        handle.write_all(b"content").unwrap();
+        handle.seek(std::io::SeekFrom::End(0)).unwrap();
+        let mut b = tempfile::Builder::new();
+        b.prefix(".hbn-tmp-");
+        assert!(name_unnamed(&b, &d.path().join("missing"), &mut handle).is_err());
+        let named = name_unnamed(&b, d.path(), &mut handle).unwrap();
+        assert_eq!(std::fs::read(&named).unwrap(), b"content");
     }
 
     #[cfg(unix)]
