@@ -8,6 +8,9 @@
 # that add coverage in the committed corpus:
 #   cargo +nightly fuzz run <target> fuzz/corpus/<target> target/fuzz-campaign/corpus/<target> -- -merge=1
 # Usage: ./scripts/fuzz_campaign.sh [target...]   (RUNS=... MAX_S=... to change the budget)
+# The malloc limit is 8 GiB, not libFuzzer's 2 GiB: the mcap crate reserves a string's claimed
+# length (up to 4 GiB) before reading it, which only reserves address space in a normal build
+# (the read then fails with an error), but counts as an out-of-memory crash under libFuzzer.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 RUNS=${RUNS:-1000000}
@@ -23,6 +26,7 @@ for t in "${targets[@]}"; do
   status=0
   cargo +nightly fuzz run "$t" "$OUT/corpus/$t" "fuzz/corpus/$t" -- \
     -runs="$RUNS" -max_total_time="$MAX_S" -print_final_stats=1 \
+    -rss_limit_mb=8192 -malloc_limit_mb=8192 \
     -artifact_prefix="$OUT/artifacts/$t/" >"$log" 2>&1 || status=$?
   last=$(grep -E '^#[0-9]+' "$log" | tail -n 1 || true)
   execs=$(grep -E '^stat::number_of_executed_units' "$log" | awk '{print $2}' || true)
