@@ -1,7 +1,7 @@
 //! Long run of the estimator step (docs/reliability.md): `STEPS` samples (default 10^7) of a
 //! noisy test run, cycled, with outliers in `y` (every 997 samples, +-50 ranges), NaN bursts
 //! (20 samples every 50,000), invalid inputs, and sensor dropouts (`y` missing for 3 s = 300
-//! samples every 100,000, mid-trajectory). Checks that no output is ever non-finite and that `x_std` stays in
+//! samples every 100,000, at a point of the test run that moves). Checks that no output is ever non-finite and that `x_std` stays in
 //! `[sqrt(p_min), sqrt(p_max)]` (times the model's std scale), and measures the recovery after
 //! each dropout in two ways: the samples from the dropout's end until the error is back within
 //! 3 times the RMS error of the 1000 samples before the dropout, and until it is within 3
@@ -19,9 +19,12 @@ use hbn::sim::SystemKind;
 use std::time::Instant;
 
 const DROPOUT_EVERY: usize = 100_000;
-/// Where in each period the dropout starts: mid-trajectory (sample 17,000 of the 20,000-sample
-/// test run that is cycled), away from the wrap-around where the true state jumps.
-const DROPOUT_AT: usize = 37_000;
+/// Sample of period `n` (of `DROPOUT_EVERY`) where its dropout starts: 40,000 (a multiple of the
+/// 20,000-sample test run that is cycled) plus a point of the run that moves from dropout to
+/// dropout, in [1000, 18700], away from the wrap-around where the true state jumps.
+fn dropout_start(n: usize) -> usize {
+    n * DROPOUT_EVERY + 40_000 + 1_000 + (n * 7_919) % 17_700
+}
 const DROPOUT_LEN: usize = 300;
 const SETTLED: usize = 50;
 
@@ -52,6 +55,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let runs = training_set(system, 1.0, 5, &cfg)?;
     let model = HbnModel::fit(&sequences(&runs), &cfg.params)?;
     let test = test_trajectory(system, 1.0, 5, &cfg)?;
+    if test.u.len() != 20_000 {
+        return Err(format!("the test run has {} samples, not 20,000", test.u.len()).into());
+    }
     let (_, x_stats, y_stats) = model.stats();
     let view = model.view()?;
     println!(
@@ -92,8 +98,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             if k % 250_007 == 0 {
                 u = f64::INFINITY;
             }
-            let phase = (k + DROPOUT_EVERY - DROPOUT_AT) % DROPOUT_EVERY;
-            let dropped = k >= DROPOUT_AT && phase < DROPOUT_LEN;
+            let drop_at = dropout_start(k / DROPOUT_EVERY);
+            let dropped = (drop_at..drop_at + DROPOUT_LEN).contains(&k);
             if dropped {
                 y = f64::NAN;
             }
@@ -121,7 +127,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 }
                 recent.push_back(err * err);
             }
-            if k >= DROPOUT_AT && phase == DROPOUT_LEN {
+            if k == drop_at + DROPOUT_LEN {
                 let rms = (recent.iter().sum::<f64>() / recent.len().max(1) as f64).sqrt();
                 // A dropout not recovered from before the next one ends counts as such.
                 lost += usize::from(pending.is_some());

@@ -196,7 +196,7 @@ pub fn signal_path(data: &[u8]) {
 }
 
 /// Model file loading (`hbn estimate --model`, `HbnModel::load`): parse; if the model loads,
-/// build its view and run both estimator modes for a few steps.
+/// build its view and run every estimator mode for a few steps.
 pub fn model_load(data: &[u8]) {
     let Ok(text) = std::str::from_utf8(data) else {
         return;
@@ -206,7 +206,7 @@ pub fn model_load(data: &[u8]) {
         return;
     };
     let u: Vec<f64> = (0..20).map(|k| 0.05 * k as f64).collect();
-    for mode in [hbn_core::Mode::Ekf, hbn_core::Mode::EkfBlr] {
+    for mode in hbn_core::Mode::ALL {
         if let Ok(est) = model.estimate(&u, &u, mode) {
             assert!(est.x.iter().all(|v| v.is_finite()), "estimate is finite");
         }
@@ -382,7 +382,8 @@ pub fn step(data: &[u8]) {
         r_scale: b.f64(),
         std_scale: b.f64(),
     };
-    let mode = if b.byte() & 1 == 0 { Mode::Ekf } else { Mode::EkfBlr };
+    // Every mode: EKF, EKF+BLR and UKF.
+    let mode = Mode::ALL[usize::from(b.byte()) % Mode::ALL.len()];
     let config = cfg(&mut b, mode);
     let (Some(transition), Some(sensor)) = (view(&tr), view(&se)) else {
         return;

@@ -142,7 +142,7 @@ mod tests {
     fn random_symmetric_matrices() {
         let mut rng = Rng::new(5);
         for i in 0..2000 {
-            let mag = 10f64.powi((i % 21) as i32 - 10);
+            let mag = 10f64.powi(i % 21 - 10);
             let b = Matrix3::from_fn(|_, _| rng.normal() * mag);
             check(b + b.transpose());
             // Covariance-like: positive semi-definite, often near singular.

@@ -645,9 +645,7 @@ impl<'m> Ekf<'m> {
             flags |= Flags::INPUT_INVALID;
             0.0
         };
-        let r = cfg
-            .r_floor
-            .max(cfg.r_scale * self.model.sensor.noise_variance().max(cfg.r_model_floor));
+        let r = self.fallback_r();
         let s0 = if y_k.is_finite() {
             clamp_flag(y_k, cfg.y_bounds, &mut flags)
         } else {
@@ -699,11 +697,17 @@ impl<'m> Ekf<'m> {
         (q_x, q_s, r)
     }
 
-    /// `R` when the sensor GP could not be evaluated: its learned noise, scaled and floored.
+    /// `R` when the sensor GP could not be evaluated (and at the first step): its learned
+    /// noise, scaled and floored; the floor if the scaled noise overflows (as in `noises`: a
+    /// huge `r_scale` gave `R = inf`, found by the `step` fuzz target).
     fn fallback_r(&self) -> f64 {
         let cfg = &self.config;
-        cfg.r_floor
-            .max(cfg.r_scale * self.model.sensor.noise_variance().max(cfg.r_model_floor))
+        let r = cfg.r_scale * self.model.sensor.noise_variance().max(cfg.r_model_floor);
+        if r.is_finite() && r >= cfg.r_floor {
+            r
+        } else {
+            cfg.r_floor
+        }
     }
 
     /// The HBN's Jacobian `F` (module docs) from the transition gradient `a` and the sensor

@@ -130,17 +130,56 @@ impl Read for Counting {
 }
 
 fn corrupt(file: &Path, e: &mcap::McapError) -> IoError {
-    let mut reason = e.to_string();
+    let mut reason = plain(&e.to_string());
     let mut src = std::error::Error::source(e);
     while let Some(s) = src {
         reason.push_str(": ");
-        reason.push_str(&s.to_string());
+        reason.push_str(&plain(&s.to_string()));
         src = s.source();
     }
     IoError::Corrupt {
         file: file.to_owned(),
         reason,
     }
+}
+
+/// The MCAP reader's parse errors (binrw's) come as a multi-line, coloured "backtrace" box with
+/// source locations of the parser: keeps the words on one line ("not enough bytes in reader;
+/// While parsing field 'library' in Header"), without terminal escapes, box lines or `at
+/// file:line` lines.
+fn plain(text: &str) -> String {
+    // Drop ANSI escape sequences (ESC [ ... letter).
+    let mut clean = String::with_capacity(text.len());
+    let mut chars = text.chars().peekable();
+    while let Some(c) = chars.next() {
+        if c == '\u{1b}' {
+            if chars.peek() == Some(&'[') {
+                chars.next();
+                for d in chars.by_ref() {
+                    if d.is_ascii_alphabetic() {
+                        break;
+                    }
+                }
+            }
+            continue;
+        }
+        clean.push(c);
+    }
+    let parts: Vec<&str> = clean
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.contains('\u{2501}') && !l.starts_with("at "))
+        .map(|l| {
+            // "0: Error: what" -> "what"
+            let l = match l.split_once(": ") {
+                Some((n, rest)) if n.chars().all(|c| c.is_ascii_digit()) => rest,
+                _ => l,
+            };
+            l.strip_prefix("Error: ").unwrap_or(l).trim()
+        })
+        .filter(|l| !l.is_empty())
+        .collect();
+    parts.join("; ").replace(":;", ":")
 }
 
 type Messages = mcap::io::MessageReader<BufReader<Counting>>;
@@ -633,4 +672,36 @@ pub fn read_signals_observed(
         }
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A Header record whose `library` string claims 2.3 GB in a 24-byte record (found by the
+    /// `mcap_ingest` fuzz target, an out-of-memory under libFuzzer): a short, plain error.
+    #[test]
+    fn a_string_longer_than_its_record_is_a_plain_error() {
+        let file = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../fuzz/regressions/mcap_ingest/oom-header-string-length-2GiB");
+        let e = list_topics(&file).expect_err("corrupt");
+        let msg = e.to_string();
+        assert!(msg.contains("oom-header-string-length-2GiB"), "{msg}");
+        assert!(msg.contains("not enough bytes"), "{msg}");
+        assert!(
+            !msg.contains('\u{1b}') && !msg.contains('\n') && !msg.contains("Backtrace"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn plain_keeps_the_words_of_a_parse_backtrace() {
+        let text = "Record parse failed: \n \u{1b}[1m\u{2501}\u{2501} Backtrace \u{2501}\u{2501}\u{1b}[0m\n\n 0: \u{1b}[1mError: not enough bytes in reader\u{1b}[22m\n     While parsing field 'inner' in McapString\n     at /x/records.rs:151\n 1: While parsing field 'library' in Header\n     at /x/records.rs:202\n";
+        assert_eq!(
+            plain(text),
+            "Record parse failed: not enough bytes in reader; While parsing field 'inner' in \
+             McapString; While parsing field 'library' in Header"
+        );
+        assert_eq!(plain("invalid magic"), "invalid magic");
+    }
 }
