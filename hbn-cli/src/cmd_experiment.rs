@@ -21,10 +21,10 @@ pub fn panels(rows: &[ExperimentRow]) -> Vec<(String, Vec<GainLine>)> {
         }
     }
     let methods: [Method; 4] = [
-        ("EKF", |r| r.nrmse_ekf),
-        ("EKF+BLR", |r| r.nrmse_ekf_blr),
-        ("UKF", |r| r.nrmse_ukf),
-        ("open loop", |r| r.nrmse_open_loop),
+        ("ekf", |r| r.nrmse_ekf),
+        ("ekf-blr", |r| r.nrmse_ekf_blr),
+        ("ukf", |r| r.nrmse_ukf),
+        ("open-loop", |r| r.nrmse_open_loop),
     ];
     systems
         .into_iter()
