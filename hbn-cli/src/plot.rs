@@ -138,7 +138,8 @@ pub fn color(i: usize) -> RGBColor {
     MODE_COLORS[i % MODE_COLORS.len()]
 }
 
-/// The colour of mode `i`'s band where it lies on white: what the PNG holds there.
+/// The colour of mode `i`'s band where it lies on white: what the PNG holds there (to within the
+/// backend's rounding, a level or two per channel).
 pub fn band_pixel(i: usize) -> [u8; 3] {
     let c = color(i);
     let mix = |v: u8| (BAND_ALPHA * f64::from(v) + (1.0 - BAND_ALPHA) * 255.0).round() as u8;

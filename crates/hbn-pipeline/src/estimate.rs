@@ -370,3 +370,34 @@ pub fn estimate_schema() -> Value {
         "required": ["x", "x_std", "y_pred", "innovation", "nis", "flags", "flag_names"]
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn files_for_a_mode_carry_its_name() {
+        let m = Mode::EkfBlr;
+        assert_eq!(
+            file_for_mode(Path::new("out/est.csv"), m),
+            Path::new("out/est-ekf-blr.csv")
+        );
+        assert_eq!(
+            file_for_mode(Path::new("est.v1.mcap"), m),
+            Path::new("est.v1-ekf-blr.mcap")
+        );
+        assert_eq!(file_for_mode(Path::new("est"), m), Path::new("est-ekf-blr"));
+        let o = Outputs {
+            csv: Some("a.csv".into()),
+            mcap: None,
+        };
+        assert_eq!(o.for_mode(Mode::Ekf).csv, Some("a-ekf.csv".into()));
+        assert_eq!(o.for_mode(Mode::Ekf).files().count(), 1);
+        // Every mode gets its own files.
+        let names: std::collections::BTreeSet<PathBuf> = Mode::ALL
+            .iter()
+            .filter_map(|&m| o.for_mode(m).csv)
+            .collect();
+        assert_eq!(names.len(), Mode::ALL.len());
+    }
+}
