@@ -6,6 +6,7 @@ use hbn_pipeline::experiment::{self, ExperimentConfig, ExperimentRow};
 
 use crate::Ui;
 use crate::cli::ExperimentArgs;
+use crate::glossary::Term;
 use crate::plot::{self, GainLine};
 use crate::report::{self, Renderer};
 
@@ -99,6 +100,14 @@ pub fn run(ui: &mut Ui<'_>, args: &ExperimentArgs) -> anyhow::Result<Vec<Experim
         plot::experiment_plot(f, &panels(&rows))?;
     }
     ui.print(experiment::markdown_table(&rows))?;
+    ui.line(crate::glossary::links(&[
+        Term::NoiseGain,
+        Term::Nrmse,
+        Term::DefaultMode,
+        Term::Coverage,
+        Term::Nees,
+        Term::NoiseStateCorrelation,
+    ]))?;
     for (f, what) in [(&args.json, "rows"), (&args.plot, "plot")] {
         if let Some(f) = f {
             ui.line(format!("wrote {what} `{}`", f.display()))?;

@@ -49,11 +49,15 @@ pub enum Term {
     BlrIndex,
     /// The held-out validation table.
     ValidationTable,
+    /// The simulator's noise gain.
+    NoiseGain,
+    /// `corr(q, x)` of the experiment table.
+    NoiseStateCorrelation,
 }
 
 impl Term {
     /// Every term.
-    pub const ALL: [Term; 21] = [
+    pub const ALL: [Term; 23] = [
         Term::Signals,
         Term::Samples,
         Term::Rows,
@@ -75,6 +79,8 @@ impl Term {
         Term::Jitter,
         Term::BlrIndex,
         Term::ValidationTable,
+        Term::NoiseGain,
+        Term::NoiseStateCorrelation,
     ];
 
     /// The section's anchor in the glossary (GitHub's heading ids).
@@ -101,6 +107,8 @@ impl Term {
             Term::Jitter => "jitter",
             Term::BlrIndex => "blr-index",
             Term::ValidationTable => "validation-table",
+            Term::NoiseGain => "noise-gain",
+            Term::NoiseStateCorrelation => "noise-state-correlation",
         }
     }
 
