@@ -36,18 +36,23 @@ else
   echo "notice: cargo +nightly or cargo-fuzz is not installed: fuzz smoke skipped"
 fi
 
-echo "== Python: build and install the wheel into a private virtual environment"
+echo "== Python: a private virtual environment with numpy, scikit-learn, matplotlib and pytest"
 VENV="$ROOT/target/py-test-venv"
 if [ ! -x "$VENV/bin/python" ]; then
   python3 -m venv "$VENV"
 fi
 "$VENV/bin/python" -m pip install --quiet --upgrade pip
-"$VENV/bin/python" -m pip install --quiet numpy scikit-learn matplotlib pytest
-"$VENV/bin/python" -m pip install --quiet --force-reinstall --no-deps ./hbn-py
+"$VENV/bin/python" -m pip install numpy scikit-learn matplotlib pytest
+
+echo "== Python: build the wheel (cargo compiles the engine in release mode: a few minutes the"
+echo "   first time; pip -v shows cargo's progress) and install it"
+"$VENV/bin/python" -m pip install -v --force-reinstall --no-deps ./hbn-py
 
 echo "== Python tests (the wheel, then the baselines of benches/baselines; the LSTM skips without torch)"
 HBN_BIN="$ROOT/target/release/hbn" "$VENV/bin/python" -m pytest -q hbn-py/tests
 HBN_BIN="$ROOT/target/release/hbn" "$VENV/bin/python" -m pytest -q benches/baselines
 
-echo "== The README's Python snippets run as written"
-"$VENV/bin/python" scripts/check_docs.py
+echo "== Every code block of README.md and hbn-py/README.md (shell with target/release/hbn on"
+echo "   PATH, Python with the wheel; Rust blocks ran above as doctests)"
+"$VENV/bin/python" scripts/check_docs.py --self-test
+"$VENV/bin/python" scripts/check_docs.py --python "$VENV/bin/python" --hbn "$ROOT/target/release/hbn"

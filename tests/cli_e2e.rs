@@ -83,6 +83,7 @@ fn simulate_train_inspect_estimate_eval() {
         "3",
         "--out",
         &model,
+        "--verbose",
     ]);
     assert!(err.contains("using 100.0 Hz"), "rate notice: {err}");
     assert!(out.contains("1600 samples at 100.0 Hz"), "{out}");
@@ -100,6 +101,21 @@ fn simulate_train_inspect_estimate_eval() {
 
     // inspect, text and JSON.
     let (out, _) = ok(&["inspect", &model]);
+    // Length scales named by their inputs; the best start counted from 1, as in the JSON.
+    assert!(
+        out.contains("transition GP: predicts x[k] from x[k-1], x[k-2], u[k-1], u[k-2]")
+            && out.contains("sensor GP: predicts y[k] from x[k-1], y[k-1], x[k]"),
+        "{out}"
+    );
+    let ls_line = out
+        .lines()
+        .find(|l| l.trim_start().starts_with("length scales"))
+        .expect("length scales line");
+    for name in ["x[k-1] ", "x[k-2] ", "u[k-1] ", "u[k-2] "] {
+        assert!(ls_line.contains(name), "{ls_line}");
+    }
+    assert!(out.contains("(subset: farthest-point)"), "{out}");
+    assert!(out.contains("docs/glossary.md#"), "{out}");
     for needle in [
         "/input.data",
         "/state.data",
@@ -124,6 +140,33 @@ fn simulate_train_inspect_estimate_eval() {
         v["sensor"]["length_scales"].as_array().map(Vec::len),
         Some(3)
     );
+    assert_eq!(
+        v["transition"]["inputs"],
+        serde_json::json!(["x[k-1]", "x[k-2]", "u[k-1]", "u[k-2]"])
+    );
+    assert_eq!(
+        v["sensor"]["length_scales_by_input"]["y[k-1]"],
+        v["sensor"]["length_scales"][1]
+    );
+    assert_eq!(
+        v["transition"]["training"]["subset_policy"],
+        "farthest-point"
+    );
+    // The text and the JSON number starts alike (from 1).
+    for role in ["transition", "sensor"] {
+        let best = v[role]["training"]["best_start"]
+            .as_u64()
+            .expect("best start");
+        let n = v[role]["training"]["starts"].as_array().map_or(0, Vec::len);
+        assert!((1..=n as u64).contains(&best), "{best} of {n}");
+        assert_eq!(v[role]["training"]["starts"][0]["start"], 1);
+        let text = ok(&["inspect", &model]).0;
+        let section = text.split(&format!("{role} GP:")).nth(1).expect("section");
+        assert!(
+            section.contains(&format!("best: start {best} of {n}")),
+            "{role}: JSON best_start {best}, text: {section}"
+        );
+    }
     assert!(v["blr"]["transition"]["cells"].as_u64().unwrap_or(0) > 0);
     let rows = v["filter"]["validation"]["rows"]
         .as_array()
@@ -150,7 +193,11 @@ fn simulate_train_inspect_estimate_eval() {
         "estimate", "--model", &model, "--log", &test, "--mode", "ekf-blr", "--csv", &csv, "--out",
         &mcap,
     ]);
-    assert!(out.contains("ekf-blr: 600 samples"), "{out}");
+    assert!(
+        out.contains("600 samples at 100.0 Hz (6.00 s, where /input.data and /sensor.data")
+            && out.contains("  ekf-blr"),
+        "{out}"
+    );
     assert!(!err.contains("resampling"), "same rate: no notice: {err}");
     let text = std::fs::read_to_string(&csv).expect("csv");
     let mut lines = text.lines();
@@ -165,7 +212,7 @@ fn simulate_train_inspect_estimate_eval() {
     for r in &rows {
         let bits: u32 = r[6].parse().expect("flags");
         let names: Vec<&str> = hbn_core::Flags(bits).names().collect();
-        assert_eq!(r[7], names.join("|"));
+        assert_eq!(r[7], names.join("|"), "{r:?}");
     }
     assert!(rows[0][7].contains("initialised"), "{:?}", rows[0]);
     assert_eq!(rows[0][0], "0");
@@ -210,7 +257,9 @@ fn simulate_train_inspect_estimate_eval() {
         &csv_default,
     ]);
     assert!(
-        out.contains(&format!("{default_mode}: 600 samples")),
+        out.contains(&format!(
+            "{default_mode} (the model's default mode): wrote CSV"
+        )),
         "{out}"
     );
     ok(&[
@@ -260,13 +309,35 @@ fn simulate_train_inspect_estimate_eval() {
     // The table names methods as the flags do (`ekf-blr`, not the JSON key `ekf_blr`).
     assert!(out.contains("ekf") && out.contains("open-loop") && !out.contains("ekf-blr"));
     let (all, _) = ok(&["eval", "--model", &model, "--log", &test, "--mode", "all"]);
+    for m in hbn_core::Mode::ALL {
+        assert!(
+            all.lines().any(|l| l.starts_with(m.name())),
+            "{m} missing: {all}"
+        );
+    }
+    assert!(!all.contains("ekf_blr"), "{all}");
+    // A short table by default (with the glossary), every column with --verbose.
     assert!(
-        all.contains("ekf-blr") && all.contains("ukf") && !all.contains("ekf_blr"),
-        "{all}"
+        out.contains("in 2 sd") && !out.contains("mean NEES") && out.contains("--verbose"),
+        "{out}"
     );
     assert!(
-        out.contains("in 2 sd") && out.contains("mean NEES"),
+        out.contains("terms: docs/glossary.md#rmse-and-nrmse, #2-sigma-coverage"),
         "{out}"
+    );
+    let (verbose, _) = ok(&[
+        "eval",
+        "--model",
+        &model,
+        "--log",
+        &test,
+        "--mode",
+        "ekf",
+        "--verbose",
+    ]);
+    assert!(
+        verbose.contains("in 1 sd") && verbose.contains("mean NEES") && verbose.contains("NLPD"),
+        "{verbose}"
     );
 
     // Errors leave no output behind and name the topic.
@@ -373,7 +444,7 @@ fn model_rate_differs_from_log_rate_prints_a_notice() {
         err.contains("resampling /sensor.data from 100.0 Hz to 50.0 Hz"),
         "{err}"
     );
-    assert!(out.contains("150 samples"), "2.99 s at 50 Hz: {out}");
+    assert!(out.contains("150 samples at 50.0 Hz (3.00 s"), "{out}");
     // --quiet suppresses notices, not the summary, and not the warning that the log's rate
     // is not the model's.
     let (out, err) = ok(&["--quiet", "estimate", "--model", &model, "--log", &test]);
@@ -387,27 +458,107 @@ fn model_rate_differs_from_log_rate_prints_a_notice() {
     assert!(out.contains("150 samples"), "{out}");
 }
 
+/// The sections of the README between a heading and the next heading of the same level.
+fn readme_section(readme: &str, heading: &str) -> String {
+    let start = readme
+        .find(heading)
+        .unwrap_or_else(|| panic!("README has no {heading:?}"));
+    let rest = &readme[start + heading.len()..];
+    let end = rest.find("\n## ").unwrap_or(rest.len());
+    rest[..end].to_owned()
+}
+
+/// The fenced blocks of `lang` in a Markdown text.
+fn fenced(text: &str, lang: &str) -> Vec<String> {
+    let open = format!("```{lang}\n");
+    let mut out = Vec::new();
+    let mut rest = text;
+    while let Some(i) = rest.find(&open) {
+        let body = &rest[i + open.len()..];
+        let j = body.find("```").expect("closed block");
+        out.push(body[..j].to_owned());
+        rest = &body[j..];
+        rest = &rest[3..];
+    }
+    out
+}
+
+/// The README's worked example is what `hbn demo` runs (the same commands, seeds and
+/// defaults), and the figures it quotes are what the demo prints, to the printed precision.
+/// The plot shows a band per mode.
 #[test]
-fn demo_writes_everything() {
+fn demo_is_the_worked_example() {
+    let readme =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).expect("README");
+    let section = readme_section(&readme, "## Worked example");
+    let blocks = fenced(&section, "sh");
+    let script = blocks.first().expect("the worked example's commands");
+    // Shell lines: continuations joined, comments and blank lines dropped, spaces collapsed.
+    let joined = script.replace("\\\n", " ");
+    let readme_cmds: Vec<String> = joined
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with('#'))
+        .map(|l| l.split_whitespace().collect::<Vec<_>>().join(" "))
+        .collect();
+    let demo_cmds: Vec<String> =
+        hbn_cli::cmd_demo::commands(&hbn_cli::cli::DemoArgs::default(), Path::new(""))
+            .iter()
+            .map(|c| hbn_cli::cmd_demo::shell_line(c))
+            .collect();
+    assert_eq!(
+        readme_cmds, demo_cmds,
+        "README's worked example vs `hbn demo`"
+    );
+
     let d = tempfile::tempdir().expect("tempdir");
     let dir = d.path().join("demo");
     let dir_s = dir.to_string_lossy().into_owned();
-    // (How long the demo takes is a benchmark figure, docs/benchmarks.md, not a test: a timed
-    // test fails on a loaded machine.)
-    let (out, _) = ok(&["-q", "demo", "--out", &dir_s, "--system", "duhem"]);
+    let (out, _) = ok(&["-q", "demo", "--out", &dir_s]);
     for f in [
-        "train-1.mcap",
-        "train-2.mcap",
-        "train-3.mcap",
+        "train1.mcap",
+        "train2.mcap",
+        "train3.mcap",
         "test.mcap",
         "model.hbn",
-        "estimate.csv",
-        "estimate.mcap",
-        "estimate-ekf-blr.csv",
-        "estimate-ekf-blr.mcap",
+        "est.csv",
+        "est.mcap",
         "eval.png",
     ] {
         assert!(dir.join(f).is_file(), "demo did not write {f}: {out}");
     }
-    assert!(out.contains("open-loop") && out.contains("nRMSE"), "{out}");
+    // Each command is printed before it runs, as the README spells it (in the demo's directory).
+    for c in hbn_cli::cmd_demo::commands(&hbn_cli::cli::DemoArgs::default(), &dir) {
+        let line = format!("$ {}", hbn_cli::cmd_demo::shell_line(&c));
+        assert!(out.contains(&line), "{line} not printed: {out}");
+    }
+    // The README quotes the eval table exactly as the demo prints it.
+    let quoted = fenced(&section, "text");
+    let table = quoted.first().expect("the quoted eval output");
+    let printed: Vec<&str> = out
+        .lines()
+        .skip_while(|l| !l.starts_with("method "))
+        .take(table.lines().count())
+        .collect();
+    assert_eq!(
+        table.lines().collect::<Vec<_>>(),
+        printed,
+        "README's quoted figures differ from what `hbn demo` prints:\n{out}"
+    );
+    // The prose quotes the default mode's held-out coverage: check it against the demo.
+    assert!(
+        out.contains("default mode ekf-blr: on held-out data nRMSE")
+            && out.contains("deviations 95.2% of the time"),
+        "README says the default mode holds 95% on held-out data: {out}"
+    );
+
+    // The plot: a band per mode, in the mode's colour.
+    let img = image::open(dir.join("eval.png")).expect("png").to_rgb8();
+    for i in 0..hbn_core::Mode::ALL.len() {
+        let band = hbn_cli::plot::band_pixel(i);
+        // Within 2 levels per channel: the backend's blending rounds its own way.
+        let near = |p: &image::Rgb<u8>| p.0.iter().zip(band).all(|(a, b)| a.abs_diff(b) <= 2);
+        let n = img.pixels().filter(|p| near(p)).count();
+        assert!(n > 500, "mode {i}: {n} pixels of its band colour {band:?}");
+    }
 }

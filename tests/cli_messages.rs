@@ -21,7 +21,301 @@ fn bare_hbn_is_a_usage_error() {
     let mut err = Vec::new();
     let r = hbn_cli::run_with(["hbn"], &mut out, &mut err);
     let e = r.expect_err("bare hbn does nothing: a usage error");
+    // It shows the help: the usage and the commands.
+    let text = hbn_cli::error_message(&e);
+    assert!(
+        text.contains("Usage:") && text.contains("demo") && text.contains("estimate"),
+        "{text}"
+    );
     assert_eq!(hbn_cli::main_exit_code(Err(e)), 2);
+}
+
+/// Writes a log of `n` samples at 100 Hz with `/input`, `/state` and `/sensor` (each `.data`).
+fn write_log(file: &Path, u: &[f64], x: &[f64], y: &[f64]) {
+    let t = hbn_pipeline::log_times(u.len(), 100.0);
+    let topics = [
+        hbn_io::ScalarTopic {
+            topic: "/input",
+            values: u,
+        },
+        hbn_io::ScalarTopic {
+            topic: "/state",
+            values: x,
+        },
+        hbn_io::ScalarTopic {
+            topic: "/sensor",
+            values: y,
+        },
+    ];
+    hbn_io::write_scalar_log(file, &t, &topics, hbn_io::Encoding::Json).expect("write");
+}
+
+/// A small model trained on a simulated log; returns (dir, log, model).
+fn small_model() -> (tempfile::TempDir, String, String) {
+    let d = tempfile::tempdir().expect("tempdir");
+    let p = |n: &str| d.path().join(n).to_string_lossy().into_owned();
+    let (log, model) = (p("a.mcap"), p("m.hbn"));
+    let (e, _) = hbn(&["simulate", "--steps", "300", "--out", &log]);
+    assert!(e.is_none(), "{e:?}");
+    let (e, _) = hbn(&[
+        "train",
+        "--log",
+        &log,
+        "--max-points",
+        "50",
+        "--starts",
+        "1",
+        "--out",
+        &model,
+    ]);
+    assert!(e.is_none(), "{e:?}");
+    (d, log, model)
+}
+
+#[test]
+fn a_constant_target_is_said_once() {
+    let d = tempfile::tempdir().expect("tempdir");
+    let log = d.path().join("flat.mcap");
+    let u: Vec<f64> = (0..200).map(|k| (k as f64 * 0.05).sin()).collect();
+    let x = vec![0.5; u.len()];
+    write_log(&log, &u, &x, &u);
+    let model = d.path().join("m.hbn");
+    let (e, _) = hbn(&[
+        "train",
+        "--log",
+        &log.to_string_lossy(),
+        "--max-points",
+        "50",
+        "--starts",
+        "1",
+        "--out",
+        &model.to_string_lossy(),
+    ]);
+    let e = e.expect("a constant state cannot be learned");
+    assert_eq!(e.matches("constant").count(), 1, "{e}");
+    assert!(!model.exists());
+}
+
+#[test]
+fn every_mode_is_spelled_as_its_flag() {
+    use hbn_cli::cli::{Cli, Command, ModeChoice};
+    use hbn_core::Mode;
+    let parse = |cmd: &str, mode: &str| -> Option<ModeChoice> {
+        let c = <Cli as clap::Parser>::try_parse_from([
+            "hbn", cmd, "--model", "m", "--log", "l", "--mode", mode,
+        ])
+        .ok()?;
+        match c.command {
+            Command::Estimate(a) => a.mode,
+            Command::Eval(a) => Some(a.mode),
+            _ => None,
+        }
+    };
+    for m in Mode::ALL {
+        assert_eq!(parse("estimate", m.name()), Some(ModeChoice::One(m)));
+        assert_eq!(parse("eval", m.name()), Some(ModeChoice::One(m)));
+    }
+    // `all` is accepted by estimate as by eval.
+    assert_eq!(parse("estimate", "all"), Some(ModeChoice::All));
+    assert_eq!(parse("eval", "all"), Some(ModeChoice::All));
+    assert_eq!(ModeChoice::All.modes(), Mode::ALL.to_vec());
+    // The help lists every mode by the same name.
+    let (e, _) = hbn(&["estimate", "--mode", "nope", "--model", "m", "--log", "l"]);
+    let e = e.expect("unknown mode");
+    for m in Mode::ALL {
+        assert!(e.contains(m.name()), "{e}");
+    }
+    // Tables and summaries use the same names (`ekf-blr`, not `ekf_blr` or `EKF+BLR`).
+    let (_d, log, model) = small_model();
+    let (_, out) = hbn(&["inspect", &model]);
+    let (_, eval) = hbn(&["eval", "--model", &model, "--log", &log]);
+    for text in [&out, &eval] {
+        for m in Mode::ALL {
+            assert!(text.contains(m.name()), "{m}: {text}");
+        }
+        assert!(
+            !text.contains("ekf_blr") && !text.contains("EKF+BLR"),
+            "{text}"
+        );
+    }
+    let table = hbn_pipeline::experiment::markdown_table(&[]);
+    assert!(
+        table.contains("nRMSE ekf-blr") && !table.contains("EKF"),
+        "{table}"
+    );
+}
+
+#[test]
+fn estimate_mode_all_writes_one_file_per_mode() {
+    let (d, log, model) = small_model();
+    let p = |n: &str| d.path().join(n).to_string_lossy().into_owned();
+    let (e, out) = hbn(&[
+        "estimate",
+        "--model",
+        &model,
+        "--log",
+        &log,
+        "--mode",
+        "all",
+        "--csv",
+        &p("est.csv"),
+        "--out",
+        &p("est.mcap"),
+    ]);
+    assert!(e.is_none(), "{e:?}");
+    assert!(!d.path().join("est.csv").exists() && !d.path().join("est.mcap").exists());
+    let mut csvs = Vec::new();
+    for m in hbn_core::Mode::ALL {
+        let csv = d.path().join(format!("est-{}.csv", m.name()));
+        let mcap = d.path().join(format!("est-{}.mcap", m.name()));
+        let text = std::fs::read_to_string(&csv).expect("a CSV per mode");
+        assert!(text.starts_with(hbn_pipeline::CSV_HEADER), "{text}");
+        assert!(mcap.is_file(), "{}", mcap.display());
+        assert!(
+            out.contains(&format!("`{}`", csv.display())),
+            "{m} not in the summary: {out}"
+        );
+        csvs.push(text);
+    }
+    // Each file holds its own mode's estimate, the same as a run of that mode alone.
+    let single = p("single.csv");
+    let mode = hbn_core::Mode::ALL[1];
+    let (e, _) = hbn(&[
+        "estimate",
+        "--model",
+        &model,
+        "--log",
+        &log,
+        "--mode",
+        mode.name(),
+        "--csv",
+        &single,
+    ]);
+    assert!(e.is_none(), "{e:?}");
+    assert_eq!(std::fs::read_to_string(&single).expect("csv"), csvs[1]);
+    assert_ne!(csvs[0], csvs[1]);
+}
+
+#[test]
+fn signal_mismatches_name_the_flags_in_estimate_and_eval() {
+    let (_d, log, model) = small_model();
+    for (cmd, flag) in [
+        ("estimate", "--output"),
+        ("eval", "--output"),
+        ("eval", "--state"),
+        ("eval", "--input"),
+    ] {
+        let (e, _) = hbn(&[cmd, "--model", &model, "--log", &log, flag, "/nope.data"]);
+        let e = e.unwrap_or_else(|| panic!("{cmd} {flag}: a missing topic"));
+        assert_eq!(e.matches("/nope").count(), 1, "{e}");
+        assert!(
+            e.contains("--input") && e.contains("--output") && e.contains("--state"),
+            "{cmd} {flag}: {e}"
+        );
+    }
+}
+
+/// The same log gives fewer samples to `eval` than to `estimate` when the state covers a
+/// shorter span; both say which signals the span is common to.
+#[test]
+fn sample_counts_explain_their_span() {
+    let fixture = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/json_zstd.mcap");
+    let d = tempfile::tempdir().expect("tempdir");
+    let model = d.path().join("m.hbn").to_string_lossy().into_owned();
+    let (e, _) = hbn(&[
+        "train",
+        "--log",
+        fixture,
+        "--max-points",
+        "60",
+        "--starts",
+        "1",
+        "--max-iters",
+        "30",
+        "--out",
+        &model,
+    ]);
+    assert!(e.is_none(), "{e:?}");
+    let count = |text: &str, after: &str| -> usize {
+        let head = text.split(" samples at ").next().unwrap_or("");
+        head.rsplit(after)
+            .next()
+            .unwrap_or("")
+            .trim()
+            .parse()
+            .expect("count")
+    };
+    let (_, est) = hbn(&["estimate", "--model", &model, "--log", fixture]);
+    assert!(
+        est.contains("where /input.data and /sensor.data both have data"),
+        "{est}"
+    );
+    let (_, ev) = hbn(&["eval", "--model", &model, "--log", fixture]);
+    assert!(
+        ev.contains("where /input.data, /state.data and /sensor.data all have data"),
+        "{ev}"
+    );
+    let (n_est, n_eval) = (count(&est, ":"), count(&ev, ":"));
+    assert!(n_eval < n_est, "estimate {n_est}, eval {n_eval}");
+}
+
+#[test]
+fn details_are_behind_verbose_and_json() {
+    let (_d, log, model) = small_model();
+    let (_, out) = hbn(&["estimate", "--model", &model, "--log", &log]);
+    assert!(
+        !out.contains("NIS") && out.contains("--verbose"),
+        "short by default: {out}"
+    );
+    let (_, out) = hbn(&["estimate", "--model", &model, "--log", &log, "--verbose"]);
+    assert!(
+        out.contains("mean NIS")
+            && out.contains("guard flags")
+            && out.contains("docs/glossary.md#nis"),
+        "{out}"
+    );
+    let (e, out) = hbn(&["estimate", "--model", &model, "--log", &log, "--json"]);
+    assert!(e.is_none(), "{e:?}");
+    let v: serde_json::Value = serde_json::from_str(&out).expect("estimate JSON");
+    assert_eq!(v["samples"], 300);
+    assert_eq!(
+        v["estimates"][0]["default_mode"], true,
+        "without --mode: the model's default: {v}"
+    );
+    assert!(v["estimates"][0]["mean_nis"].as_f64().is_some(), "{v}");
+    let d = tempfile::tempdir().expect("tempdir");
+    let m2 = d.path().join("m2.hbn").to_string_lossy().into_owned();
+    let train = |extra: &str| {
+        let mut a = vec![
+            "train",
+            "--log",
+            &log,
+            "--max-points",
+            "50",
+            "--starts",
+            "1",
+            "--out",
+            &m2,
+        ];
+        if !extra.is_empty() {
+            a.push(extra);
+        }
+        hbn(&a)
+    };
+    let (_, short) = train("");
+    assert!(
+        short.contains("default mode") && !short.contains("LML") && short.contains("--verbose"),
+        "{short}"
+    );
+    let (_, long) = train("--verbose");
+    assert!(
+        long.contains("LML") && long.contains("Q scale") && long.contains("docs/glossary.md#"),
+        "{long}"
+    );
+    let (_, json) = train("--json");
+    let v: serde_json::Value = serde_json::from_str(&json).expect("train JSON");
+    assert_eq!(v["samples"], 300);
+    assert!(v["transition"]["length_scales"].is_array(), "{v}");
 }
 
 #[test]
@@ -135,6 +429,7 @@ fn summaries_count_in_words() {
         "0",
         "--out",
         &p("m.hbn"),
+        "--verbose",
     ]);
     assert!(e.is_none(), "{e:?}");
     assert!(
@@ -153,14 +448,14 @@ fn summaries_count_in_words() {
     );
     let (_, out) = hbn(&["inspect", &p("m.hbn")]);
     assert!(out.contains("trained on 1 trajectory,"), "{out}");
-    // Length scales named by the input they belong to.
-    assert!(out.contains("length scales     x[k-1] "), "{out}");
+    // A log's length is its samples over the rate, as `simulate` says (not the last sample's
+    // time), and never confused with computing time.
+    let (_, out) = hbn(&["estimate", "--model", &p("m.hbn"), "--log", &p("a.mcap")]);
     assert!(
-        out.contains("u[k-2] ") && out.contains("y[k-1] ") && out.contains("x[k] "),
+        out.contains("300 samples at 100.0 Hz (3.00 s, where"),
         "{out}"
     );
-    let (_, out) = hbn(&["estimate", "--model", &p("m.hbn"), "--log", &p("a.mcap")]);
-    assert!(out.contains("s log)"), "{out}");
+    assert!(!out.contains("2.99 s") && !out.contains("took"), "{out}");
     assert!(Path::new(&p("m.hbn")).exists());
 }
 

@@ -96,10 +96,12 @@ fn estimate_warns_about_other_rates_and_data_outside_the_training_range() {
         },
     ];
     hbn_io::write_scalar_log(Path::new(&far), &t, &topics, Encoding::Json).expect("write");
-    let (out, err) = hbn(&["estimate", "--model", &model, "--log", &far]);
-    assert!(out.contains("extrapolation x"), "{out}");
+    // The warning comes without --verbose; the flag counts with it.
+    let (_, err) = hbn(&["estimate", "--model", &model, "--log", &far]);
     assert!(
         err.contains("are outside the training data (flag `extrapolation`)"),
         "{err}"
     );
+    let (out, _) = hbn(&["estimate", "--model", &model, "--log", &far, "--verbose"]);
+    assert!(out.contains("extrapolation x"), "{out}");
 }

@@ -42,6 +42,12 @@ pub struct Cli {
     #[arg(short, long, global = true)]
     pub quiet: bool,
 
+    /// Print details after the summary: GP hyperparameters and the held-out table of
+    /// `train`, filter diagnostics of `estimate`, all calibration columns of `eval` (terms
+    /// explained in docs/glossary.md).
+    #[arg(short, long, global = true)]
+    pub verbose: bool,
+
     /// The subcommand.
     #[command(subcommand)]
     pub command: Command,
@@ -102,35 +108,56 @@ impl From<TimeSourceArg> for TimeSource {
     }
 }
 
-/// Estimation mode.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum ModeArg {
-    /// Plain EKF with GP mean gradients as Jacobians.
-    Ekf,
-    /// EKF with local Bayesian linear regression (Jacobians and noise).
-    EkfBlr,
-    /// Unscented (sigma-point) filter through the GP means.
-    Ukf,
+/// `--mode` of `hbn estimate` and `hbn eval`: one mode by its name ([`Mode::name`]) or `all`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ModeChoice {
+    /// One mode.
+    One(Mode),
+    /// Every mode ([`Mode::ALL`]).
+    All,
 }
 
-impl From<Mode> for ModeArg {
-    fn from(m: Mode) -> Self {
-        match m {
-            Mode::Ekf => ModeArg::Ekf,
-            Mode::EkfBlr => ModeArg::EkfBlr,
-            Mode::Ukf => ModeArg::Ukf,
+impl ModeChoice {
+    /// The modes chosen, in the order of [`Mode::ALL`].
+    pub fn modes(self) -> Vec<Mode> {
+        match self {
+            ModeChoice::One(m) => vec![m],
+            ModeChoice::All => Mode::ALL.to_vec(),
         }
     }
 }
 
-impl From<ModeArg> for Mode {
-    fn from(m: ModeArg) -> Self {
-        match m {
-            ModeArg::Ekf => Mode::Ekf,
-            ModeArg::EkfBlr => Mode::EkfBlr,
-            ModeArg::Ukf => Mode::Ukf,
+impl std::fmt::Display for ModeChoice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ModeChoice::One(m) => f.write_str(m.name()),
+            ModeChoice::All => f.write_str("all"),
         }
     }
+}
+
+impl std::str::FromStr for ModeChoice {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s.trim().eq_ignore_ascii_case("all") {
+            return Ok(ModeChoice::All);
+        }
+        s.parse::<Mode>()
+            .map(ModeChoice::One)
+            .map_err(|e| e.to_string())
+    }
+}
+
+/// The values `--mode` accepts: every mode's name, then `all` (listed by `--help`).
+fn mode_choice() -> impl clap::builder::TypedValueParser<Value = ModeChoice> {
+    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+    let values = Mode::ALL
+        .iter()
+        .map(|m| PossibleValue::new(m.name()))
+        .chain(std::iter::once(
+            PossibleValue::new("all").help("every mode, one after the other"),
+        ));
+    PossibleValuesParser::new(values).try_map(|s: String| s.parse::<ModeChoice>())
 }
 
 /// How training reduces large data sets.
@@ -158,19 +185,6 @@ impl From<SubsetArg> for SubsetPolicy {
             SubsetArg::Random => SubsetPolicy::Random,
         }
     }
-}
-
-/// Estimation modes to evaluate.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum EvalModeArg {
-    /// Plain EKF.
-    Ekf,
-    /// EKF with local Bayesian linear regression.
-    EkfBlr,
-    /// Unscented filter.
-    Ukf,
-    /// Every mode.
-    All,
 }
 
 fn parse_system(s: &str) -> Result<SystemKind, String> {
@@ -368,16 +382,23 @@ pub struct TrainArgs {
     /// Output model file.
     #[arg(long)]
     pub out: PathBuf,
+    /// Print the summary as JSON (what `hbn inspect --json` prints, with the training run's
+    /// samples and time).
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// `hbn estimate`.
 #[derive(Clone, Debug, Args)]
 #[command(
-    after_help = "Example:\n  hbn estimate --model model.hbn --log test.mcap --mode ekf-blr --out est.mcap --csv est.csv\n\n\
+    after_help = "Example:\n  hbn estimate --model model.hbn --log test.mcap --out est.mcap --csv est.csv\n  \
+     hbn estimate --model model.hbn --log test.mcap --mode all --csv est.csv\n\n\
      The MCAP output has one JSON channel /hbn/estimate (x, x_std, y_pred, innovation, nis,\n\
      flags, flag_names) on the input log's clock: open it in Foxglove beside the input log.\n\
-     CSV columns: t,x,x_std,y_pred,innovation,nis,flags,flag_names (t in seconds from the first \
-     sample; flags as a bit mask and as names joined by |, explained in docs/ekf.md)."
+     CSV columns: t,x,x_std,y_pred,innovation,nis,flags,flag_names (t in seconds from the first\n\
+     sample; flags as a bit mask and as names joined by |). With --mode all, each mode is\n\
+     written to its own files, the mode's name added to the file name: est-ekf.csv,\n\
+     est-ekf-blr.csv, ... Terms: docs/glossary.md."
 )]
 pub struct EstimateArgs {
     /// Model file from `hbn train`.
@@ -386,10 +407,10 @@ pub struct EstimateArgs {
     /// Log with the input and sensor signals.
     #[arg(long)]
     pub log: PathBuf,
-    /// Estimation mode (default: the model's, the mode with the best held-out score at
-    /// training; see `hbn inspect`).
-    #[arg(long, value_enum)]
-    pub mode: Option<ModeArg>,
+    /// Estimation mode, or `all` for every mode (default: the model's, the mode with the best
+    /// held-out score at training; see `hbn inspect`).
+    #[arg(long, value_parser = mode_choice())]
+    pub mode: Option<ModeChoice>,
     /// Input signal (default: the path the model was trained with).
     #[arg(long, value_parser = parse_path)]
     pub input: Option<SignalPath>,
@@ -402,6 +423,9 @@ pub struct EstimateArgs {
     /// Write the estimate as CSV.
     #[arg(long)]
     pub csv: Option<PathBuf>,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    pub json: bool,
     /// Log reading options.
     #[command(flatten)]
     pub read: ReadArgs,
@@ -412,8 +436,10 @@ pub struct EstimateArgs {
 #[command(
     after_help = "Example:\n  hbn eval --model model.hbn --log test.mcap --plot eval.png\n  \
      hbn eval --model model.hbn --log test.mcap --mode ekf --json\n\n\
-     Scores RMSE and nRMSE (RMSE / range of the reference) of each EKF mode and of the\n\
-     open-loop GP simulation against the logged state."
+     Scores RMSE and nRMSE (RMSE / range of the reference) of each filter mode and of the\n\
+     open-loop GP simulation against the logged state, and how often the state lies within 2\n\
+     standard deviations of the estimate (about 95% when the uncertainty is honest); --verbose\n\
+     adds the 1-sd coverage, mean NEES and NLPD. Terms: docs/glossary.md."
 )]
 pub struct EvalArgs {
     /// Model file from `hbn train`.
@@ -422,9 +448,9 @@ pub struct EvalArgs {
     /// Log with input, state (reference) and sensor signals.
     #[arg(long)]
     pub log: PathBuf,
-    /// Modes to evaluate.
-    #[arg(long, value_enum, default_value_t = EvalModeArg::All)]
-    pub mode: EvalModeArg,
+    /// Mode to evaluate, or `all`.
+    #[arg(long, value_parser = mode_choice(), default_value_t = ModeChoice::All)]
+    pub mode: ModeChoice,
     /// Input signal (default: the model's).
     #[arg(long, value_parser = parse_path)]
     pub input: Option<SignalPath>,
@@ -434,7 +460,8 @@ pub struct EvalArgs {
     /// Sensor signal (default: the model's).
     #[arg(long, value_parser = parse_path)]
     pub output: Option<SignalPath>,
-    /// Write a PNG plot: state vs time with a 2-sigma band, and hysteresis loops.
+    /// Write a PNG plot: per mode the estimate with its 2-sigma band against the logged state
+    /// (nRMSE and 2-sigma coverage in the legend), and the hysteresis loops.
     #[arg(long)]
     pub plot: Option<PathBuf>,
     /// Print JSON instead of a table.
@@ -460,8 +487,12 @@ pub struct InspectArgs {
 #[derive(Clone, Debug, Args)]
 #[command(after_help = format!(
     "Example:\n  hbn demo --out hbn-demo --system bouc-wen\n\n\
-     Writes train-1..3.mcap (same input, independent noise), test.mcap, model.hbn,\n\
-     estimate.csv / estimate.mcap (EKF), estimate-ekf-blr.csv / .mcap and eval.png.\n\nSystems:\n{}",
+     Runs the README's worked example in the --out directory, printing each command before it\n\
+     runs: three training logs with the same input (--input-seed SEED) and independent noise\n\
+     (--seed 10*SEED+1, +2, +3), a test log with a new input (--input-seed SEED+1,\n\
+     --seed 10*(SEED+1)+1), hbn train with the default options, hbn estimate in the model's\n\
+     default mode and hbn eval of every mode. Writes train1..3.mcap, test.mcap, model.hbn,\n\
+     est.csv, est.mcap and eval.png.\n\nSystems:\n{}",
     systems_help()
 ))]
 pub struct DemoArgs {
@@ -474,9 +505,20 @@ pub struct DemoArgs {
     /// Noise gain.
     #[arg(long, default_value_t = 1.0, value_parser = parse_non_negative)]
     pub noise_gain: f64,
-    /// Seed.
+    /// Seed (the input seed of the training logs; see below).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+}
+
+impl Default for DemoArgs {
+    fn default() -> Self {
+        Self {
+            out: PathBuf::from("hbn-demo"),
+            system: SystemKind::BoucWen,
+            noise_gain: 1.0,
+            seed: 1,
+        }
+    }
 }
 
 /// `hbn experiment`.

@@ -1,14 +1,17 @@
 //! `hbn estimate`: run the filter over a log and write the estimate
-//! ([`hbn_pipeline::estimate_log`]).
+//! ([`hbn_pipeline::estimate_log_modes`]).
 
 use std::path::Path;
 
 use anyhow::Context;
+use hbn_core::Mode;
 use hbn_model::{Estimate, HbnModel};
-use hbn_pipeline::{LogEstimate, Outputs, SignalChoice, estimate_log};
+use hbn_pipeline::{LogEstimate, Outputs, SignalChoice, estimate_log_modes};
+use serde_json::{Value, json};
 
 use crate::Ui;
 use crate::cli::EstimateArgs;
+use crate::glossary::{self, Term};
 use crate::report::{self, Renderer};
 
 /// Loads a model, naming the file in errors.
@@ -16,34 +19,84 @@ pub fn load_model(file: &Path) -> anyhow::Result<HbnModel> {
     HbnModel::load(file).with_context(|| format!("cannot load the model `{}`", file.display()))
 }
 
-/// Summary line of a run.
-pub fn summary(est: &Estimate, mode: hbn_core::Mode) -> String {
-    let finite_nis: Vec<f64> = est.nis.iter().copied().filter(|v| v.is_finite()).collect();
-    let mean_nis = if finite_nis.is_empty() {
+/// Mean normalised innovation squared over the samples that have one.
+pub fn mean_nis(est: &Estimate) -> f64 {
+    let finite: Vec<f64> = est.nis.iter().copied().filter(|v| v.is_finite()).collect();
+    if finite.is_empty() {
         f64::NAN
     } else {
-        finite_nis.iter().sum::<f64>() / finite_nis.len() as f64
-    };
-    let mut s = format!("  {mode}: {} samples, mean NIS {mean_nis:.3}", est.len());
-    let counts = est.flag_counts();
-    if counts.is_empty() {
-        s.push_str(", no guard flags");
-    } else {
-        let c: Vec<String> = counts.iter().map(|(n, c)| format!("{n} x{c}")).collect();
-        s.push_str(&format!(", flags: {}", c.join(", ")));
+        finite.iter().sum::<f64>() / finite.len() as f64
     }
+}
+
+/// The filter diagnostics of one run (`--verbose`): mean NIS, guard flags, observability.
+pub fn diagnostics(est: &Estimate, mode: Mode) -> String {
+    let mut s = format!(
+        "  {mode} diagnostics: mean NIS {:.3} (about 1 when the filter's noise fits the log)",
+        mean_nis(est)
+    );
     if let Some(o) = est.observability() {
         s.push_str(&format!(
-            ", near-unobservable {:.1}%",
+            ", near-unobservable on {:.1}% of samples",
             100.0 * o.near_unobservable
         ));
     }
-    s.push('\n');
+    let counts = est.flag_counts();
+    if counts.is_empty() {
+        s.push_str("; no guard flags\n");
+    } else {
+        let c: Vec<String> = counts.iter().map(|(n, c)| format!("{n} x{c}")).collect();
+        s.push_str(&format!("; guard flags (samples): {}\n", c.join(", ")));
+    }
     s
 }
 
-/// Runs `hbn estimate`; returns the log and the estimate.
-pub fn run(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<LogEstimate> {
+fn outputs_of(args: &EstimateArgs, modes: usize, mode: Mode) -> Outputs {
+    let o = Outputs {
+        csv: args.csv.clone(),
+        mcap: args.out.clone(),
+    };
+    if modes > 1 { o.for_mode(mode) } else { o }
+}
+
+/// The summary as JSON (`--json`).
+pub fn summary_json(args: &EstimateArgs, model: &HbnModel, runs: &[LogEstimate]) -> Value {
+    let log = runs.first().map(|r| &r.log);
+    let estimates: Vec<Value> = runs
+        .iter()
+        .map(|r| {
+            let files = outputs_of(args, runs.len(), r.mode);
+            let flags: serde_json::Map<String, Value> = r
+                .estimate
+                .flag_counts()
+                .into_iter()
+                .map(|(n, c)| (n.to_owned(), json!(c)))
+                .collect();
+            json!({
+                "mode": r.mode.name(),
+                "default_mode": r.mode == model.default_mode(),
+                "mean_nis": mean_nis(&r.estimate),
+                "flags": flags,
+                "near_unobservable": r.estimate.observability().map(|o| o.near_unobservable),
+                "csv": files.csv,
+                "mcap": files.mcap,
+                "warnings": r.warnings().iter().map(ToString::to_string).collect::<Vec<_>>(),
+            })
+        })
+        .collect();
+    json!({
+        "log": args.log,
+        "model": args.model,
+        "samples": log.map(|l| l.len()),
+        "rate_hz": model.rate_hz(),
+        "duration_s": log.map(|l| l.duration_s()),
+        "signals": log.map(|l| l.paths.iter().map(|p| p.to_string()).collect::<Vec<_>>()),
+        "estimates": estimates,
+    })
+}
+
+/// Runs `hbn estimate`; returns one estimate per mode run.
+pub fn run(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<Vec<LogEstimate>> {
     for (f, what) in [(&args.out, "MCAP output"), (&args.csv, "CSV output")] {
         if let Some(f) = f {
             crate::check_output(f, what)?;
@@ -59,40 +112,95 @@ pub fn run(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<LogEstimate> 
         csv: args.csv.clone(),
         mcap: args.out.clone(),
     };
+    let modes = args
+        .mode
+        .map_or_else(|| vec![model.default_mode()], |m| m.modes());
     let opts = args.read.options(None);
     let mut render = Renderer::default();
-    let result = estimate_log(
+    let result = estimate_log_modes(
         &model,
         &args.log,
         &signals,
-        args.mode.map_or(model.default_mode(), Into::into),
+        &modes,
         opts,
         &outputs,
         &mut |e| render.event(ui, e),
     );
     render.finish();
-    let est = result
+    let runs = result
         .map_err(|e| report::error(e, opts.time_source))
         .with_context(|| format!("estimation on `{}` failed", args.log.display()))?;
-    let mut text = format!(
-        "estimated `{}` with `{}` at {:.1} Hz (a {:.2} s log)\n",
-        args.log.display(),
-        args.model.display(),
-        model.rate_hz(),
-        est.log.aligned.t_s.last().copied().unwrap_or(0.0)
-    );
-    text.push_str(&summary(&est.estimate, est.mode));
-    for (f, what) in [(&args.out, "MCAP (/hbn/estimate)"), (&args.csv, "CSV")] {
-        if let Some(f) = f {
-            text.push_str(&format!("  wrote {what}: `{}`\n", f.display()));
+    if args.json {
+        let v = summary_json(args, &model, &runs);
+        ui.line(serde_json::to_string_pretty(&v).context("cannot format JSON")?)?;
+    } else {
+        ui.print(summary_text(ui.verbose, args, &model, &runs))?;
+    }
+    for r in &runs {
+        for w in r.warnings() {
+            if runs.len() > 1 {
+                ui.warn(format_args!("{}: {w}", r.mode));
+            } else {
+                ui.warn(w);
+            }
         }
     }
-    if args.out.is_none() && args.csv.is_none() {
-        text.push_str("  (no --out or --csv given: nothing written)\n");
+    Ok(runs)
+}
+
+/// The text summary: what was estimated and where it was written; with `verbose`, the filter
+/// diagnostics of each mode.
+pub fn summary_text(
+    verbose: bool,
+    args: &EstimateArgs,
+    model: &HbnModel,
+    runs: &[LogEstimate],
+) -> String {
+    let Some(first) = runs.first() else {
+        return String::new();
+    };
+    let mut text = format!(
+        "estimated {} in `{}` with `{}`: {}\n",
+        model.signals().state.name,
+        args.log.display(),
+        args.model.display(),
+        report::grid_text(&first.log)
+    );
+    for r in runs {
+        let default = if r.mode == model.default_mode() {
+            " (the model's default mode)"
+        } else {
+            ""
+        };
+        let files = outputs_of(args, runs.len(), r.mode);
+        let mut wrote: Vec<String> = Vec::new();
+        if let Some(f) = &files.csv {
+            wrote.push(format!("CSV `{}`", f.display()));
+        }
+        if let Some(f) = &files.mcap {
+            wrote.push(format!(
+                "MCAP `{}` (topic {})",
+                f.display(),
+                hbn_pipeline::ESTIMATE_TOPIC
+            ));
+        }
+        let wrote = if wrote.is_empty() {
+            "nothing written (give --csv or --out)".to_owned()
+        } else {
+            format!("wrote {}", wrote.join(" and "))
+        };
+        text.push_str(&format!("  {}{default}: {wrote}\n", r.mode));
+        if verbose {
+            text.push_str(&diagnostics(&r.estimate, r.mode));
+        }
     }
-    ui.print(text)?;
-    for w in est.warnings() {
-        ui.warn(w);
+    if verbose {
+        text.push_str(&format!(
+            "  {}\n",
+            glossary::links(&[Term::Nis, Term::GuardFlags, Term::Observability])
+        ));
+    } else {
+        text.push_str("  (filter diagnostics: --verbose)\n");
     }
-    Ok(est)
+    text
 }

@@ -6,6 +6,7 @@ use hbn_pipeline::experiment::{self, ExperimentConfig, ExperimentRow};
 
 use crate::Ui;
 use crate::cli::ExperimentArgs;
+use crate::glossary::Term;
 use crate::plot::{self, GainLine};
 use crate::report::{self, Renderer};
 
@@ -21,10 +22,10 @@ pub fn panels(rows: &[ExperimentRow]) -> Vec<(String, Vec<GainLine>)> {
         }
     }
     let methods: [Method; 4] = [
-        ("EKF", |r| r.nrmse_ekf),
-        ("EKF+BLR", |r| r.nrmse_ekf_blr),
-        ("UKF", |r| r.nrmse_ukf),
-        ("open loop", |r| r.nrmse_open_loop),
+        ("ekf", |r| r.nrmse_ekf),
+        ("ekf-blr", |r| r.nrmse_ekf_blr),
+        ("ukf", |r| r.nrmse_ukf),
+        ("open-loop", |r| r.nrmse_open_loop),
     ];
     systems
         .into_iter()
@@ -99,6 +100,14 @@ pub fn run(ui: &mut Ui<'_>, args: &ExperimentArgs) -> anyhow::Result<Vec<Experim
         plot::experiment_plot(f, &panels(&rows))?;
     }
     ui.print(experiment::markdown_table(&rows))?;
+    ui.line(crate::glossary::links(&[
+        Term::NoiseGain,
+        Term::Nrmse,
+        Term::DefaultMode,
+        Term::Coverage,
+        Term::Nees,
+        Term::NoiseStateCorrelation,
+    ]))?;
     for (f, what) in [(&args.json, "rows"), (&args.plot, "plot")] {
         if let Some(f) = f {
             ui.line(format!("wrote {what} `{}`", f.display()))?;

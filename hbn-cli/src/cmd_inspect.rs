@@ -7,14 +7,74 @@ use serde_json::{Value, json};
 use crate::Ui;
 use crate::cli::InspectArgs;
 use crate::cmd_estimate::load_model;
+use crate::glossary::{self, Term};
 
-fn gp_json(gp: &GaussianProcess, kernel: KernelChoice, inputs: &[String]) -> Value {
+/// The inputs of one GP by the model's signal names: `x[k-1], x[k-2], u[k-1], u[k-2]` for the
+/// transition (which predicts `x[k]`), `x[k-1], y[k-1], x[k]` for the sensor (which predicts
+/// `y[k]`).
+pub fn input_names(model: &HbnModel, role: GpRole) -> Vec<String> {
+    let s = model.signals();
+    let (u, x, y) = (&s.input.name, &s.state.name, &s.output.name);
+    match role {
+        GpRole::Transition => vec![
+            format!("{x}[k-1]"),
+            format!("{x}[k-2]"),
+            format!("{u}[k-1]"),
+            format!("{u}[k-2]"),
+        ],
+        GpRole::Sensor => vec![format!("{x}[k-1]"), format!("{y}[k-1]"), format!("{x}[k]")],
+    }
+}
+
+/// What one GP predicts: `x[k]` or `y[k]`.
+pub fn target_name(model: &HbnModel, role: GpRole) -> String {
+    let s = model.signals();
+    match role {
+        GpRole::Transition => format!("{}[k]", s.state.name),
+        GpRole::Sensor => format!("{}[k]", s.output.name),
+    }
+}
+
+/// A subset policy as `--subset` spells it.
+fn subset_name(p: hbn_gp::SubsetPolicy) -> String {
+    use clap::ValueEnum;
+    crate::cli::SubsetArg::from(p)
+        .to_possible_value()
+        .map_or_else(|| format!("{p:?}"), |v| v.get_name().to_owned())
+}
+
+fn gp_json(gp: &GaussianProcess, kernel: KernelChoice, inputs: &[String], target: &str) -> Value {
     let r = gp.report();
+    let ls = gp.length_scales();
+    let named: serde_json::Map<String, Value> = if ls.len() == inputs.len() {
+        inputs
+            .iter()
+            .zip(&ls)
+            .map(|(n, l)| (n.clone(), json!(l)))
+            .collect()
+    } else {
+        serde_json::Map::new()
+    };
+    // Starts are numbered from 1, as the text and the progress bar count them.
+    let starts: Vec<Value> = r
+        .starts
+        .iter()
+        .enumerate()
+        .map(|(i, st)| {
+            let mut v = json!(st);
+            if let Some(o) = v.as_object_mut() {
+                o.insert("start".into(), json!(i + 1));
+            }
+            v
+        })
+        .collect();
     json!({
-        "kernel": kernel.to_string(),
+        "predicts": target,
         "inputs": inputs,
+        "kernel": kernel.to_string(),
         "signal_variance": gp.signal_variance(),
-        "length_scales": gp.length_scales(),
+        "length_scales": ls,
+        "length_scales_by_input": named,
         "noise_variance": gp.noise_variance(),
         "kind": if gp.is_sparse() { "sparse" } else { "exact" },
         "support_points": gp.n_support(),
@@ -24,9 +84,9 @@ fn gp_json(gp: &GaussianProcess, kernel: KernelChoice, inputs: &[String]) -> Val
             "refinement": r.refinement,
             "samples": r.n_samples,
             "support_points": r.n_support,
-            "subset_policy": r.subset_policy.map(|p| format!("{p:?}")),
-            "starts": r.starts,
-            "best_start": r.best_start,
+            "subset_policy": r.subset_policy.map(subset_name),
+            "starts": starts,
+            "best_start": r.best_start.map(|b| b + 1),
             "evaluations": r.evaluations,
             "jitter_evaluations": r.jitter_evaluations,
             "max_jitter": r.max_jitter,
@@ -56,12 +116,14 @@ pub fn model_json(model: &HbnModel) -> Value {
         "transition": gp_json(
             model.transition(),
             p.transition_kernel,
-            &input_names(model, GpRole::Transition)
+            &input_names(model, GpRole::Transition),
+            &target_name(model, GpRole::Transition),
         ),
         "sensor": gp_json(
             model.sensor(),
             p.sensor_kernel,
-            &input_names(model, GpRole::Sensor)
+            &input_names(model, GpRole::Sensor),
+            &target_name(model, GpRole::Sensor),
         ),
         "blr": {
             "transition": blr_json(model.transition_local()),
@@ -85,44 +147,32 @@ fn fmt_list(v: &[f64]) -> String {
         .join(", ")
 }
 
-/// The inputs of one GP by the model's signal names: `x[k-1], x[k-2], u[k-1], u[k-2]` for the
-/// transition, `x[k-1], y[k-1], x[k]` for the sensor.
-pub fn input_names(model: &HbnModel, role: GpRole) -> Vec<String> {
-    let s = model.signals();
-    let (u, x, y) = (&s.input.name, &s.state.name, &s.output.name);
-    match role {
-        GpRole::Transition => vec![
-            format!("{x}[k-1]"),
-            format!("{x}[k-2]"),
-            format!("{u}[k-1]"),
-            format!("{u}[k-2]"),
-        ],
-        GpRole::Sensor => vec![format!("{x}[k-1]"), format!("{y}[k-1]"), format!("{x}[k]")],
-    }
-}
-
-/// Length scales labelled by their input (`x[k-1] 0.52, ...`) when there is one per input.
-fn named_length_scales(gp: &GaussianProcess, names: &[String]) -> String {
-    let ls = gp.length_scales();
-    if ls.len() == names.len() {
+/// Length scales labelled by their input (`x[k-1] 2.0878e2, ...`) when there is one per input.
+pub fn named_length_scales(ls: &[f64], inputs: &[String]) -> String {
+    if ls.len() == inputs.len() {
         ls.iter()
-            .zip(names)
+            .zip(inputs)
             .map(|(l, n)| format!("{n} {l:.4e}"))
             .collect::<Vec<_>>()
             .join(", ")
     } else {
-        format!("[{}]", fmt_list(&ls))
+        format!("[{}]", fmt_list(ls))
     }
 }
 
-fn gp_text(name: &str, gp: &GaussianProcess, kernel: KernelChoice, inputs: &[String]) -> String {
+fn gp_text(model: &HbnModel, role: GpRole, kernel: KernelChoice) -> String {
+    let gp = model.gp(role);
     let r = gp.report();
     let failed = r.starts.iter().filter(|s| s.error.is_some()).count();
+    let inputs = input_names(model, role);
     let mut s = format!(
-        "{name} GP\n  kernel            {kernel}\n  signal variance   {:.4e}\n  length scales     {}\n  \
-         noise variance    {:.4e}\n  {}    {} of {} samples",
+        "{} GP: predicts {} from {}\n  kernel            {kernel}\n  signal variance   {:.4e}\n  \
+         length scales     {}\n  noise variance    {:.4e}\n  {}    {} of {} samples",
+        role.name(),
+        target_name(model, role),
+        inputs.join(", "),
         gp.signal_variance(),
-        named_length_scales(gp, inputs),
+        named_length_scales(&gp.length_scales(), &inputs),
         gp.noise_variance(),
         if gp.is_sparse() {
             "inducing points"
@@ -133,16 +183,18 @@ fn gp_text(name: &str, gp: &GaussianProcess, kernel: KernelChoice, inputs: &[Str
         r.n_samples,
     );
     if let Some(p) = r.subset_policy {
-        s.push_str(&format!(" (subset: {p:?})"));
+        s.push_str(&format!(" (subset: {})", subset_name(p)));
     }
     s.push_str(&format!(
-        "\n  training LML      {:.3}\n  starts            {} ({} failed, best {}), {} evaluations\n  \
-         jitter            {} evaluations needed it (max {:.1e}), final {:.1e}\n",
+        "\n  training {}      {:.3}\n  starts            {} ({} failed; best: start {} of {}), {} \
+         evaluations\n  jitter            {} evaluations needed it (max {:.1e}), final {:.1e}\n",
+        if gp.is_sparse() { "bound" } else { "LML  " },
         gp.log_marginal_likelihood(),
         r.starts.len(),
         failed,
         r.best_start
             .map_or_else(|| "-".to_owned(), |b| (b + 1).to_string()),
+        r.starts.len(),
         r.evaluations,
         r.jitter_evaluations,
         r.max_jitter,
@@ -177,18 +229,13 @@ pub fn model_text(model: &HbnModel, file: &std::path::Path) -> String {
         if role == GpRole::Sensor {
             t.push('\n');
         }
-        t.push_str(&gp_text(
-            role.name(),
-            model.gp(role),
-            p.kernel(role),
-            &input_names(model, role),
-        ));
+        t.push_str(&gp_text(model, role, p.kernel(role)));
         let ends = crate::report::terminations(s, role);
         if !ends.is_empty() {
             t.push_str(&format!("  start endings      {ends}\n"));
         }
     }
-    t.push_str("\nBLR index (EKF+BLR)\n");
+    t.push_str("\nBLR index (ekf-blr)\n");
     for (n, l) in [
         ("transition", model.transition_local()),
         ("sensor", model.sensor_local()),
@@ -205,8 +252,9 @@ pub fn model_text(model: &HbnModel, file: &std::path::Path) -> String {
     t.push_str(&crate::report::validation_table(model));
     match &s.observability {
         Some(o) => t.push_str(&format!(
-            "\nobservability (first training trajectory)\n  lambda_min: min {:.3e}, median {:.3e}; lambda_max {:.3e}; \
-             near-unobservable {:.1}%\n",
+            "\nobservability (first training trajectory)\n  lambda_min: min {:.3e}, median {:.3e}; \
+             lambda_max {:.3e}\n  near-unobservable (the sensor says almost nothing about the \
+             state) on {:.1}% of samples\n",
             o.min,
             o.median,
             o.max,
@@ -214,6 +262,26 @@ pub fn model_text(model: &HbnModel, file: &std::path::Path) -> String {
         )),
         None => t.push_str("\nobservability: not computed\n"),
     }
+    let points = if p.n_inducing.is_some() {
+        Term::InducingPoints
+    } else {
+        Term::SupportPoints
+    };
+    t.push_str(&format!(
+        "\n{}\n",
+        glossary::links(&[
+            Term::Signals,
+            Term::Rows,
+            Term::LengthScales,
+            points,
+            Term::Lml,
+            Term::OptimiserStarts,
+            Term::Jitter,
+            Term::BlrIndex,
+            Term::ValidationTable,
+            Term::Observability,
+        ])
+    ));
     if s.warnings.is_empty() {
         t.push_str("\nno warnings\n");
     } else {

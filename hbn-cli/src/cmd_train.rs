@@ -3,9 +3,11 @@
 use anyhow::Context;
 use hbn_model::{GpRole, HbnModel, HbnParams};
 use hbn_pipeline::{TrainSignals, train_from_logs};
+use serde_json::json;
 
 use crate::Ui;
 use crate::cli::TrainArgs;
+use crate::glossary::{self, Term};
 use crate::report::{self, Renderer};
 
 impl TrainArgs {
@@ -53,52 +55,101 @@ pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<HbnModel> {
         .save(&args.out)
         .with_context(|| format!("cannot save the model to `{}`", args.out.display()))?;
     let samples = trained.logs.iter().map(|l| l.len()).sum();
-    print_summary(ui, &model, samples, &args.out)?;
+    if args.json {
+        let mut v = crate::cmd_inspect::model_json(&model);
+        if let Some(o) = v.as_object_mut() {
+            o.insert("file".into(), json!(args.out));
+            o.insert("samples".into(), json!(samples));
+            o.insert("seconds".into(), json!(model.summary().seconds));
+        }
+        ui.line(serde_json::to_string_pretty(&v).context("cannot format JSON")?)?;
+    } else {
+        ui.print(summary_text(&model, samples, &args.out, ui.verbose))?;
+    }
     Ok(model)
 }
 
-/// Prints the training summary.
-pub fn print_summary(
-    ui: &mut Ui<'_>,
+/// The one-line result of filter-aware training: the default mode and its held-out scores.
+pub fn default_mode_line(model: &HbnModel) -> String {
+    let Some(v) = &model.summary().validation else {
+        return format!(
+            "filter not tuned (--validation 0, or too little data to hold some out): default \
+             mode {}",
+            model.default_mode()
+        );
+    };
+    match v.rows.iter().find(|r| r.mode == v.default_mode) {
+        Some(r) => format!(
+            "default mode {}: on held-out data nRMSE {:.4}, the held-out state within 2 standard \
+             deviations {:.1}% of the time (about 95% when the uncertainty is honest)",
+            v.default_mode,
+            r.tuned.nrmse,
+            100.0 * r.tuned.calibration.coverage_2sigma
+        ),
+        None => format!("default mode {}", v.default_mode),
+    }
+}
+
+/// The training summary: what was trained, how long it took, the default mode and its
+/// held-out scores, and the warnings; with `verbose`, each GP and the held-out table.
+pub fn summary_text(
     model: &HbnModel,
     samples: usize,
     out: &std::path::Path,
-) -> anyhow::Result<()> {
+    verbose: bool,
+) -> String {
     let s = model.summary();
     let p = model.params();
     let mut text = format!(
-        "trained `{}` from {} log{}: {} samples at {:.1} Hz, {} rows per GP; training took \
-         {:.1} s\n",
+        "trained `{}` from {} log{}: {} samples at {:.1} Hz; training took {:.1} s\n  {}\n",
         out.display(),
         s.trajectories,
         if s.trajectories == 1 { "" } else { "s" },
         samples,
         model.rate_hz(),
-        s.rows,
-        s.seconds
+        s.seconds,
+        default_mode_line(model),
     );
-    for role in GpRole::ALL {
-        let gp = model.gp(role);
-        let (points, score) = if gp.is_sparse() {
-            ("inducing points", "bound")
+    if verbose {
+        text.push_str(&format!("  {} rows per GP\n", s.rows));
+        for role in GpRole::ALL {
+            let gp = model.gp(role);
+            let (points, score) = if gp.is_sparse() {
+                ("inducing points", "bound")
+            } else {
+                ("support points", "LML")
+            };
+            let chosen = gp
+                .report()
+                .subset_note()
+                .map_or(String::new(), |n| format!(" ({n})"));
+            text.push_str(&format!(
+                "  {:<10} GP: {:>4} {points}{chosen}, {score} {:>10.2}, kernel {}; optimiser \
+                 starts: {}\n",
+                role.name(),
+                gp.n_support(),
+                gp.log_marginal_likelihood(),
+                p.kernel(role),
+                report::terminations(s, role)
+            ));
+        }
+        text.push_str(&report::validation_table(model));
+        let points = if p.n_inducing.is_some() {
+            Term::InducingPoints
         } else {
-            ("support points", "LML")
+            Term::SupportPoints
         };
-        let chosen = gp
-            .report()
-            .subset_note()
-            .map_or(String::new(), |n| format!(" ({n})"));
         text.push_str(&format!(
-            "  {:<10} GP: {:>4} {points}{chosen}, {score} {:>10.2}, kernel {}; optimiser \
-             starts: {}\n",
-            role.name(),
-            gp.n_support(),
-            gp.log_marginal_likelihood(),
-            p.kernel(role),
-            report::terminations(s, role)
+            "  {}\n",
+            glossary::links(&[
+                Term::Rows,
+                points,
+                Term::Lml,
+                Term::OptimiserStarts,
+                Term::ValidationTable
+            ])
         ));
     }
-    text.push_str(&report::validation_table(model));
     if s.warnings.is_empty() {
         text.push_str("  no warnings\n");
     } else {
@@ -106,5 +157,12 @@ pub fn print_summary(
             text.push_str(&format!("  warning: {w}\n"));
         }
     }
-    ui.print(text)
+    if !verbose {
+        text.push_str(&format!(
+            "  (details: --verbose, or `hbn inspect {}`; {})\n",
+            out.display(),
+            glossary::links(&[Term::DefaultMode, Term::Nrmse, Term::Coverage])
+        ));
+    }
+    text
 }

@@ -23,6 +23,7 @@ pub mod cmd_experiment;
 pub mod cmd_inspect;
 pub mod cmd_simulate;
 pub mod cmd_train;
+pub mod glossary;
 pub mod plot;
 pub mod progress;
 pub mod report;
@@ -41,14 +42,27 @@ pub use cli::{Cli, Command};
 pub struct Ui<'a> {
     /// `--quiet`: no progress bars, no notices.
     pub quiet: bool,
+    /// `--verbose`: details after the summary.
+    pub verbose: bool,
     out: &'a mut dyn Write,
     err: &'a mut dyn Write,
 }
 
 impl<'a> Ui<'a> {
-    /// A console printing to the given writers.
+    /// A console printing to the given writers (neither quiet nor verbose).
     pub fn new(quiet: bool, out: &'a mut dyn Write, err: &'a mut dyn Write) -> Self {
-        Ui { quiet, out, err }
+        Ui {
+            quiet,
+            verbose: false,
+            out,
+            err,
+        }
+    }
+
+    /// The same console, verbose or not.
+    pub fn with_verbose(mut self, verbose: bool) -> Self {
+        self.verbose = verbose;
+        self
     }
 
     /// Prints a notice (`note: ...`) to stderr unless quiet.
@@ -111,15 +125,21 @@ where
             };
         }
     };
-    let mut ui = Ui::new(cli.quiet, out, err);
-    match cli.command {
-        Command::Simulate(a) => cmd_simulate::run(&mut ui, &a),
-        Command::Train(a) => cmd_train::run(&mut ui, &a).map(|_| ()),
-        Command::Estimate(a) => cmd_estimate::run(&mut ui, &a).map(|_| ()),
-        Command::Eval(a) => cmd_eval::run(&mut ui, &a).map(|_| ()),
-        Command::Inspect(a) => cmd_inspect::run(&mut ui, &a),
-        Command::Demo(a) => cmd_demo::run(&mut ui, &a),
-        Command::Experiment(a) => cmd_experiment::run(&mut ui, &a).map(|_| ()),
+    let mut ui = Ui::new(cli.quiet, out, err).with_verbose(cli.verbose);
+    execute(&mut ui, cli.command)
+}
+
+/// Runs one parsed command.
+pub fn execute(ui: &mut Ui<'_>, command: Command) -> anyhow::Result<()> {
+    let ui = &mut *ui;
+    match command {
+        Command::Simulate(a) => cmd_simulate::run(ui, &a),
+        Command::Train(a) => cmd_train::run(ui, &a).map(|_| ()),
+        Command::Estimate(a) => cmd_estimate::run(ui, &a).map(|_| ()),
+        Command::Eval(a) => cmd_eval::run(ui, &a).map(|_| ()),
+        Command::Inspect(a) => cmd_inspect::run(ui, &a),
+        Command::Demo(a) => cmd_demo::run(ui, &a),
+        Command::Experiment(a) => cmd_experiment::run(ui, &a).map(|_| ()),
     }
 }
 

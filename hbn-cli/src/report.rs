@@ -81,6 +81,26 @@ pub fn error(e: PipelineError, time_source: TimeSource) -> anyhow::Error {
     }
 }
 
+/// `1000 samples at 100.0 Hz (10.00 s, where /input.data and /sensor.data both have data)`:
+/// the grid of a log, with the signals whose common span it covers (so that `estimate`, which
+/// reads two signals, and `eval`, which reads three, explain why their counts may differ).
+pub fn grid_text(log: &hbn_pipeline::LogData) -> String {
+    let paths: Vec<String> = log.paths.iter().map(|p| p.to_string()).collect();
+    let signals = match paths.as_slice() {
+        [] => String::new(),
+        [one] => format!(", where {one} has data"),
+        [a, b] => format!(", where {a} and {b} both have data"),
+        [rest @ .., last] => format!(", where {} and {last} all have data", rest.join(", ")),
+    };
+    format!(
+        "{} sample{} at {:.1} Hz ({:.2} s{signals})",
+        log.len(),
+        if log.len() == 1 { "" } else { "s" },
+        log.rate_hz(),
+        log.duration_s()
+    )
+}
+
 /// Why each optimiser start of one GP stopped, comma-separated.
 pub fn terminations(summary: &hbn_model::TrainingSummary, role: hbn_model::GpRole) -> String {
     summary

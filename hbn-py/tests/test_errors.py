@@ -49,7 +49,7 @@ def test_estimate_bad_inputs(trained):
     with pytest.raises(ValueError, match="equal lengths"):
         model.estimate(test["u"], test["y"][:-1])
     with pytest.raises(ValueError, match="unknown mode"):
-        model.estimate(test["u"], test["y"], mode="ukf")
+        model.estimate(test["u"], test["y"], mode="kalman")
 
 
 def test_simulate_bad_inputs():

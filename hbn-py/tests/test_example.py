@@ -15,4 +15,4 @@ def test_example_writes_png(repo, tmp_path):
     )
     assert r.returncode == 0, r.stderr
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert "nRMSE EKF" in r.stdout
+    assert "nRMSE ekf " in r.stdout and "nRMSE ekf-blr" in r.stdout

@@ -290,9 +290,9 @@ fn every_flag_fires_on_a_case_built_for_it_and_not_on_clean_data() {
     y_spike[120] += 50.0 * sy;
     let xb = f.model.untuned_config(Mode::Ekf).x_bounds;
     type Change = Box<dyn Fn(&mut EkfConfig)>;
-    /// (flag, mode, settings change, u, y)
+    // (flag expected, mode, change of the configuration, u, y)
     type Case<'a> = (u32, Mode, Change, &'a [f64], &'a [f64]);
-    let cases: Vec<Case> = vec![
+    let cases: Vec<Case<'_>> = vec![
         (Flags::INPUT_INVALID, Mode::Ekf, Box::new(same), &u_bad, y),
         (
             Flags::MEASUREMENT_INVALID,

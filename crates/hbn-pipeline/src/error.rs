@@ -130,6 +130,9 @@ pub enum PipelineError {
     /// Training, estimation or a model file failed.
     #[error(transparent)]
     Model(#[from] ModelError),
+    /// No estimation mode was given.
+    #[error("no estimation mode given; give at least one")]
+    NoModes,
     /// Writing an output failed.
     #[error("cannot write `{}`: {source}", file.display())]
     Write {

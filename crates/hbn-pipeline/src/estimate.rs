@@ -17,7 +17,8 @@ use crate::train::{DEFAULT_INPUT, DEFAULT_OUTPUT, DEFAULT_STATE};
 pub const ESTIMATE_TOPIC: &str = "/hbn/estimate";
 /// Schema name of the estimate messages.
 pub const ESTIMATE_SCHEMA: &str = "hbn/Estimate";
-/// CSV header (`t` in seconds from the first grid sample).
+/// CSV header (`t` in seconds from the first grid sample; `flags` the guard flags as a bit mask,
+/// `flag_names` the same as names joined by `|`, see [`hbn_core::Flags::names`]).
 pub const CSV_HEADER: &str = "t,x,x_std,y_pred,innovation,nis,flags,flag_names";
 
 /// The signal paths to read for a model: explicit ones, else those the model was trained
@@ -151,6 +152,34 @@ pub struct Outputs {
     pub mcap: Option<PathBuf>,
 }
 
+/// `file` with `-{mode}` added to its name before the extension: `est.csv` ->
+/// `est-ekf-blr.csv`, `est` -> `est-ekf-blr`.
+pub fn file_for_mode(file: &Path, mode: Mode) -> PathBuf {
+    let stem = file.file_stem().map(|s| s.to_string_lossy().into_owned());
+    let name = match (stem, file.extension()) {
+        (Some(stem), Some(ext)) => format!("{stem}-{}.{}", mode.name(), ext.to_string_lossy()),
+        (Some(stem), None) => format!("{stem}-{}", mode.name()),
+        (None, _) => format!("{}-{}", file.to_string_lossy(), mode.name()),
+    };
+    file.with_file_name(name)
+}
+
+impl Outputs {
+    /// The files of one mode when several modes are estimated at once: the mode's name added
+    /// to each file name ([`file_for_mode`]).
+    pub fn for_mode(&self, mode: Mode) -> Outputs {
+        Outputs {
+            csv: self.csv.as_deref().map(|f| file_for_mode(f, mode)),
+            mcap: self.mcap.as_deref().map(|f| file_for_mode(f, mode)),
+        }
+    }
+
+    /// The files to write, in order (MCAP, then CSV).
+    pub fn files(&self) -> impl Iterator<Item = &Path> {
+        self.mcap.iter().chain(&self.csv).map(PathBuf::as_path)
+    }
+}
+
 /// Reads `u` and `y` from `file` at the model's rate and runs the filter in `mode` over them
 /// ([`HbnModel::estimate`]); then writes `outputs` (everything is rendered first, so an error
 /// leaves no file behind). `log_options.rate_hz` must be unset or the model's rate: a model
@@ -164,15 +193,53 @@ pub fn estimate_log(
     outputs: &Outputs,
     observe: &mut Observer<'_>,
 ) -> Result<LogEstimate, PipelineError> {
+    let mut all = estimate_log_modes(model, file, signals, &[mode], log_options, outputs, observe)?;
+    all.pop().ok_or(PipelineError::NoModes)
+}
+
+/// [`estimate_log`] for several modes: reads the log once and runs each mode over it. With one
+/// mode the estimate goes to `outputs`; with several, each mode's to
+/// [`Outputs::for_mode`] (`est.csv` -> `est-ekf.csv`, `est-ekf-blr.csv`, ...). Every estimate
+/// is computed before a file is written, and an error while writing removes the files this
+/// call already wrote.
+pub fn estimate_log_modes(
+    model: &HbnModel,
+    file: &Path,
+    signals: &SignalChoice,
+    modes: &[Mode],
+    log_options: LogOptions,
+    outputs: &Outputs,
+    observe: &mut Observer<'_>,
+) -> Result<Vec<LogEstimate>, PipelineError> {
+    if modes.is_empty() {
+        return Err(PipelineError::NoModes);
+    }
     let which = [LogOption::Input, LogOption::Output];
     let log = read_at_model_rate(model, file, signals, &which, log_options, observe)?;
-    let estimate = model.estimate(log.column(0), log.column(1), mode)?;
-    let out = LogEstimate {
-        log,
-        estimate,
-        mode,
-    };
-    out.write(outputs)?;
+    let mut out = Vec::with_capacity(modes.len());
+    for &mode in modes {
+        let estimate = model.estimate(log.column(0), log.column(1), mode)?;
+        out.push(LogEstimate {
+            log: log.clone(),
+            estimate,
+            mode,
+        });
+    }
+    let mut written: Vec<PathBuf> = Vec::new();
+    for e in &out {
+        let files = if modes.len() == 1 {
+            outputs.clone()
+        } else {
+            outputs.for_mode(e.mode)
+        };
+        if let Err(err) = e.write(&files) {
+            for f in &written {
+                let _ = std::fs::remove_file(f);
+            }
+            return Err(err);
+        }
+        written.extend(files.files().map(Path::to_path_buf));
+    }
     Ok(out)
 }
 
@@ -213,19 +280,25 @@ impl LogEstimate {
         let mut s = String::with_capacity(64 * est.len() + 64);
         s.push_str(CSV_HEADER);
         s.push('\n');
+        let mut names = String::new();
         for (k, t) in self.log.aligned.t_s.iter().enumerate() {
             let g = |v: &Vec<f64>| v.get(k).copied().unwrap_or(f64::NAN);
             let flags = est.flags.get(k).copied().unwrap_or(0);
-            let names: Vec<&str> = hbn_core::Flags(flags).names().collect();
+            names.clear();
+            for (i, n) in Flags(flags).names().enumerate() {
+                if i > 0 {
+                    names.push('|');
+                }
+                names.push_str(n);
+            }
             let _ = writeln!(
                 s,
-                "{t},{},{},{},{},{},{flags},{}",
+                "{t},{},{},{},{},{},{flags},{names}",
                 g(&est.x),
                 g(&est.x_std),
                 g(&est.y_pred),
                 g(&est.innovation),
                 g(&est.nis),
-                names.join("|")
             );
         }
         s
@@ -296,4 +369,35 @@ pub fn estimate_schema() -> Value {
         },
         "required": ["x", "x_std", "y_pred", "innovation", "nis", "flags", "flag_names"]
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn files_for_a_mode_carry_its_name() {
+        let m = Mode::EkfBlr;
+        assert_eq!(
+            file_for_mode(Path::new("out/est.csv"), m),
+            Path::new("out/est-ekf-blr.csv")
+        );
+        assert_eq!(
+            file_for_mode(Path::new("est.v1.mcap"), m),
+            Path::new("est.v1-ekf-blr.mcap")
+        );
+        assert_eq!(file_for_mode(Path::new("est"), m), Path::new("est-ekf-blr"));
+        let o = Outputs {
+            csv: Some("a.csv".into()),
+            mcap: None,
+        };
+        assert_eq!(o.for_mode(Mode::Ekf).csv, Some("a-ekf.csv".into()));
+        assert_eq!(o.for_mode(Mode::Ekf).files().count(), 1);
+        // Every mode gets its own files.
+        let names: std::collections::BTreeSet<PathBuf> = Mode::ALL
+            .iter()
+            .filter_map(|&m| o.for_mode(m).csv)
+            .collect();
+        assert_eq!(names.len(), Mode::ALL.len());
+    }
 }

@@ -73,7 +73,9 @@ pub struct Evaluation {
 
 impl Evaluation {
     /// JSON: `{"rmse": {..}, "nrmse": {..}, "calibration": {method: {coverage_1sigma,
-    /// coverage_2sigma, mean_nees, nlpd, samples}}, "samples": N, "rate_hz": ..}`.
+    /// coverage_2sigma, mean_nees, nlpd, samples}}, "samples": N, "rate_hz": ..,
+    /// "duration_s": .., "signals": [paths]}` (the samples are the span where every signal read
+    /// has data).
     pub fn to_json(&self) -> Value {
         let mut r = Map::new();
         let mut n = Map::new();
@@ -85,8 +87,10 @@ impl Evaluation {
                 c.insert(s.method.key().into(), json!(cal));
             }
         }
+        let signals: Vec<String> = self.log.paths.iter().map(|p| p.to_string()).collect();
         json!({"rmse": r, "nrmse": n, "calibration": c, "samples": self.log.len(),
-               "rate_hz": self.log.rate_hz()})
+               "rate_hz": self.log.rate_hz(), "duration_s": self.log.duration_s(),
+               "signals": signals})
     }
 }
 

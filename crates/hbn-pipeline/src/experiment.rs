@@ -229,7 +229,7 @@ pub fn markdown_table(rows: &[ExperimentRow]) -> String {
         }
     }
     let mut out = String::from(
-        "| system | noise gain | runs | nRMSE EKF | nRMSE EKF+BLR | nRMSE UKF | nRMSE open loop | nRMSE default mode | 2-sigma coverage | mean NEES | corr(q, x) EKF | corr(q, x) EKF+BLR |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| system | noise gain | runs | nRMSE ekf | nRMSE ekf-blr | nRMSE ukf | nRMSE open-loop | nRMSE default mode | 2-sigma coverage | mean NEES | corr(q, x) ekf | corr(q, x) ekf-blr |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for (s, g) in keys {
         let sel: Vec<&ExperimentRow> = rows

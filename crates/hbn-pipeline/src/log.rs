@@ -175,6 +175,15 @@ impl LogData {
     pub fn rate_hz(&self) -> f64 {
         self.aligned.rate_hz
     }
+    /// The length of the grid, samples / rate (s): 1000 samples at 100 Hz last 10 s, as
+    /// `hbn simulate` says of the log it writes.
+    pub fn duration_s(&self) -> f64 {
+        if self.rate_hz() > 0.0 {
+            self.len() as f64 / self.rate_hz()
+        } else {
+            0.0
+        }
+    }
     /// Absolute grid times on the log's clock (ns): where estimates are written.
     pub fn times_ns(&self) -> Vec<u64> {
         let a = &self.aligned;
