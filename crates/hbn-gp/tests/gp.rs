@@ -267,7 +267,11 @@ fn large_data_use_a_reported_subset() {
         // A subset is normal for the exact GP on a long log: a note, not a warning.
         let note = gp.report().subset_note().expect("the subset is reported");
         assert!(note.contains("from 300 samples"), "{note}");
-        assert!(gp.report().warnings().is_empty(), "{:?}", gp.report().warnings());
+        assert!(
+            gp.report().warnings().is_empty(),
+            "{:?}",
+            gp.report().warnings()
+        );
     }
 }
 
