@@ -103,14 +103,32 @@ class NumpyGP:
 
         sparse = gp.get("sparse")
         if sparse is None:
-            # Exact GP: L^{-1}, once; the variance is then |L^{-1} k|^2, one mat-vec.
-            self.chol_inv = np.linalg.solve(unpack(gp["chol_packed"]), np.eye(n))
+            # Exact GP: L^{-1}, once; the variance is then |L^{-1} k|^2, one mat-vec. Model files
+            # of version 2 leave the factor out: L L^T = K + s_n^2 I over the support points.
+            if gp.get("chol_packed"):
+                chol = unpack(gp["chol_packed"])
+            else:
+                delta = self.features[:, None, :] - self.features[None, :, :]
+                f, _ = self._profile(np.einsum("ijk,ijk->ij", delta, delta))
+                dirf = 1.0 if self.dirs is None else 0.5 * (1.0 + np.outer(self.dirs, self.dirs))
+                kmat = self.sf2 * f * dirf + float(gp["noise_variance"]) * np.eye(n)
+                chol = np.linalg.cholesky(kmat)
+            self.chol_inv = np.linalg.solve(chol, np.eye(n))
             self.sigma_factor = None
         else:
             # Sparse GP (docs/sparse.md): var = k** - |L^{-1} k|^2 + |C k|^2, both factors stored
             # already inverted.
             self.chol_inv = unpack(sparse["kmm_inv_factor"])
             self.sigma_factor = unpack(sparse["sigma_factor"])
+
+    def _profile(self, r2: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """Kernel profile ``f(r2)`` and its slope ``df/dr2``."""
+        if self.profile == "squared-exponential":
+            f = np.exp(-0.5 * r2)
+            return f, -0.5 * f
+        r = np.sqrt(np.maximum(r2, 0.0))
+        e = np.exp(-SQRT5 * r)
+        return (1.0 + SQRT5 * r + (5.0 / 3.0) * r2) * e, -(5.0 / 6.0) * (1.0 + SQRT5 * r) * e
 
     def _features(self, z: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """``u = L phi(z)`` and ``du/dz`` (d x d)."""
@@ -127,14 +145,7 @@ class NumpyGP:
         u_star, du_dz = self._features(z)
         delta = self.features - u_star
         r2 = np.einsum("ij,ij->i", delta, delta)
-        if self.profile == "squared-exponential":
-            f = np.exp(-0.5 * r2)
-            df = -0.5 * f
-        else:
-            r = np.sqrt(np.maximum(r2, 0.0))
-            e = np.exp(-SQRT5 * r)
-            f = (1.0 + SQRT5 * r + (5.0 / 3.0) * r2) * e
-            df = -(5.0 / 6.0) * (1.0 + SQRT5 * r) * e
+        f, df = self._profile(r2)
         if self.direction is not None:
             a, b = self.direction
             g = float(np.sign(x_raw[a] - x_raw[b]))
@@ -360,8 +371,8 @@ def load_model_json(path: str) -> Dict[str, Any]:
     """The ``model`` object of an hbn model file (checks the format tag)."""
     with open(path, "r", encoding="utf-8") as fh:
         doc = json.load(fh)
-    if doc.get("format") != "hbn-model" or doc.get("version") != 1:
-        raise ValueError(f"{path}: not an hbn model file of format version 1")
+    if doc.get("format") != "hbn-model" or doc.get("version") not in (1, 2):
+        raise ValueError(f"{path}: not an hbn model file of format version 1 or 2")
     return doc["model"]
 
 

@@ -40,6 +40,10 @@ pub use train::{FitProgress, StartFailure, Termination, fit, fit_observed};
 
 /// Fewest support points a GP keeps (`GpParams::max_points` must be at least this).
 pub const MIN_POINTS: usize = 2;
+/// Largest number of support points of an exact GP (`max_points`): its `n x n` kernel matrix
+/// (800 MB at this size) is factorised when a model is trained and again when it is loaded.
+/// Longer logs are what the sparse GP (`n_inducing`) is for.
+pub const MAX_EXACT_POINTS: usize = 10_000;
 
 /// Writes `bytes` to `path` atomically: the one writer of [`hbn_fs`] (temporary file in the
 /// same directory, fsync, rename, directory fsync). A failure leaves no partial file behind.

@@ -9,8 +9,9 @@ use std::path::Path;
 
 /// Format tag of a standalone GP file.
 pub const GP_FORMAT: &str = "hbn-gp";
-/// Current GP file format version (2 added the sparse GP; version 1 files still load).
-pub const GP_FORMAT_VERSION: u32 = 2;
+/// Current GP file format version (2 added the sparse GP; 3 leaves out the exact GP's
+/// Cholesky factor, recomputed on load; versions 1 and 2 still load).
+pub const GP_FORMAT_VERSION: u32 = 3;
 /// Oldest GP file format version this build reads.
 pub const GP_FORMAT_OLDEST: u32 = 1;
 
@@ -149,8 +150,10 @@ pub struct GaussianProcess {
     pub(crate) directions: Vec<f64>,
     pub(crate) features: Vec<f64>,
     pub(crate) alpha: Vec<f64>,
-    /// Exact GP only (empty for a sparse GP).
-    #[serde(default)]
+    /// Exact GP only (empty for a sparse GP). Not written to files: it is `O(n^2)` (87% of
+    /// a default model file) and a deterministic function of the other fields, recomputed by
+    /// [`GaussianProcess::restore_factor`] on load, with the routine that made it in training.
+    #[serde(default, skip_serializing)]
     pub(crate) chol_packed: Vec<f64>,
     /// Sparse GP only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -293,6 +296,74 @@ impl GaussianProcess {
         &self.report
     }
 
+    /// Recomputes the exact GP's Cholesky factor after deserialisation (files leave it out);
+    /// does nothing for a sparse GP or when the factor is present (files of format 1 and 2).
+    /// Loaders call it; it gives the factor [`crate::fit`] made, bit for bit, because training
+    /// ends by computing the factor with this same routine.
+    pub fn restore_factor(&mut self) -> Result<(), GpError> {
+        if self.sparse.is_some() || !self.chol_packed.is_empty() {
+            return Ok(());
+        }
+        self.chol_packed = self.exact_factor()?;
+        Ok(())
+    }
+
+    /// Packed lower Cholesky factor of `K + s_n^2 I` over the support points, from the stored
+    /// kernel features, directions, hyperparameters and noise (which includes any jitter
+    /// training needed). Fails rather than adding jitter: training checked that it succeeds.
+    pub(crate) fn exact_factor(&self) -> Result<Vec<f64>, GpError> {
+        let d = self.kernel.dim;
+        let n = self.alpha.len();
+        if n > crate::MAX_EXACT_POINTS {
+            return Err(GpError::InvalidParameter {
+                name: "max_points",
+                reason: format!(
+                    "an exact GP has at most {} support points, this one {n}",
+                    crate::MAX_EXACT_POINTS
+                ),
+            });
+        }
+        let kernel = Kernel::new(self.kernel, &self.theta, &self.whiten)?;
+        let has_dirs = self.kernel.direction.is_some();
+        if self.features.len() != n * d || (has_dirs && self.directions.len() != n) {
+            return Err(GpError::Shape {
+                what: "support-point features (n x dim)",
+                expected: n * d,
+                got: self.features.len(),
+            });
+        }
+        let sf2 = kernel.signal_variance();
+        let spec = self.kernel;
+        let dir = |i: usize| if has_dirs { self.directions[i] } else { 0.0 };
+        let u = &self.features;
+        let mut k = faer::Mat::from_fn(n, n, |i, j| {
+            if j > i {
+                return 0.0;
+            }
+            let r2: f64 = u[i * d..i * d + d]
+                .iter()
+                .zip(&u[j * d..j * d + d])
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum();
+            let (f, _) = hbn_core::kernel::profile_and_slope(spec.profile, r2);
+            let k_ij = sf2 * f * spec.direction_factor(dir(i), dir(j));
+            if i == j {
+                k_ij + self.noise_variance
+            } else {
+                k_ij
+            }
+        });
+        let factor = crate::factor::factor_with_jitter(&mut k, 0)?;
+        let l = factor.llt.L();
+        let mut packed = Vec::with_capacity(n * (n + 1) / 2);
+        for i in 0..n {
+            for j in 0..=i {
+                packed.push(l[(i, j)]);
+            }
+        }
+        Ok(packed)
+    }
+
     /// Serialises to JSON (exact float round trip) with a format tag and version.
     pub fn to_json(&self) -> Result<String, GpError> {
         let file = GpFile {
@@ -329,9 +400,13 @@ impl GaussianProcess {
                 ),
             });
         }
-        let file: GpFile = serde_json::from_value(value).map_err(|e| GpError::Format {
+        let mut file: GpFile = serde_json::from_value(value).map_err(|e| GpError::Format {
             path: origin.into(),
             reason: format!("malformed GP model: {e}"),
+        })?;
+        file.gp.restore_factor().map_err(|e| GpError::Format {
+            path: origin.into(),
+            reason: format!("inconsistent GP model: {e}"),
         })?;
         file.gp.view().map_err(|e| GpError::Format {
             path: origin.into(),
@@ -353,5 +428,70 @@ impl GaussianProcess {
             source,
         })?;
         Self::from_json(&text, &path.display().to_string())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{GpParams, fit};
+
+    fn trained() -> GaussianProcess {
+        let x: Vec<f64> = (0..120).map(|i| (i as f64 * 0.731).sin() * 2.0).collect();
+        let y: Vec<f64> = x
+            .chunks_exact(2)
+            .map(|r| (1.3 * r[0]).sin() + 0.5 * r[1])
+            .collect();
+        let mut params = GpParams::new(KernelSpec::se_ard(2));
+        params.n_starts = 1;
+        params.max_iters = 20;
+        fit(&params, &x, &y).unwrap()
+    }
+
+    #[test]
+    fn files_leave_the_factor_out_and_loading_recomputes_it_bit_for_bit() {
+        let gp = trained();
+        assert_eq!(gp.chol_packed.len(), 60 * 61 / 2);
+        let text = gp.to_json().unwrap();
+        let value: serde_json::Value = serde_json::from_str(&text).unwrap();
+        assert!(value["gp"].get("chol_packed").is_none(), "factor written");
+        let back = GaussianProcess::from_json(&text, "mem").unwrap();
+        let same_bits = |a: &[f64], b: &[f64]| {
+            a.len() == b.len() && a.iter().zip(b).all(|(p, q)| p.to_bits() == q.to_bits())
+        };
+        assert!(same_bits(&gp.chol_packed, &back.chol_packed));
+        // The factor is right: L L^T = K + s_n^2 I at a diagonal entry (k(x, x) = sf2).
+        let l00 = back.chol_packed[0];
+        let sf2 = Kernel::new(gp.kernel, &gp.theta, &gp.whiten)
+            .unwrap()
+            .signal_variance();
+        assert!((l00 * l00 - (sf2 + gp.noise_variance)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn files_of_format_2_with_the_factor_still_load_as_written() {
+        let gp = trained();
+        let mut value: serde_json::Value = serde_json::from_str(&gp.to_json().unwrap()).unwrap();
+        value["version"] = 2.into();
+        // A factor that differs from the recomputed one in the last bit: it must be used as is.
+        let mut old = gp.chol_packed.clone();
+        old[0] = f64::from_bits(old[0].to_bits() + 1);
+        value["gp"]["chol_packed"] = serde_json::to_value(&old).unwrap();
+        let back = GaussianProcess::from_json(&value.to_string(), "mem").unwrap();
+        assert_eq!(back.chol_packed, old);
+    }
+
+    #[test]
+    fn a_file_whose_factor_cannot_be_recomputed_is_an_error() {
+        let gp = trained();
+        let mut value: serde_json::Value = serde_json::from_str(&gp.to_json().unwrap()).unwrap();
+        // A negative noise larger than the signal variance: K + s_n^2 I is not positive definite.
+        value["gp"]["noise_variance"] = (-1e3).into();
+        let e = GaussianProcess::from_json(&value.to_string(), "m.json").unwrap_err();
+        assert!(matches!(e, GpError::Format { .. }), "{e}");
+        // Features of the wrong length: a shape error, not a panic.
+        let mut value: serde_json::Value = serde_json::from_str(&gp.to_json().unwrap()).unwrap();
+        value["gp"]["features"] = serde_json::to_value(vec![0.0; 3]).unwrap();
+        assert!(GaussianProcess::from_json(&value.to_string(), "m.json").is_err());
     }
 }

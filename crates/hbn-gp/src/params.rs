@@ -154,10 +154,15 @@ impl GpParams {
                 format!("must be finite and > 0, got {}", self.noise_floor),
             );
         }
-        if self.max_points < crate::MIN_POINTS {
+        if !(crate::MIN_POINTS..=crate::MAX_EXACT_POINTS).contains(&self.max_points) {
             return bad(
                 "max_points",
-                format!("must be >= {}, got {}", crate::MIN_POINTS, self.max_points),
+                format!(
+                    "must be in {}..={}, got {} (for more samples use a sparse GP: n_inducing)",
+                    crate::MIN_POINTS,
+                    crate::MAX_EXACT_POINTS,
+                    self.max_points
+                ),
             );
         }
         if let Some(sp) = &self.sparse {

@@ -212,14 +212,7 @@ pub fn fit_observed(
     // Final factorisation at the chosen hyperparameters.
     let solved = lik.solve(&theta, noise)?;
     report.final_jitter = solved.factor.jitter;
-    let l = solved.factor.llt.L();
     let n = keep.len();
-    let mut chol_packed = Vec::with_capacity(n * (n + 1) / 2);
-    for i in 0..n {
-        for j in 0..=i {
-            chol_packed.push(l[(i, j)]);
-        }
-    }
     let kernel = Kernel::new(spec, &theta, &whiten)?;
     let mut features = Vec::with_capacity(n * d);
     let mut u = [0.0; MAX_DIM];
@@ -235,7 +228,7 @@ pub fn fit_observed(
         .sum::<f64>()
         / n as f64;
     report.seconds = t0.elapsed().as_secs_f64();
-    Ok(GaussianProcess {
+    let mut gp = GaussianProcess {
         kernel: spec,
         theta,
         // The jitter is part of the factor's diagonal: keep it in the noise so the model is consistent.
@@ -254,12 +247,16 @@ pub fn fit_observed(
         },
         features,
         alpha: solved.alpha,
-        chol_packed,
+        chol_packed: Vec::new(),
         sparse: None,
         log_marginal_likelihood: solved.lml,
         loo_error_variance: loo_standardised * output_scale * output_scale,
         report,
-    })
+    };
+    // The prediction factor comes from the routine that recomputes it when a file is loaded
+    // (files leave it out), so a loaded model predicts bit for bit as the trained one.
+    gp.restore_factor()?;
+    Ok(gp)
 }
 
 /// Standardised copies of the data (statistics of all samples).

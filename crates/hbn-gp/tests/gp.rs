@@ -234,10 +234,11 @@ fn save_and_load_predict_bit_identically() {
     std::fs::write(&path, "{\"format\":\"other\",\"version\":1}").unwrap();
     let e = GaussianProcess::load(&path).unwrap_err().to_string();
     assert!(e.contains("gp.json") && e.contains("not an hbn GP"), "{e}");
-    let text = gp
-        .to_json()
-        .unwrap()
-        .replacen("\"version\":2", "\"version\":99", 1);
+    let text = gp.to_json().unwrap().replacen(
+        &format!("\"version\":{}", hbn_gp::GP_FORMAT_VERSION),
+        "\"version\":99",
+        1,
+    );
     std::fs::write(&path, text).unwrap();
     assert!(
         GaussianProcess::load(&path)

@@ -100,8 +100,9 @@ pub enum ModelFileProblem {
     },
     /// A format version this build does not read.
     #[error(
-        "model format version {version} is not supported by this hbn (reads version {}); retrain \
-         with this version",
+        "model format version {version} is not supported by this hbn (reads versions {} to {}); \
+         retrain with this version or use a newer hbn",
+        crate::MODEL_FORMAT_OLDEST,
         crate::MODEL_FORMAT_VERSION
     )]
     UnsupportedVersion {

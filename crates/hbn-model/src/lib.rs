@@ -50,8 +50,8 @@ pub use estimate::{Estimate, NEAR_UNOBSERVABLE, OBSERVABILITY_WINDOW, Observabil
 pub use filter::{Filter, FilterOutput};
 pub use local::LocalData;
 pub use model::{
-    GpRole, HbnModel, INIT_NEIGHBOURS, MODEL_FORMAT, MODEL_FORMAT_VERSION, SignalStats,
-    StartSummary, TrainingSummary,
+    GpRole, HbnModel, INIT_NEIGHBOURS, MODEL_FORMAT, MODEL_FORMAT_OLDEST, MODEL_FORMAT_VERSION,
+    SignalStats, StartSummary, TrainingSummary,
 };
 pub use params::{
     CheckedHbnParams, ConfigError, DEFAULT_INDUCING, HbnParams, Increments, KernelChoice,

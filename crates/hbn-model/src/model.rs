@@ -16,8 +16,11 @@ use std::time::Instant;
 
 /// Format tag of an HBN model file.
 pub const MODEL_FORMAT: &str = "hbn-model";
-/// Current model file format version.
-pub const MODEL_FORMAT_VERSION: u32 = 1;
+/// Current model file format version (2 leaves out the exact GPs' Cholesky factors, which
+/// are recomputed on load: a default model file went from 6.4 MB to under 1 MB).
+pub const MODEL_FORMAT_VERSION: u32 = 2;
+/// Oldest model file format version this build reads (version 1 files carry the factors).
+pub const MODEL_FORMAT_OLDEST: u32 = 1;
 
 /// One of the two GPs of the HBN.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -506,14 +509,21 @@ impl HbnModel {
             return Err(fail(ModelFileProblem::WrongFormat { tag: tag.into() }));
         }
         let version = value.get("version").and_then(|v| v.as_u64()).unwrap_or(0);
-        if version != u64::from(MODEL_FORMAT_VERSION) {
+        if !(u64::from(MODEL_FORMAT_OLDEST)..=u64::from(MODEL_FORMAT_VERSION)).contains(&version) {
             return Err(fail(ModelFileProblem::UnsupportedVersion { version }));
         }
-        let file: ModelFile = serde_json::from_value(value).map_err(|e| {
+        let mut file: ModelFile = serde_json::from_value(value).map_err(|e| {
             fail(ModelFileProblem::Malformed {
                 detail: e.to_string(),
             })
         })?;
+        for gp in [&mut file.model.transition, &mut file.model.sensor] {
+            gp.restore_factor().map_err(|e| {
+                fail(ModelFileProblem::Malformed {
+                    detail: format!("the GP's factor cannot be recomputed: {e}"),
+                })
+            })?;
+        }
         file.model.view().map_err(|e| match e {
             ModelError::Core(c) => fail(ModelFileProblem::Inconsistent(c)),
             other => other,
