@@ -16,7 +16,9 @@ cargo test --release --workspace --exclude hbn-py
 
 echo "== Fuzz smoke: each cargo-fuzz target for 5 s (needs nightly and cargo-fuzz; optional)"
 # The corpora also replay on stable in tests/fuzz_replay.rs (above). New inputs go to a scratch
-# corpus under target/, never into the committed fuzz/corpus.
+# corpus under target/, never into the committed fuzz/corpus. The memory limits are those of
+# scripts/fuzz_campaign.sh (docs/reliability.md: the mcap crate reserves a string's claimed
+# length before reading it, an out-of-memory only under libFuzzer's default 2 GiB limit).
 if cargo +nightly --version >/dev/null 2>&1 && cargo +nightly fuzz --version >/dev/null 2>&1; then
   SMOKE="$ROOT/target/fuzz-smoke"
   for t in $(cargo +nightly fuzz list); do
@@ -24,7 +26,8 @@ if cargo +nightly --version >/dev/null 2>&1 && cargo +nightly fuzz --version >/d
     log="$SMOKE/$t.log"
     # Exits non-zero on a crash (the input is saved under $SMOKE/artifacts/$t/).
     if ! cargo +nightly fuzz run "$t" "$SMOKE/corpus/$t" "fuzz/corpus/$t" -- \
-      -max_total_time=5 -print_final_stats=1 -artifact_prefix="$SMOKE/artifacts/$t/" \
+      -max_total_time=5 -print_final_stats=1 -rss_limit_mb=8192 -malloc_limit_mb=8192 \
+      -artifact_prefix="$SMOKE/artifacts/$t/" \
       >"$log" 2>&1; then
       tail -n 40 "$log" >&2
       echo "fuzz target $t failed (log: $log)" >&2
