@@ -336,7 +336,7 @@ impl<'a> InitPrior<'a> {
 
     /// Mean and variance of `x` over the `neighbours` training samples whose `y` is nearest `y0`
     /// (ties go to the lower index), the variance at least the floor. `None` for a non-finite
-    /// `y0`.
+    /// `y0`, and when the mean or variance overflows (pairs near `f64::MAX`).
     pub fn prior(&self, y0: f64) -> Option<(f64, f64)> {
         if !y0.is_finite() {
             return None;
@@ -385,7 +385,13 @@ impl<'a> InitPrior<'a> {
         let n = k.max(1) as f64;
         let mean = picked().sum::<f64>() / n;
         let var = picked().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n;
-        Some((mean, var.max(self.var_floor)))
+        // Finite pairs near f64::MAX can still overflow the sums (found by the `step` fuzz
+        // target): no prior then, and the caller falls back to its settings.
+        if mean.is_finite() && var.is_finite() {
+            Some((mean, var.max(self.var_floor)))
+        } else {
+            None
+        }
     }
 }
 
@@ -1292,5 +1298,20 @@ mod tests {
         );
         assert!(InitPrior::new(&[[0.0, 0.0]], 0, 1.0).is_err());
         assert!(InitPrior::new(&[[0.0, 0.0]], 1, 0.0).is_err());
+    }
+
+    #[test]
+    fn init_prior_that_overflows_is_no_prior() {
+        // Finite pairs whose mean (sum) or spread overflows: no prior, so the estimator starts
+        // from its settings instead of x = inf (a `step` fuzz target crash).
+        let big = [[0.0, f64::MAX], [0.1, f64::MAX]];
+        assert_eq!(InitPrior::new(&big, 2, 1.0).unwrap().prior(0.0), None);
+        let spread = [[0.0, f64::MAX], [0.1, -f64::MAX]];
+        assert_eq!(InitPrior::new(&spread, 2, 1.0).unwrap().prior(0.0), None);
+        // One such sample alone is a fine prior.
+        assert_eq!(
+            InitPrior::new(&big, 1, 1.0).unwrap().prior(0.0),
+            Some((f64::MAX, 1.0))
+        );
     }
 }
