@@ -266,6 +266,14 @@ impl EkfConfig {
                 "q_scale, r_scale and std_scale must be finite and > 0",
             ));
         }
+        // The reported standard deviation is `std_scale * sqrt(P_11)` with `P_11 <= p_max`:
+        // it must stay finite (a huge std_scale gave x_std = inf; found by the `step` fuzz
+        // target).
+        if !(self.std_scale * sqrt(self.p_max)).is_finite() {
+            return Err(CoreError::InvalidSpec(
+                "std_scale * sqrt(p_max) must be finite (the reported standard deviation)",
+            ));
+        }
         if !(self.x0_mean.is_finite() && pos(self.x0_var)) {
             return Err(CoreError::InvalidSpec(
                 "x0_mean must be finite and x0_var > 0",

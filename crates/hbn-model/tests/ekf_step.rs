@@ -640,3 +640,15 @@ fn increments_models_add_the_previous_sample_back() {
     let span = f.model.stats().1.span();
     assert!((err / est.x.len() as f64).sqrt() < 0.1 * span);
 }
+
+#[test]
+fn settings_whose_reported_deviation_overflows_are_rejected() {
+    // x_std = std_scale * sqrt(P_11) <= std_scale * sqrt(p_max): it must stay finite (the
+    // step fuzz target found x_std = inf with std_scale = 1e200 and p_max = 1e308).
+    let mut c = cfg(Mode::Ekf);
+    c.p_max = 1e308;
+    c.std_scale = 1e200;
+    assert!(c.validate().is_err());
+    c.std_scale = 1e100;
+    assert!(c.validate().is_ok());
+}
