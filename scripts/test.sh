@@ -14,19 +14,27 @@ cargo test --release --manifest-path crates/hbn-core/nopanic/Cargo.toml
 echo "== Rust tests (release: the end-to-end tests train GPs; also builds target/release/hbn)"
 cargo test --release --workspace --exclude hbn-py
 
-echo "== Fuzz smoke: each cargo-fuzz target for 5 s (needs nightly and cargo-fuzz; optional)"
-# The corpora also replay on stable in tests/fuzz_replay.rs (above). New inputs go to a scratch
-# corpus under target/, never into the committed fuzz/corpus. The memory limits are those of
-# scripts/fuzz_campaign.sh (docs/reliability.md: the mcap crate reserves a string's claimed
-# length before reading it, an out-of-memory only under libFuzzer's default 2 GiB limit).
+echo "== Fuzz smoke: each cargo-fuzz target, a fixed seed and run count (needs nightly and cargo-fuzz; optional)"
+# The corpora also replay on stable in tests/fuzz_replay.rs (above). The smoke is
+# deterministic: a fresh scratch corpus, -seed=1 and a fixed number of executions, so CI
+# runs exactly what passed here; exploration is the campaign's job (scripts/fuzz_campaign.sh,
+# docs/reliability.md), and every crash it finds becomes a committed regression input. The
+# memory limits are the campaign's (the mcap crate reserves a string's claimed length before
+# reading it, an out-of-memory only under libFuzzer's default 2 GiB limit).
 if cargo +nightly --version >/dev/null 2>&1 && cargo +nightly fuzz --version >/dev/null 2>&1; then
   SMOKE="$ROOT/target/fuzz-smoke"
   for t in $(cargo +nightly fuzz list); do
+    case "$t" in
+      mcap_ingest) runs=2000 ;;
+      model_load) runs=10000 ;;
+      *) runs=20000 ;;
+    esac
+    rm -rf "$SMOKE/corpus/$t" "$SMOKE/artifacts/$t"
     mkdir -p "$SMOKE/corpus/$t" "$SMOKE/artifacts/$t"
     log="$SMOKE/$t.log"
     # Exits non-zero on a crash (the input is saved under $SMOKE/artifacts/$t/).
     if ! cargo +nightly fuzz run "$t" "$SMOKE/corpus/$t" "fuzz/corpus/$t" -- \
-      -max_total_time=5 -print_final_stats=1 -rss_limit_mb=8192 -malloc_limit_mb=8192 \
+      -seed=1 -runs="$runs" -print_final_stats=1 -rss_limit_mb=8192 -malloc_limit_mb=8192 \
       -artifact_prefix="$SMOKE/artifacts/$t/" \
       >"$log" 2>&1; then
       tail -n 40 "$log" >&2

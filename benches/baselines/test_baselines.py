@@ -334,6 +334,10 @@ def test_runner_end_to_end_on_simulated_logs(
     # The default mode is one of the two modes, and gives exactly that mode's estimate.
     assert ms["hbn"]["mode"] in ("ekf", "ekf-blr")
     assert ms["hbn"]["nrmse"] == ms["hbn-" + ms["hbn"]["mode"]]["nrmse"]
+    # The open loop of the same fit: a point estimate from u alone, less accurate than the filter.
+    ol = ms["hbn-open-loop"]
+    assert ol["mode"] == "open-loop" and ol["mean_nees"] is None and ol["samples"] == 150
+    assert math.isfinite(ol["nrmse"]) and ol["nrmse"] != ms["hbn-ekf"]["nrmse"]
     printed = capsys.readouterr()
     if lstm.available():
         assert ms["lstm"]["coverage_1sigma"] is None and ms["lstm"]["mean_nees"] is None
@@ -380,7 +384,7 @@ def test_grid_writes_json_and_a_markdown_table(tmp_path: Path, capsys: pytest.Ca
     assert row["ratio_hbn-ekf"] == pytest.approx(hbn_nr / sk_nr)
     md = (tmp_path / "grid.md").read_text()
     assert md.startswith("| system | gain | runs |")
-    assert f"| duhem | 1 | 1 | - | {hbn_nr:.4f} +- 0.0000 | - | {sk_nr:.4f}" in md
+    assert f"| duhem | 1 | 1 | - | {hbn_nr:.4f} +- 0.0000 | - | - | {sk_nr:.4f}" in md
     # --table re-renders the same tables from the saved JSON.
     assert run.main(["--table", str(tmp_path / "grid.json")]) == 0
     assert capsys.readouterr().out == md
