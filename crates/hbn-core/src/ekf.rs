@@ -1085,11 +1085,14 @@ fn update(
     cfg: &EkfConfig,
     flags: &mut u32,
 ) -> (f64, f64, f64) {
+    // `P_ss + R` of two finite variances can still overflow (`P_ss` near `p_max` and a huge
+    // `R`; found by the `step` fuzz target): saturated at the largest finite value, it is a
+    // measurement that carries no information, as it should be.
+    let s_var = saturating_sum(st.p.m33, r);
     if !y_k.is_finite() {
         *flags |= Flags::MEASUREMENT_INVALID;
-        return (0.0, st.p.m33 + r, 0.0);
+        return (0.0, s_var, 0.0);
     }
-    let s_var = st.p.m33 + r;
     if !(s_var.is_finite() && s_var >= cfg.innovation_min) {
         *flags |= Flags::INNOVATION_SINGULAR;
         return (0.0, s_var, 0.0);
@@ -1130,6 +1133,12 @@ fn update(
         *flags |= Flags::INNOVATION_SINGULAR;
     }
     (innovation, s_var, nis)
+}
+
+/// `a + b`, or `f64::MAX` where the sum overflows (both are finite, non-negative variances).
+fn saturating_sum(a: f64, b: f64) -> f64 {
+    let s = a + b;
+    if s.is_finite() { s } else { f64::MAX }
 }
 
 /// Symmetrises `p` and clamps its eigenvalues into `[lo, hi]`.

@@ -652,3 +652,37 @@ fn settings_whose_reported_deviation_overflows_are_rejected() {
     c.std_scale = 1e100;
     assert!(c.validate().is_ok());
 }
+
+#[test]
+fn an_innovation_variance_that_overflows_saturates_and_the_output_stays_finite() {
+    // P_ss near p_max plus a huge (finite) R overflowed to an infinite innovation variance
+    // (found by the step fuzz target). It saturates at f64::MAX: the measurement carries no
+    // information, the update leaves the estimate where the prediction put it.
+    let f = fixture();
+    for mode in [Mode::Ekf, Mode::Ukf] {
+        let mut c = cfg(mode);
+        // Every eigenvalue of P at least 5e307, R = 1e300 * 1.5e8 = 1.5e308: their sum overflows.
+        c.p_min = 5e307;
+        c.p_max = 1e308;
+        c.r_scale = 1e300;
+        c.r_model_floor = 1.5e8;
+        let (ekf, mut scratch, mut state) = warm(f, c, 3);
+        for k in 3..40 {
+            let out = ekf.step(&mut state, &mut scratch, f.test.u[k], f.test.y[k]);
+            for v in [
+                out.x,
+                out.x_std,
+                out.y_pred,
+                out.innovation_var,
+                out.nis,
+                out.q_x,
+                out.r,
+            ] {
+                assert!(v.is_finite(), "{mode:?} step {k}: {out:?}");
+            }
+        }
+        // An invalid measurement reports the same saturated variance.
+        let out = ekf.step(&mut state, &mut scratch, f.test.u[40], f64::NAN);
+        assert!(out.innovation_var.is_finite(), "{mode:?}: {out:?}");
+    }
+}
