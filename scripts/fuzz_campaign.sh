@@ -20,9 +20,12 @@ MAX_S=${MAX_S:-1200}
 SANITIZER=${SANITIZER:-address}
 # Builds of another sanitizer get their own target directory, so that two campaigns can run at
 # once without rebuilding each other's targets.
+# FUZZ_FLAGS: more `cargo fuzz run` flags, e.g. FUZZ_FLAGS=-O (no debug assertions and no
+# overflow checks: how hbn ships). Such builds also get their own target directory.
+read -r -a EXTRA <<<"${FUZZ_FLAGS:-}"
 TARGET_DIR=()
-if [ "$SANITIZER" != address ]; then
-  TARGET_DIR=(--target-dir "fuzz/target-$SANITIZER")
+if [ "$SANITIZER" != address ] || [ ${#EXTRA[@]} -gt 0 ]; then
+  TARGET_DIR=(--target-dir "fuzz/target-$SANITIZER${FUZZ_FLAGS:+-opt}")
 fi
 OUT=target/fuzz-campaign
 targets=("$@")
@@ -33,7 +36,7 @@ for t in "${targets[@]}"; do
   mkdir -p "$OUT/corpus/$t" "$OUT/artifacts/$t"
   log="$OUT/$t.log"
   status=0
-  cargo +nightly fuzz run -s "$SANITIZER" "${TARGET_DIR[@]}" "$t" "$OUT/corpus/$t" "fuzz/corpus/$t" -- \
+  cargo +nightly fuzz run -s "$SANITIZER" "${TARGET_DIR[@]}" ${EXTRA[@]+"${EXTRA[@]}"} "$t" "$OUT/corpus/$t" "fuzz/corpus/$t" -- \
     -runs="$RUNS" -max_total_time="$MAX_S" -print_final_stats=1 \
     -rss_limit_mb=8192 -malloc_limit_mb=8192 \
     -artifact_prefix="$OUT/artifacts/$t/" >"$log" 2>&1 || status=$?

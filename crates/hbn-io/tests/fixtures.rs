@@ -389,3 +389,25 @@ fn fuzz_truncations_and_bit_flips() {
     // Some bit flips land in padding/CRCs that are not checked: those files still read.
     assert!(ok < 2000);
 }
+
+#[test]
+fn a_chunk_whose_records_overrun_it_is_an_error_in_every_build() {
+    // Found by the mcap_ingest fuzz target: an uncompressed chunk whose record claims more
+    // bytes than the chunk has left. The mcap crate (0.26, sans_io/linear_reader.rs) subtracts
+    // the record's length from the chunk's remainder without a check: with overflow checks
+    // (debug and test builds) that panicked; without (release) it wraps and the read fails.
+    // The workspace turns overflow checks off for the mcap crate alone (Cargo.toml), so every
+    // build reports a corrupt file.
+    let file = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fuzz/regressions/mcap_ingest/crash-f3b9df91929d193fc63135284ed1e1b6e7c04951");
+    let topics = list_topics(&file).unwrap_or_default();
+    let mut p: Vec<SignalPath> = topics
+        .iter()
+        .filter_map(|t| format!("{}.data", t.topic).parse().ok())
+        .collect();
+    p.extend(paths(&["/input.data", "/state.data", "/sensor.data"]));
+    for time_source in [TimeSource::LogTime, TimeSource::HeaderStamp] {
+        let err = read_signals(&file, &p, &ReadOptions { time_source });
+        assert!(err.is_err(), "{err:?}");
+    }
+}
