@@ -529,6 +529,12 @@ pub struct ExportArgs {
     /// training samples its local regression reads.
     #[arg(long, value_parser = mode_value())]
     pub mode: Option<Mode>,
+    /// Keep at most N of the training (y, x) pairs the prior of x_0 reads (default: all, and
+    /// the export reproduces `hbn estimate` exactly). Fewer pairs shrink the model data (8
+    /// bytes a pair in f32) and change only the first estimates; 0 drops the prior (the filter
+    /// starts from the training mean).
+    #[arg(long, value_name = "N")]
+    pub init_pairs: Option<usize>,
 }
 
 fn mode_value() -> impl clap::builder::TypedValueParser<Value = Mode> {

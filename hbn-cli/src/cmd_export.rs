@@ -28,11 +28,11 @@ impl From<PrecisionArg> for Precision {
 
 /// The firmware size table of `model` at both precisions (what `hbn export` and `hbn
 /// inspect` print).
-pub fn size_text(model: &HbnModel) -> anyhow::Result<String> {
+pub fn size_text(model: &HbnModel, init_pairs: Option<usize>) -> anyhow::Result<String> {
     let mut s = String::new();
     for p in [Precision::F32, Precision::F64] {
         let sizes =
-            hbn_export::size_report(model, p).context("cannot compute the firmware size report")?;
+            hbn_export::size_report(model, p, init_pairs).context("cannot compute the firmware size report")?;
         let table = hbn_export::size_table(&sizes, model.default_mode());
         // The legend once, after the last table.
         let body: Vec<&str> = table.lines().collect();
@@ -57,8 +57,8 @@ pub fn run(ui: &mut Ui<'_>, args: &ExportArgs) -> anyhow::Result<()> {
         || args.model.display().to_string(),
         |n| n.to_string_lossy().into_owned(),
     );
-    let files =
-        hbn_export::export(&model, mode, format, precision, &origin).with_context(|| {
+    let files = hbn_export::export(&model, mode, format, precision, args.init_pairs, &origin)
+        .with_context(|| {
             format!(
                 "cannot export `{}` as --format {} --precision {}",
                 args.model.display(),
@@ -73,7 +73,7 @@ pub fn run(ui: &mut Ui<'_>, args: &ExportArgs) -> anyhow::Result<()> {
         )
     })?;
     let names: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
-    let sizes = hbn_export::size_report(&model, precision)
+    let sizes = hbn_export::size_report(&model, precision, args.init_pairs)
         .context("cannot compute the firmware size report")?;
     let this = sizes.iter().find(|s| s.mode == mode);
     ui.line(format!(
@@ -93,5 +93,5 @@ pub fn run(ui: &mut Ui<'_>, args: &ExportArgs) -> anyhow::Result<()> {
         ))?;
     }
     ui.line("firmware size per mode:")?;
-    ui.print(size_text(&model)?)
+    ui.print(size_text(&model, args.init_pairs)?)
 }

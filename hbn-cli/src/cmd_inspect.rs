@@ -302,6 +302,6 @@ pub fn run(ui: &mut Ui<'_>, args: &InspectArgs) -> anyhow::Result<()> {
     } else {
         ui.print(model_text(&model, &args.model))?;
         ui.line("\nfirmware (`hbn export`, docs/firmware.md):")?;
-        ui.print(crate::cmd_export::size_text(&model)?)
+        ui.print(crate::cmd_export::size_text(&model, None)?)
     }
 }

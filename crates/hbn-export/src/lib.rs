@@ -23,7 +23,7 @@
 //! # let y: Vec<f64> = x.iter().map(|v| v + 0.1 * v * v).collect();
 //! let params = HbnParams { n_inducing: Some(16), n_starts: 1, ..HbnParams::default() };
 //! let model = HbnModel::fit(&[Sequence::new(&u, &x, &y)], &params)?;
-//! let files = export(&model, model.default_mode(), Format::C, Precision::F32, "model.hbn")?;
+//! let files = export(&model, model.default_mode(), Format::C, Precision::F32, None, "model.hbn")?;
 //! assert_eq!(files.iter().map(|f| f.name).collect::<Vec<_>>(), ["hbn_model.h", "hbn_model.c"]);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
@@ -38,7 +38,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use hbn_core::tables::{self, TableSink, Tables};
-use hbn_core::{CoreError, EkfConfig, Estimator, HbnView, Mode};
+use hbn_core::{CoreError, EkfConfig, Estimator, HbnView, InitPrior, Mode};
 use hbn_model::{HbnModel, ModelError};
 
 /// What the exported source is for.
@@ -245,6 +245,52 @@ fn checked(
     }
 }
 
+/// The prior of `x_0` as exported: the training `(y, x)` pairs, thinned.
+struct InitTable {
+    pairs: Vec<[f64; 2]>,
+    neighbours: usize,
+    var_floor: f64,
+}
+
+/// The view's prior of `x_0` with at most `keep` pairs (`None`: all of them; `Some(0)`: no
+/// prior). Thinning keeps evenly spaced pairs of the `y`-sorted table and scales the number of
+/// neighbours averaged by the same factor, so the prior spans about the same range of `y`.
+fn init_table(view: &HbnView<'_>, keep: Option<usize>) -> Option<InitTable> {
+    let init = view.init?;
+    let pairs = init.pairs();
+    let n = pairs.len();
+    let keep = keep.unwrap_or(n).min(n);
+    if keep == 0 {
+        return None;
+    }
+    let picked = (0..keep)
+        .filter_map(|i| pairs.get((2 * i + 1) * n / (2 * keep)))
+        .copied()
+        .collect();
+    let neighbours = if keep == n {
+        init.neighbours()
+    } else {
+        ((init.neighbours() * keep + n / 2) / n).max(1)
+    };
+    Some(InitTable {
+        pairs: picked,
+        neighbours,
+        var_floor: init.var_floor(),
+    })
+}
+
+/// `view` with the prior of `x_0` replaced by `table`.
+fn with_init<'a>(
+    view: HbnView<'a>,
+    table: &'a Option<InitTable>,
+) -> Result<HbnView<'a>, CoreError> {
+    let init = match table {
+        Some(t) => Some(InitPrior::new(&t.pairs, t.neighbours, t.var_floor)?),
+        None => None,
+    };
+    Ok(HbnView { init, ..view })
+}
+
 /// Sizes of one mode's export (see [`size_report`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ModeSize {
@@ -274,9 +320,20 @@ impl ModeSize {
     }
 }
 
-/// Bytes of model data and work memory of every mode at `precision`.
-pub fn size_report(model: &HbnModel, precision: Precision) -> Result<Vec<ModeSize>, ExportError> {
+/// Bytes of model data and work memory of every mode at `precision`, with at most
+/// `init_pairs` pairs in the prior of `x_0` (as [`export`]).
+pub fn size_report(
+    model: &HbnModel,
+    precision: Precision,
+    init_pairs: Option<usize>,
+) -> Result<Vec<ModeSize>, ExportError> {
     let view = model.view()?;
+    let table = init_table(&view, init_pairs);
+    let view = with_init(view, &table).map_err(|source| ExportError::Tables {
+        mode: model.default_mode(),
+        precision: precision.name(),
+        source,
+    })?;
     let scratch_bytes = 8 * Estimator::scratch_len(&view);
     let bare = HbnView { init: None, ..view };
     Mode::ALL
@@ -344,17 +401,27 @@ pub struct GeneratedFile {
     pub text: String,
 }
 
-/// Generates the source of `model` in `mode` (what [`write`] writes). `origin` (e.g. the model
-/// file) is named in the generated header comment.
+/// Generates the source of `model` in `mode` (what [`write`] writes). `init_pairs` keeps at
+/// most that many training `(y, x)` pairs for the prior of `x_0` (`None`: all, and the export
+/// reproduces `hbn estimate` exactly; `Some(0)`: no prior, the filter starts from the training
+/// mean; fewer pairs change the first estimates only). `origin` (e.g. the model file) is named
+/// in the generated header comment.
 pub fn export(
     model: &HbnModel,
     mode: Mode,
     format: Format,
     precision: Precision,
+    init_pairs: Option<usize>,
     origin: &str,
 ) -> Result<Vec<GeneratedFile>, ExportError> {
     let view = model.view()?;
     let config = model.ekf_config(mode);
+    let table = init_table(&view, init_pairs);
+    let view = with_init(view, &table).map_err(|source| ExportError::Tables {
+        mode,
+        precision: precision.name(),
+        source,
+    })?;
     let t = encode(&view, &config, precision)?;
     let r32 = checked(&t, mode, precision)?;
     let scratch = tables::scratch_len(&t.layout).map_err(|source| ExportError::Tables {
@@ -796,7 +863,7 @@ mod tests {
     #[test]
     fn sizes_add_up_and_files_are_generated() {
         let m = model(Some(16));
-        let sizes = size_report(&m, Precision::F32).unwrap();
+        let sizes = size_report(&m, Precision::F32, None).unwrap();
         for s in &sizes {
             assert_eq!(s.model_bytes, s.gp_bytes + s.init_bytes + s.local_bytes);
             assert_eq!(s.local_bytes == 0, s.mode != Mode::EkfBlr);
@@ -808,13 +875,22 @@ mod tests {
             (Format::C, &["hbn_model.h", "hbn_model.c"][..]),
         ] {
             for p in [Precision::F64, Precision::F32] {
-                let files = export(&m, Mode::EkfBlr, format, p, "m.hbn").unwrap();
+                let files = export(&m, Mode::EkfBlr, format, p, None, "m.hbn").unwrap();
                 let got: Vec<_> = files.iter().map(|f| f.name).collect();
                 assert_eq!(got, names);
             }
         }
         let dir = tempfile::tempdir().unwrap();
-        let files = export(&m, Mode::Ekf, Format::C, Precision::F64, "m.hbn").unwrap();
+        let files = export(&m, Mode::Ekf, Format::C, Precision::F64, None, "m.hbn").unwrap();
+        // Thinning the prior of x_0 shrinks the model data; 0 pairs drop it.
+        let full = size_report(&m, Precision::F32, None).unwrap()[0];
+        let thin = size_report(&m, Precision::F32, Some(50)).unwrap()[0];
+        let none = size_report(&m, Precision::F32, Some(0)).unwrap()[0];
+        assert!(thin.init_bytes < full.init_bytes && none.init_bytes == 0);
+        assert_eq!(thin.gp_bytes, full.gp_bytes);
+        for keep in [Some(0), Some(1), Some(50), Some(1_000_000)] {
+            export(&m, Mode::Ekf, Format::Rust, Precision::F32, keep, "m.hbn").unwrap();
+        }
         let out = dir.path().join("new");
         let paths = write(&out, &files).unwrap();
         assert_eq!(paths.len(), 2);
