@@ -387,3 +387,123 @@ fn export_errors_name_the_flag_and_leave_nothing_behind() {
         "{text}"
     );
 }
+
+/// The figures of docs/firmware.md ("Accuracy of f32 and of small m"): the README's training
+/// protocol (three bouc-wen logs of 1000 samples, one input, fresh noise) and a held-out test
+/// log with another input; sparse models with m = 16, 32, 64 and the default exact model, each
+/// in its default mode, in f64 and from its f32 tables. Run with
+/// `cargo test --release --test firmware -- --ignored --nocapture`.
+#[test]
+#[ignore = "measurement for docs/firmware.md (about 2 minutes)"]
+fn measure_f32_and_small_m() {
+    use hbn::core::Estimator;
+    use hbn::core::tables::{Tables, widen};
+    use hbn::model::metrics::nrmse;
+    use hbn_export::{Precision, model_tables, size_report};
+
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
+    for (log, input_seed, seed) in [
+        ("train1.mcap", "1", "11"),
+        ("train2.mcap", "1", "12"),
+        ("train3.mcap", "1", "13"),
+        ("test.mcap", "2", "21"),
+    ] {
+        ok(&[
+            "simulate",
+            "--system",
+            "bouc-wen",
+            "--steps",
+            "1000",
+            "--input-seed",
+            input_seed,
+            "--seed",
+            seed,
+            "--noise-gain",
+            "1",
+            "--out",
+            &p(log),
+        ]);
+    }
+    let logs = [p("train1.mcap"), p("train2.mcap"), p("train3.mcap")];
+    eprintln!(
+        "| model | mode | nRMSE f64 | nRMSE f32 | max abs(x_f32 - x_f64) / range of x | f32 model data | f32, --init-pairs 100 |"
+    );
+    eprintln!("|---|---|---|---|---|---|---|");
+    for (name, inducing) in [
+        ("m = 16", "16"),
+        ("m = 32", "32"),
+        ("m = 64", "64"),
+        ("exact (500 points)", "exact"),
+    ] {
+        let model_file = p(&format!("model-{inducing}.hbn"));
+        ok(&[
+            "-q",
+            "train",
+            "--log",
+            &logs[0],
+            "--log",
+            &logs[1],
+            "--log",
+            &logs[2],
+            "--inducing",
+            inducing,
+            "--out",
+            &model_file,
+        ]);
+        let model = hbn::model::HbnModel::load(Path::new(&model_file)).expect("load");
+        let log = read_at_model_rate(
+            &model,
+            Path::new(&p("test.mcap")),
+            &SignalChoice::default(),
+            &[LogOption::Input, LogOption::State, LogOption::Output],
+            hbn::pipeline::LogOptions::default(),
+            &mut |_| {},
+        )
+        .expect("read the test log");
+        let (u, x, y) = (log.column(0), log.column(1), log.column(2));
+        let span =
+            x.iter().cloned().fold(f64::MIN, f64::max) - x.iter().cloned().fold(f64::MAX, f64::min);
+        let all = size_report(&model, Precision::F32, None).expect("sizes");
+        let thin = size_report(&model, Precision::F32, Some(100)).expect("sizes");
+        let bytes = |s: &[hbn_export::ModeSize], m: hbn::core::Mode| {
+            s.iter().find(|r| r.mode == m).map_or(0, |r| r.model_bytes)
+        };
+        let default = model.default_mode();
+        let mut modes = vec![default];
+        if default != hbn::core::Mode::Ekf {
+            modes.push(hbn::core::Mode::Ekf);
+        }
+        for mode in modes {
+            let f64_est = model.estimate(u, y, mode).expect("estimate");
+            let t = model_tables(&model, mode).expect("tables");
+            let r32 = t.reals_f32().expect("f32");
+            let mut wide = vec![0.0; r32.len()];
+            let reals = widen(&r32, &mut wide).expect("widen");
+            let tm = Tables {
+                layout: &t.layout,
+                keys: &t.keys,
+                reals,
+            }
+            .model()
+            .expect("f32 tables");
+            let mut scratch = vec![0.0; Estimator::scratch_len(&tm.view)];
+            let mut e = Estimator::new(tm.view, tm.config, &mut scratch).expect("estimator");
+            let x32: Vec<f64> = u.iter().zip(y).map(|(&u, &y)| e.step(u, y).x).collect();
+            let worst = x32
+                .iter()
+                .zip(&f64_est.x)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            let star = if mode == default { "*" } else { "" };
+            eprintln!(
+                "| {name} | {mode}{star} | {:.4} | {:.4} | {:.2}% | {:.1} KB | {:.1} KB |",
+                nrmse(&f64_est.x, x),
+                nrmse(&x32, x),
+                100.0 * worst / span,
+                bytes(&all, mode) as f64 / 1024.0,
+                bytes(&thin, mode) as f64 / 1024.0,
+            );
+        }
+    }
+}
