@@ -11,7 +11,8 @@ cargo build -p hbn-core --no-default-features
 echo "== hbn-core: the estimator step links with no panic path (no-panic, fat LTO)"
 cargo test --release --manifest-path crates/hbn-core/nopanic/Cargo.toml
 
-echo "== Rust tests (release: the end-to-end tests train GPs; also builds target/release/hbn)"
+echo "== Rust tests (release: the end-to-end tests train GPs; also builds target/release/hbn;"
+echo "   tests/firmware.rs builds the C and no_std Rust firmware examples: needs make and cc)"
 cargo test --release --workspace --exclude hbn-py
 
 echo "== Fuzz smoke: each cargo-fuzz target, a fixed seed and run count (needs nightly and cargo-fuzz; optional)"

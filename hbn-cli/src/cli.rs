@@ -66,6 +66,8 @@ pub enum Command {
     Eval(EvalArgs),
     /// Show what a model file contains (signals, rate, kernels, hyperparameters, diagnostics).
     Inspect(InspectArgs),
+    /// Export a model as firmware source: Rust tables for a no_std crate, or C for libhbn_ffi.
+    Export(ExportArgs),
     /// Simulate, train, estimate and evaluate end to end in one directory (under a minute).
     Demo(DemoArgs),
     /// Run the thesis' simulation experiment (systems x noise gains x seeds).
@@ -481,6 +483,63 @@ pub struct InspectArgs {
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Source language of `hbn export`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum FormatArg {
+    /// hbn_model.rs: static arrays and `hbn_model()`, to `include!` in a no_std crate.
+    Rust,
+    /// hbn_model.h and hbn_model.c: const arrays and `hbn_model` for the C ABI (hbn.h).
+    C,
+}
+
+/// Precision of the exported real numbers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum PrecisionArg {
+    /// double: the estimates equal `hbn estimate` bit for bit.
+    F64,
+    /// float: half the model data, estimates within a few tenths of a percent (docs/firmware.md).
+    F32,
+}
+
+/// `hbn export`.
+#[derive(Clone, Debug, Args)]
+#[command(
+    after_help = "Examples:\n  hbn export --model model.hbn --out fw --format c --precision f32\n  \
+     make -C examples/firmware-c MODEL=$PWD/fw\n  hbn export --model model.hbn --out fw-rs --format rust\n\n\
+     Writes hbn_model.h and hbn_model.c (--format c) or hbn_model.rs (--format rust) into --out\n\
+     (created if missing; nothing is written if the export fails) and prints the size report:\n\
+     bytes of model data (flash) and work memory (RAM) per mode. See docs/firmware.md."
+)]
+pub struct ExportArgs {
+    /// Model file from `hbn train`.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Output directory (created if missing).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Source language.
+    #[arg(long, value_enum)]
+    pub format: FormatArg,
+    /// Precision of the exported real numbers.
+    #[arg(long, value_enum, default_value = "f64")]
+    pub precision: PrecisionArg,
+    /// Estimation mode built into the export (default: the model's). EKF+BLR also exports the
+    /// training samples its local regression reads.
+    #[arg(long, value_parser = mode_value())]
+    pub mode: Option<Mode>,
+    /// Keep at most N of the training (y, x) pairs the prior of x_0 reads (default: all, and
+    /// the export reproduces `hbn estimate` exactly). Fewer pairs shrink the model data (8
+    /// bytes a pair in f32) and change only the first estimates; 0 drops the prior (the filter
+    /// starts from the training mean).
+    #[arg(long, value_name = "N")]
+    pub init_pairs: Option<usize>,
+}
+
+fn mode_value() -> impl clap::builder::TypedValueParser<Value = Mode> {
+    use clap::builder::{PossibleValuesParser, TypedValueParser};
+    PossibleValuesParser::new(Mode::ALL.map(|m| m.name())).try_map(|s: String| s.parse::<Mode>())
 }
 
 /// `hbn demo`.

@@ -300,6 +300,8 @@ pub fn run(ui: &mut Ui<'_>, args: &InspectArgs) -> anyhow::Result<()> {
         let text = serde_json::to_string_pretty(&model_json(&model))?;
         ui.line(text)
     } else {
-        ui.print(model_text(&model, &args.model))
+        ui.print(model_text(&model, &args.model))?;
+        ui.line("\nfirmware (`hbn export`, docs/firmware.md):")?;
+        ui.print(crate::cmd_export::size_text(&model, None)?)
     }
 }

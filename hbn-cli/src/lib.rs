@@ -20,6 +20,7 @@ pub mod cmd_demo;
 pub mod cmd_estimate;
 pub mod cmd_eval;
 pub mod cmd_experiment;
+pub mod cmd_export;
 pub mod cmd_inspect;
 pub mod cmd_simulate;
 pub mod cmd_train;
@@ -138,6 +139,7 @@ pub fn execute(ui: &mut Ui<'_>, command: Command) -> anyhow::Result<()> {
         Command::Estimate(a) => cmd_estimate::run(ui, &a).map(|_| ()),
         Command::Eval(a) => cmd_eval::run(ui, &a).map(|_| ()),
         Command::Inspect(a) => cmd_inspect::run(ui, &a),
+        Command::Export(a) => cmd_export::run(ui, &a),
         Command::Demo(a) => cmd_demo::run(ui, &a),
         Command::Experiment(a) => cmd_experiment::run(ui, &a).map(|_| ()),
     }

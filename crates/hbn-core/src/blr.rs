@@ -336,6 +336,20 @@ impl<'a> Neighbourhood<'a> {
         })
     }
 
+    /// The slices this index was built from (what [`Neighbourhood::new`] checked): for
+    /// exporting a model as constant tables.
+    pub fn parts(&self) -> NeighbourhoodParts<'a> {
+        NeighbourhoodParts {
+            inputs: self.inputs,
+            targets: self.targets,
+            cell_keys: self.cell_keys,
+            cell_start: self.cell_start,
+            origin: self.origin,
+            half_window: self.half_window,
+            input_var: self.input_var,
+        }
+    }
+
     /// Input dimension.
     pub fn dim(&self) -> usize {
         self.dim

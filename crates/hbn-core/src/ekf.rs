@@ -342,6 +342,21 @@ impl<'a> InitPrior<'a> {
         })
     }
 
+    /// The `[y, x]` pairs, sorted by `y`.
+    pub fn pairs(&self) -> &'a [[f64; 2]] {
+        self.pairs
+    }
+
+    /// How many nearest samples [`InitPrior::prior`] averages.
+    pub fn neighbours(&self) -> usize {
+        self.neighbours
+    }
+
+    /// The smallest variance [`InitPrior::prior`] returns.
+    pub fn var_floor(&self) -> f64 {
+        self.var_floor
+    }
+
     /// Mean and variance of `x` over the `neighbours` training samples whose `y` is nearest `y0`
     /// (ties go to the lower index), the variance at least the floor. `None` for a non-finite
     /// `y0`, and when the mean or variance overflows (pairs near `f64::MAX`).

@@ -221,6 +221,23 @@ impl<'a> GpView<'a> {
         })
     }
 
+    /// The slices and scalars this view was built from (what [`GpView::new`] checked): for
+    /// exporting a model as constant tables.
+    pub fn parts(&self) -> GpParts<'a> {
+        GpParts {
+            kernel: self.kernel,
+            input_mean: self.input_mean,
+            input_scale: self.input_scale,
+            output_mean: self.output_mean,
+            output_scale: self.output_scale,
+            features: self.features,
+            directions: self.directions,
+            alpha: self.alpha,
+            variance: self.variance,
+            noise_var: self.noise_var,
+        }
+    }
+
     /// The same GP with the raw input `j` as its prior mean: predictions become
     /// `x[j] + GP(x)` (mean gradient `+1` in `j`; variances unchanged). For a GP fitted to the
     /// increments `t - x[j]` of its targets, e.g. `x_k - x_{k-1}`.

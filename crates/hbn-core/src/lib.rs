@@ -9,7 +9,8 @@
 //!   exact or sparse (inducing points);
 //! - [`ekf`]: the EKF / EKF+BLR step on the augmented HBN state;
 //! - [`blr`]: local Bayesian linear regression with a bounded neighbourhood query;
-//! - [`rng`]: a small portable random number generator.
+//! - [`rng`]: a small portable random number generator;
+//! - [`tables`]: a trained model as constant tables (flash) and the view read back from them.
 #![cfg_attr(not(feature = "std"), no_std)]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
@@ -37,6 +38,7 @@ mod error;
 pub mod gp;
 pub mod kernel;
 pub mod rng;
+pub mod tables;
 
 pub mod eigen;
 pub use blr::{LocalRegression, Neighbourhood, NeighbourhoodParts, Posterior};

@@ -1,0 +1,106 @@
+//! `hbn export`: a model as firmware source (see `hbn-export` and docs/firmware.md).
+
+use anyhow::Context;
+use hbn_export::{Format, Precision};
+use hbn_model::HbnModel;
+
+use crate::Ui;
+use crate::cli::{ExportArgs, FormatArg, PrecisionArg};
+use crate::cmd_estimate::load_model;
+
+impl From<FormatArg> for Format {
+    fn from(f: FormatArg) -> Self {
+        match f {
+            FormatArg::Rust => Format::Rust,
+            FormatArg::C => Format::C,
+        }
+    }
+}
+
+impl From<PrecisionArg> for Precision {
+    fn from(p: PrecisionArg) -> Self {
+        match p {
+            PrecisionArg::F64 => Precision::F64,
+            PrecisionArg::F32 => Precision::F32,
+        }
+    }
+}
+
+/// The firmware size table of `model` at both precisions (what `hbn export` and `hbn
+/// inspect` print).
+pub fn size_text(model: &HbnModel, init_pairs: Option<usize>) -> anyhow::Result<String> {
+    let mut s = String::new();
+    for p in [Precision::F32, Precision::F64] {
+        let sizes = hbn_export::size_report(model, p, init_pairs)
+            .context("cannot compute the firmware size report")?;
+        let table = hbn_export::size_table(&sizes, model.default_mode());
+        // The legend once, after the last table.
+        let body: Vec<&str> = table.lines().collect();
+        let keep = if p == Precision::F64 {
+            body.len()
+        } else {
+            body.len().saturating_sub(1)
+        };
+        for line in body.iter().take(keep) {
+            s.push_str(&format!("  {line}\n"));
+        }
+    }
+    Ok(s)
+}
+
+/// Runs `hbn export`.
+pub fn run(ui: &mut Ui<'_>, args: &ExportArgs) -> anyhow::Result<()> {
+    let model = load_model(&args.model)?;
+    let mode = args.mode.unwrap_or_else(|| model.default_mode());
+    let (format, precision) = (Format::from(args.format), Precision::from(args.precision));
+    let origin = args.model.file_name().map_or_else(
+        || args.model.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    );
+    let files = hbn_export::export(&model, mode, format, precision, args.init_pairs, &origin)
+        .with_context(|| {
+            format!(
+                "cannot export `{}` as --format {} --precision {}",
+                args.model.display(),
+                format.name(),
+                precision.name()
+            )
+        })?;
+    let paths = hbn_export::write(&args.out, &files).with_context(|| {
+        format!(
+            "cannot write the export into --out `{}`",
+            args.out.display()
+        )
+    })?;
+    let names: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
+    if precision == Precision::F32
+        && !(model.transition().is_sparse() && model.sensor().is_sparse())
+    {
+        ui.warn(
+            "f32 tables of an exact GP can lose the accuracy of its Cholesky factor (measured in \
+             docs/firmware.md: nRMSE 0.58 instead of 0.016 on 500 support points); export it \
+             with --precision f64, or train a sparse model (hbn train --inducing 32) for f32",
+        );
+    }
+    let sizes = hbn_export::size_report(&model, precision, args.init_pairs)
+        .context("cannot compute the firmware size report")?;
+    let this = sizes.iter().find(|s| s.mode == mode);
+    ui.line(format!(
+        "exported `{}` (mode {mode}, {} reals) as {}: {}",
+        args.model.display(),
+        precision.name(),
+        format.name(),
+        names.join(", ")
+    ))?;
+    if let Some(s) = this {
+        ui.line(format!(
+            "model data {} bytes ({:.1} KB), work memory {} bytes ({:.1} KB)",
+            s.model_bytes,
+            s.model_bytes as f64 / 1024.0,
+            s.work_bytes(),
+            s.work_bytes() as f64 / 1024.0
+        ))?;
+    }
+    ui.line("firmware size per mode:")?;
+    ui.print(size_text(&model, args.init_pairs)?)
+}
