@@ -79,7 +79,7 @@ pub fn mcap_ingest(data: &[u8]) {
     // One clock per input, chosen by the input's length (mutations change it often), so each
     // execution parses the file twice (listing, reading), not three times: the campaign's
     // 10^6 executions of this, the slowest target, then fit in hours, not a day.
-    let time_source = if data.len() % 2 == 0 {
+    let time_source = if data.len().is_multiple_of(2) {
         TimeSource::LogTime
     } else {
         TimeSource::HeaderStamp
