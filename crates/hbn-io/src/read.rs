@@ -129,6 +129,25 @@ impl Read for Counting {
     }
 }
 
+/// The next message of `reader`, `None` at the end. The mcap crate (0.26) indexes slices with
+/// lengths read from the file (`read.rs`, attachment records: a crafted file panicked with
+/// "slice index starts at 50 but ends at 49", found by the `mcap_ingest` fuzz target), so a
+/// panic inside it is caught here and reported as a corrupt file, like its errors.
+fn next_message(
+    file: &Path,
+    reader: &mut Messages,
+) -> Result<Option<mcap::Message<'static>>, IoError> {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| reader.next())) {
+        Ok(None) => Ok(None),
+        Ok(Some(Ok(m))) => Ok(Some(m)),
+        Ok(Some(Err(e))) => Err(corrupt(file, &e)),
+        Err(_) => Err(IoError::Corrupt {
+            file: file.to_owned(),
+            reason: "the MCAP reader failed on a malformed record".to_owned(),
+        }),
+    }
+}
+
 fn corrupt(file: &Path, e: &mcap::McapError) -> IoError {
     let mut reason = plain(&e.to_string());
     let mut src = std::error::Error::source(e);
@@ -284,8 +303,7 @@ fn topics_of(reader: &Messages) -> Vec<String> {
 pub fn list_topics(file: &Path) -> Result<Vec<TopicInfo>, IoError> {
     let (mut reader, _, _) = open(file)?;
     let mut counts: HashMap<u16, u64> = HashMap::new();
-    for m in reader.by_ref() {
-        let m = m.map_err(|e| corrupt(file, &e))?;
+    while let Some(m) = next_message(file, &mut reader)? {
         *counts.entry(m.channel.id).or_default() += 1;
     }
     let mut out: Vec<TopicInfo> = channel_list(&reader)
@@ -607,8 +625,7 @@ pub fn read_signals_observed(
         n: 0,
     };
 
-    for m in reader.by_ref() {
-        let m = m.map_err(|e| corrupt(file, &e))?;
+    while let Some(m) = next_message(file, &mut reader)? {
         progress.tick();
         let cid = m.channel.id;
         if let std::collections::hash_map::Entry::Vacant(slot) = plans.entry(cid) {

@@ -411,3 +411,15 @@ fn a_chunk_whose_records_overrun_it_is_an_error_in_every_build() {
         assert!(err.is_err(), "{err:?}");
     }
 }
+
+#[test]
+fn a_record_that_makes_the_mcap_crate_panic_is_a_corrupt_file() {
+    // Found by the mcap_ingest fuzz target: a record whose lengths make the mcap crate (0.26,
+    // read.rs) index a slice backwards and panic, in every build. hbn-io catches it and
+    // reports a corrupt file.
+    let file = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fuzz/regressions/mcap_ingest/crash-3461355f5aa2b41f20fc106bbd2bdeafda731cb0");
+    assert!(matches!(list_topics(&file), Err(IoError::Corrupt { .. })));
+    let p = paths(&["/input.data", "/state.data", "/sensor.data"]);
+    assert!(read_signals(&file, &p, &ReadOptions::default()).is_err());
+}
