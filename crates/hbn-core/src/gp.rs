@@ -33,6 +33,18 @@ pub struct Want {
 }
 
 impl Want {
+    /// The mean only.
+    pub const MEAN: Want = Want {
+        variance: false,
+        grad_mean: false,
+        grad_variance: false,
+    };
+    /// Mean and variance.
+    pub const VARIANCE: Want = Want {
+        variance: true,
+        grad_mean: false,
+        grad_variance: false,
+    };
     /// Mean, variance and mean gradient: what the EKF step needs.
     pub const EKF: Want = Want {
         variance: true,

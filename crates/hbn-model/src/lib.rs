@@ -8,6 +8,8 @@
 //! - [`HbnParams`]: the training parameters, their defaults and their one check
 //!   ([`HbnParams::check`] gives [`CheckedHbnParams`]; errors name the [`Param`]);
 //! - [`HbnModel`]: fit, save, load; [`HbnModel::estimate`] over a whole sequence;
+//! - [`explore::Explorer`]: which input to apply next while collecting training data
+//!   (thesis Sec. 3.4);
 //! - [`Filter`]: the owned streaming estimator (model, state and scratch in one value), whose
 //!   per-sample step batch estimation loops over.
 //!
@@ -37,6 +39,7 @@
 pub mod dataset;
 mod error;
 mod estimate;
+pub mod explore;
 mod filter;
 mod local;
 pub mod metrics;

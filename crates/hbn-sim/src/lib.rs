@@ -288,6 +288,61 @@ impl SimConfig {
     }
 }
 
+/// A simulated robot driven one sample at a time (for an explorer or controller in the loop):
+/// [`Simulator::step`] applies an input and returns the sample's state and sensor output.
+/// Stepping through an input gives exactly what [`simulate`] gives for it.
+#[derive(Clone, Debug)]
+pub struct Simulator {
+    system: systems::System,
+    rng: Rng,
+    noise_x: f64,
+    noise_y: f64,
+    steps: usize,
+}
+
+impl Simulator {
+    /// The system of `config` in its initial (demagnetised/relaxed) state; checks `config`.
+    pub fn new(config: &SimConfig) -> Result<Self, SimError> {
+        config.validate()?;
+        Ok(Self {
+            system: systems::System::new(config.system, 1.0 / config.rate_hz)?,
+            rng: Rng::new(config.seed ^ NOISE_SALT),
+            noise_x: config.noise_gain * 0.02 * config.system.nominal_range_x(),
+            noise_y: config.noise_gain * 0.02 * config.system.nominal_range_y(),
+            steps: 0,
+        })
+    }
+
+    /// Applies `u` for one sample; returns `(x, y)`. Rejects (and leaves the state unchanged
+    /// for) a non-finite input or one outside [`INPUT_RANGE`].
+    pub fn step(&mut self, u: f64) -> Result<(f64, f64), SimError> {
+        let index = self.steps;
+        if !u.is_finite() {
+            return Err(SimError::NonFiniteInput { index, value: u });
+        }
+        let (lo, hi) = INPUT_RANGE;
+        if !(lo..=hi).contains(&u) {
+            return Err(SimError::InputOutOfRange {
+                index,
+                value: u,
+                lo,
+                hi,
+            });
+        }
+        let eta_x = self.rng.uniform() - 0.5;
+        let eta_y = self.rng.uniform() - 0.5;
+        let x = self.system.actuate(u) + self.noise_x * eta_x;
+        let y = self.system.sense(x) + self.noise_y * eta_y;
+        self.steps += 1;
+        Ok((x, y))
+    }
+
+    /// Samples simulated so far.
+    pub fn steps(&self) -> usize {
+        self.steps
+    }
+}
+
 /// Runs the system on a given input from its initial (demagnetised/relaxed) state.
 ///
 /// Rejects an invalid configuration and any input sample that is not finite or lies outside
@@ -308,17 +363,11 @@ pub fn simulate(config: &SimConfig, u: &[f64]) -> Result<Trajectory, SimError> {
             });
         }
     }
-    let mut system = systems::System::new(config.system, 1.0 / config.rate_hz)?;
-    let mut rng = Rng::new(config.seed ^ NOISE_SALT);
-    let sx = config.noise_gain * 0.02 * config.system.nominal_range_x();
-    let sy = config.noise_gain * 0.02 * config.system.nominal_range_y();
+    let mut sim = Simulator::new(config)?;
     let mut x = Vec::with_capacity(u.len());
     let mut y = Vec::with_capacity(u.len());
     for &uk in u {
-        let eta_x = rng.uniform() - 0.5;
-        let eta_y = rng.uniform() - 0.5;
-        let xk = system.actuate(uk) + sx * eta_x;
-        let yk = system.sense(xk) + sy * eta_y;
+        let (xk, yk) = sim.step(uk)?;
         x.push(xk);
         y.push(yk);
     }

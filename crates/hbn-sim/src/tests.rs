@@ -378,3 +378,30 @@ fn deterministic_given_config_and_input() {
         );
     }
 }
+
+#[test]
+fn a_rejected_step_leaves_the_simulator_where_it_was() {
+    let cfg = SimConfig {
+        noise_gain: 1.0,
+        seed: 4,
+        ..SimConfig::new(SystemKind::BoucWen)
+    };
+    let u = generate_input(InputKind::RandomRamps, 300, 0.02, 4).unwrap();
+    let whole = simulate(&cfg, &u).unwrap();
+    let mut sim = Simulator::new(&cfg).unwrap();
+    for (k, &uk) in u.iter().enumerate() {
+        if k == 150 {
+            assert!(matches!(
+                sim.step(f64::NAN),
+                Err(SimError::NonFiniteInput { index: 150, .. })
+            ));
+            assert!(matches!(
+                sim.step(9.0),
+                Err(SimError::InputOutOfRange { index: 150, .. })
+            ));
+        }
+        let (x, y) = sim.step(uk).unwrap();
+        assert_eq!((x, y), (whole.x[k], whole.y[k]), "sample {k}");
+    }
+    assert_eq!(sim.steps(), 300);
+}
