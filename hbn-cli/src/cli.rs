@@ -68,6 +68,9 @@ pub enum Command {
     Inspect(InspectArgs),
     /// Export a model as firmware source: Rust tables for a no_std crate, or C for libhbn_ffi.
     Export(ExportArgs),
+    /// Plan an input schedule that explores where the model is uncertain (thesis Sec. 3.4),
+    /// for a robot that cannot run the Python explorer in its loop.
+    Explore(ExploreArgs),
     /// Simulate, train, estimate and evaluate end to end in one directory (under a minute).
     Demo(DemoArgs),
     /// Run the thesis' simulation experiment (systems x noise gains x seeds).
@@ -535,6 +538,85 @@ pub struct ExportArgs {
     /// starts from the training mean).
     #[arg(long, value_name = "N")]
     pub init_pairs: Option<usize>,
+}
+
+fn explore() -> hbn_model::explore::ExploreParams {
+    // The bounds have no default (they come from the logs); only the schedule's defaults are read.
+    hbn_model::explore::ExploreParams::new(0.0, 1.0, 0.02)
+}
+
+/// `hbn explore`.
+#[derive(Clone, Debug, Args)]
+#[command(
+    after_help = "Example:\n  hbn train --log batch1.mcap --out model.hbn\n  \
+     hbn explore --model model.hbn --log batch1.mcap --samples 3000 --out plan.csv --out plan.mcap\n\n\
+     Plans --samples inputs at the model's rate that continue the last --log: each step is\n\
+     a*eps + (1-a)*w, eps the step (|eps| <= --max-step) towards the inputs where the model's\n\
+     transition GP is most uncertain (looking --horizon samples ahead), w a random step, and a\n\
+     growing from --alpha-start to --alpha-end over --alpha-ramp samples. The states along the\n\
+     plan are the model's predictions, so the plan spreads out as if they had been measured.\n\
+     Every input lies in [--u-min, --u-max] and differs from the previous one by at most\n\
+     --max-step (defaults: the range and the largest step of u in the logs).\n\
+     Output: CSV (t,u,x_pred; t in seconds from the first planned sample) for a file ending in\n\
+     .csv, else MCAP with topics /explore/u and /explore/x_pred (field data). Apply the plan,\n\
+     record u, x and y, and train on all logs. With Python in the loop, hbn.Explorer refits as\n\
+     data arrive (docs/exploration.md)."
+)]
+pub struct ExploreArgs {
+    /// Model file from `hbn train` on the first batch.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Logs of the first batch (repeat the flag); the plan continues the last one.
+    #[arg(long = "log", required = true)]
+    pub logs: Vec<PathBuf>,
+    /// Samples to plan (at the model's rate).
+    #[arg(long)]
+    pub samples: usize,
+    /// Output file: `.csv` for CSV, anything else for MCAP (repeat for both).
+    #[arg(long = "out", required = true)]
+    pub outs: Vec<PathBuf>,
+    /// Lowest input (default: the lowest u in the logs).
+    #[arg(long, allow_negative_numbers = true)]
+    pub u_min: Option<f64>,
+    /// Highest input (default: the highest u in the logs).
+    #[arg(long, allow_negative_numbers = true)]
+    pub u_max: Option<f64>,
+    /// Largest change of the input per sample (default: the largest in the logs).
+    #[arg(long)]
+    pub max_step: Option<f64>,
+    /// Weight of the uncertainty-seeking step at the start of the plan.
+    #[arg(long, default_value_t = explore().alpha_start)]
+    pub alpha_start: f64,
+    /// Weight of the uncertainty-seeking step at the end of the ramp.
+    #[arg(long, default_value_t = explore().alpha_end)]
+    pub alpha_end: f64,
+    /// Samples over which the weight grows from --alpha-start to --alpha-end.
+    #[arg(long, default_value_t = explore().alpha_ramp)]
+    pub alpha_ramp: usize,
+    /// Refit the transition GP on the planned samples every N samples.
+    #[arg(long, default_value_t = explore().refit_every, value_name = "N")]
+    pub refit_every: usize,
+    /// Candidate steps evaluated per sample.
+    #[arg(long, default_value_t = explore().candidates)]
+    pub candidates: usize,
+    /// Look-ahead (samples) of the uncertainty search; 1 is the thesis' one-step rule.
+    #[arg(long, default_value_t = explore().horizon)]
+    pub horizon: usize,
+    /// Seed of the random steps.
+    #[arg(long, default_value_t = explore().seed)]
+    pub seed: u64,
+    /// Input signal (default: the path the model was trained with).
+    #[arg(long, value_parser = parse_path)]
+    pub input: Option<SignalPath>,
+    /// State signal (default: the path the model was trained with).
+    #[arg(long, value_parser = parse_path)]
+    pub state: Option<SignalPath>,
+    /// Sensor signal (default: the path the model was trained with).
+    #[arg(long, value_parser = parse_path)]
+    pub output: Option<SignalPath>,
+    /// Log reading options.
+    #[command(flatten)]
+    pub read: ReadArgs,
 }
 
 fn mode_value() -> impl clap::builder::TypedValueParser<Value = Mode> {

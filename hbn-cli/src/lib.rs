@@ -20,6 +20,7 @@ pub mod cmd_demo;
 pub mod cmd_estimate;
 pub mod cmd_eval;
 pub mod cmd_experiment;
+pub mod cmd_explore;
 pub mod cmd_export;
 pub mod cmd_inspect;
 pub mod cmd_simulate;
@@ -140,6 +141,7 @@ pub fn execute(ui: &mut Ui<'_>, command: Command) -> anyhow::Result<()> {
         Command::Eval(a) => cmd_eval::run(ui, &a).map(|_| ()),
         Command::Inspect(a) => cmd_inspect::run(ui, &a),
         Command::Export(a) => cmd_export::run(ui, &a),
+        Command::Explore(a) => cmd_explore::run(ui, &a).map(|_| ()),
         Command::Demo(a) => cmd_demo::run(ui, &a),
         Command::Experiment(a) => cmd_experiment::run(ui, &a).map(|_| ()),
     }

@@ -54,8 +54,8 @@
 //! assert_eq!(model.summary().rows, 98);
 //! ```
 
-use hbn_core::Want;
 use hbn_core::rng::Rng;
+use hbn_core::{GpView, Want};
 use hbn_gp::{GaussianProcess, Hyperparameters};
 
 use crate::dataset::{Sequence, TRANSITION_DIM, TRANSITION_DIRECTION, Table, build_dataset};
@@ -471,16 +471,17 @@ impl Explorer {
             return None;
         }
         let p = &*self.params;
+        let mut gp = Predictor::new(gp, p.model.increments.mean_input(GpRole::Transition))?;
         let (x1, x2, u2) = (run.x[n - 1], run.x[n - 2], run.u[n - 2]);
         // x̂_t: the state of the sample at which the proposal is applied.
-        let x_now = self.predict_state(gp, [x1, x2, u_prev, u2])?;
+        let x_now = gp.state([x1, x2, u_prev, u2])?;
         let e_lo = (-eta).max(p.u_min - u_prev);
         let e_hi = eta.min(p.u_max - u_prev);
         let c = p.candidates;
         let mut best: Option<(f64, f64)> = None;
         for i in 0..c {
             let eps = e_lo + (e_hi - e_lo) * i as f64 / (c - 1) as f64;
-            let Some(variance) = self.ramp_variance(gp, [x_now, x1], u_prev, eps) else {
+            let Some(variance) = self.ramp_variance(&mut gp, [x_now, x1], u_prev, eps) else {
                 continue;
             };
             // Ties (a flat variance) go to the candidate nearest zero: no drift without cause.
@@ -499,7 +500,7 @@ impl Explorer {
     /// `j = 1..=horizon` (clamped to the bounds), starting from the states `[x̂_t, x_{t-1}]`.
     fn ramp_variance(
         &self,
-        gp: &GaussianProcess,
+        gp: &mut Predictor<'_>,
         states: [f64; 2],
         u_prev: f64,
         eps: f64,
@@ -511,28 +512,12 @@ impl Explorer {
             let u_a = (u_prev + j as f64 * eps).clamp(p.u_min, p.u_max);
             let input = [x_a, x_b, u_a, u_b];
             if j == p.horizon {
-                let pred = gp.predict(&input, Want::VARIANCE).ok()?;
-                return pred.variance.is_finite().then_some(pred.variance);
+                return gp.variance(input);
             }
-            let x_next = self.predict_state(gp, input)?;
+            let x_next = gp.state(input)?;
             (x_b, x_a, u_b) = (x_a, x_next, u_a);
         }
         None
-    }
-
-    /// The transition GP's mean state for one transition input (levels, whatever the GP
-    /// learns).
-    fn predict_state(&self, gp: &GaussianProcess, input: [f64; TRANSITION_DIM]) -> Option<f64> {
-        let pred = gp.predict(&input, Want::MEAN).ok()?;
-        let base = self
-            .params
-            .model
-            .increments
-            .mean_input(GpRole::Transition)
-            .and_then(|j| input.get(j).copied())
-            .unwrap_or(0.0);
-        let x = pred.mean + base;
-        x.is_finite().then_some(x)
     }
 
     /// Records the sample the robot produced for the last input (`u` as applied, measured
@@ -702,8 +687,54 @@ impl Explorer {
         if n < 2 {
             return last_x;
         }
-        self.predict_state(gp, [run.x[n - 1], run.x[n - 2], run.u[n - 1], run.u[n - 2]])
+        let mean_input = self.params.model.increments.mean_input(GpRole::Transition);
+        Predictor::new(gp, mean_input)
+            .and_then(|mut p| p.state([run.x[n - 1], run.x[n - 2], run.u[n - 1], run.u[n - 2]]))
             .unwrap_or(last_x)
+    }
+}
+
+/// The transition GP's view (built once per proposal: building it checks every array) with
+/// its scratch.
+struct Predictor<'a> {
+    view: GpView<'a>,
+    scratch: Vec<f64>,
+    /// The input added to the GP's mean when it learns increments.
+    mean_input: Option<usize>,
+}
+
+impl<'a> Predictor<'a> {
+    fn new(gp: &'a GaussianProcess, mean_input: Option<usize>) -> Option<Self> {
+        let view = gp.view().ok()?;
+        let scratch = vec![0.0; view.predict_scratch(Want::VARIANCE)];
+        Some(Self {
+            view,
+            scratch,
+            mean_input,
+        })
+    }
+
+    /// The mean state for one transition input (levels, whatever the GP learns).
+    fn state(&mut self, input: [f64; TRANSITION_DIM]) -> Option<f64> {
+        let pred = self
+            .view
+            .predict(&input, Want::MEAN, &mut self.scratch)
+            .ok()?;
+        let base = self
+            .mean_input
+            .and_then(|j| input.get(j).copied())
+            .unwrap_or(0.0);
+        let x = pred.mean + base;
+        x.is_finite().then_some(x)
+    }
+
+    /// The latent variance at one transition input.
+    fn variance(&mut self, input: [f64; TRANSITION_DIM]) -> Option<f64> {
+        let pred = self
+            .view
+            .predict(&input, Want::VARIANCE, &mut self.scratch)
+            .ok()?;
+        pred.variance.is_finite().then_some(pred.variance)
     }
 }
 

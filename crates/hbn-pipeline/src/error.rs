@@ -145,6 +145,10 @@ pub enum PipelineError {
     /// A simulation failed.
     #[error("simulation: {0}")]
     Sim(#[from] hbn_sim::SimError),
+    /// An exploration parameter is invalid ([`hbn_model::explore::ExploreError`]; training
+    /// errors arrive as [`PipelineError::Model`]).
+    #[error(transparent)]
+    Explore(hbn_model::explore::ExploreError),
 }
 
 impl PipelineError {

@@ -15,7 +15,8 @@
 //! The `hbn` CLI and the Python package are thin shells over these functions, with the same
 //! options and the same defaults. Workflows report progress as [`Event`]s to an observer the
 //! front end renders. [`experiment`] runs the thesis' simulation study; [`sequences`] turns
-//! simulated runs into training sequences.
+//! simulated runs into training sequences. [`explore`] plans an input schedule that seeks
+//! where the model is uncertain (`hbn explore`).
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 #![cfg_attr(
@@ -27,6 +28,7 @@ mod error;
 mod estimate;
 mod eval;
 pub mod experiment;
+pub mod explore;
 mod log;
 mod sim;
 mod train;
