@@ -550,10 +550,12 @@ fn explore() -> hbn_model::explore::ExploreParams {
 #[command(
     after_help = "Example:\n  hbn train --log batch1.mcap --out model.hbn\n  \
      hbn explore --model model.hbn --log batch1.mcap --samples 3000 --out plan.csv --out plan.mcap\n\n\
-     Plans --samples inputs at the model's rate that continue the last --log: each step is\n\
-     a*eps + (1-a)*w, eps the step (|eps| <= --max-step) towards the inputs where the model's\n\
-     transition GP is most uncertain (looking --horizon samples ahead), w a random step, and a\n\
-     growing from --alpha-start to --alpha-end over --alpha-ramp samples. The states along the\n\
+     Plans --samples inputs at the model's rate that continue the last --log, as ramps: each\n\
+     goes to a target level at a constant slope (at most --max-step per sample); with\n\
+     probability a the next ramp is the one along which the model's transition GP is most\n\
+     uncertain (over its first --horizon samples), else a random one, a growing from\n\
+     --alpha-start to --alpha-end over --alpha-ramp samples (--strategy steps: the thesis'\n\
+     per-sample rule u += a*eps + (1-a)*w). The states along the\n\
      plan are the model's predictions, so the plan spreads out as if they had been measured.\n\
      Every input lies in [--u-min, --u-max] and differs from the previous one by at most\n\
      --max-step (defaults: the range and the largest step of u in the logs).\n\
@@ -599,9 +601,15 @@ pub struct ExploreArgs {
     /// Candidate steps evaluated per sample.
     #[arg(long, default_value_t = explore().candidates)]
     pub candidates: usize,
-    /// Look-ahead (samples) of the uncertainty search; 1 is the thesis' one-step rule.
-    #[arg(long, default_value_t = explore().horizon)]
+    /// Look-ahead (samples) of the uncertainty search: a candidate ramp is scored over its
+    /// first N samples.
+    #[arg(long, default_value_t = explore().horizon, value_name = "N")]
     pub horizon: usize,
+    /// How the input moves: `ramps` (to a target level at a constant slope; the next ramp
+    /// seeks uncertainty with probability a) or `steps` (the thesis' per-sample rule).
+    #[arg(long, default_value_t = explore().strategy.name().to_owned(),
+          value_parser = ["ramps", "steps"])]
+    pub strategy: String,
     /// Seed of the random steps.
     #[arg(long, default_value_t = explore().seed)]
     pub seed: u64,

@@ -32,6 +32,10 @@ pub fn run(ui: &mut Ui<'_>, args: &ExploreArgs) -> anyhow::Result<Schedule> {
     params.refit_every = args.refit_every;
     params.candidates = args.candidates;
     params.horizon = args.horizon;
+    params.strategy = args
+        .strategy
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!("invalid --strategy: {e}"))?;
     params.seed = args.seed;
     let request = PlanRequest {
         logs: args.logs.clone(),

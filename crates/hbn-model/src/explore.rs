@@ -4,18 +4,31 @@
 //! The [`Explorer`] proposes the next input `u_t`, the robot (or a simulator) applies it, and
 //! the observed `(u, x, y)` is given back with [`Explorer::observe`]. Two phases:
 //!
-//! 1. **random** (the first [`ExploreParams::random_samples`] samples): `u_t = u_{t-1} + w`, `w`
-//!    uniform in `[-eta, eta]` (`eta` = [`ExploreParams::max_step`]);
-//! 2. **uncertainty seeking**: `u_t = u_{t-1} + a eps + (1 - a) w`, where `eps` in
-//!    `[-eta, eta]` maximises the latent variance of the transition GP `H_D` where a ramp of
-//!    steps `eps` leads within [`ExploreParams::horizon`] samples (1 = the thesis' rule: at
-//!    the next transition input), and `a` grows linearly from [`ExploreParams::alpha_start`] to
-//!    [`ExploreParams::alpha_end`] over [`ExploreParams::alpha_ramp`] samples.
+//! 1. **random** (the first [`ExploreParams::random_samples`] samples): random inputs within
+//!    the bounds and the increment bound `eta` ([`ExploreParams::max_step`]);
+//! 2. **uncertainty seeking**, with a weight `a` that grows linearly from
+//!    [`ExploreParams::alpha_start`] to [`ExploreParams::alpha_end`] over
+//!    [`ExploreParams::alpha_ramp`] samples.
+//!
+//! How the input moves is the [`Strategy`]:
+//! - [`Strategy::Ramps`] (default): ramps to a target level at a constant slope, as the
+//!   random-ramp inputs of `hbn simulate`; random ramps in phase 1; in phase 2 the next ramp
+//!   is, with probability `a`, the one along which the transition GP `H_D` has the largest
+//!   mean latent variance over its first [`ExploreParams::horizon`] samples.
+//! - [`Strategy::Steps`]: the thesis' rule, `u_t = u_{t-1} + w` in phase 1 and `u_t = u_{t-1} +
+//!   a eps + (1 - a) w` in phase 2, `w` uniform in `[-eta, eta]`, `eps` in `[-eta, eta]`
+//!   maximising the latent variance of `H_D` where a ramp of steps `eps` leads within
+//!   `horizon` samples (1 = the thesis' one-step look-ahead).
 //!
 //! The input `u_t` moves the state of the *next* sample (`x_{t+1} = H_D(x_t, x_{t-1}, u_t,
-//! u_{t-1})`), and `x_t` is not observed yet when `u_t` is chosen, so with horizon 1 the
-//! variance is taken at `[x̂_t, x_{t-1}, u_{t-1} + eps, u_{t-1}]` with `x̂_t` the transition
-//! GP's mean; longer horizons roll the states forward by the mean along the ramp.
+//! u_{t-1})`), and `x_t` is not observed yet when `u_t` is chosen, so the variance along a
+//! candidate is taken at `[x̂_t, x_{t-1}, u_t, u_{t-1}]` and beyond, the states `x̂` rolled
+//! forward by the transition GP's mean.
+//!
+//! What the measurements say (docs/exploration.md): the transition GP's variance is a weak
+//! guide when its length scales are long (a nearly linear `H_D`, common on these systems), and
+//! on the simulators measured the explored data did not train more accurate models than the
+//! same number of random-ramp samples.
 //!
 //! The transition GP is refitted on every sample so far every
 //! [`ExploreParams::refit_every`] samples with the hyperparameters it has (a factorisation:
@@ -84,7 +97,8 @@ pub struct ExploreParams {
     pub u_start: Option<f64>,
     /// Samples of the random phase (`k` of the thesis). Default 200.
     pub random_samples: usize,
-    /// Weight `a` of the uncertainty-seeking step when that phase starts. Default 0.5.
+    /// Weight `a` of uncertainty seeking when that phase starts (the probability that a ramp
+    /// seeks, or the weight of `eps` in a step). Default 0.5.
     pub alpha_start: f64,
     /// Weight `a` reached at the end of the ramp. Default 0.9.
     pub alpha_end: f64,
@@ -96,16 +110,20 @@ pub struct ExploreParams {
     /// Re-learn the transition GP's hyperparameters every this many samples (warm-started
     /// from the previous ones). Default 200.
     pub optimize_every: usize,
-    /// Candidate steps `eps` evaluated in `[-eta, eta]` (evenly spaced, ends included).
-    /// Default 21.
+    /// Candidates evaluated per choice: target levels evenly spread over the bounds
+    /// ([`Strategy::Ramps`], each with every slope of [`RAMP_SLOPES`]) or steps `eps` evenly
+    /// spaced in `[-eta, eta]` ([`Strategy::Steps`]). Default 21.
     pub candidates: usize,
-    /// Look-ahead in samples: a candidate `eps` is scored by the transition GP's variance at
-    /// the end of the ramp `u_{t-1} + j eps`, `j = 1..=horizon`. `1` is the thesis' one-step
-    /// rule, which oscillates between `+eta` and `-eta` once the variance is flat across one
-    /// step (measured: 400 samples of pure seeking stayed within 0.024 of where they began);
-    /// the default 10 sweeps to where the data are missing.
+    /// Look-ahead in samples. [`Strategy::Ramps`]: a candidate ramp is scored by the mean
+    /// latent variance over its first `horizon` samples. [`Strategy::Steps`]: a candidate
+    /// `eps` is scored by the variance at the end of the ramp `u_{t-1} + j eps`,
+    /// `j = 1..=horizon`; `1` is the thesis' one-step rule, which oscillates between `+eta`
+    /// and `-eta` once the variance is flat across one step (measured: 400 samples of pure
+    /// seeking stayed within 0.024 of where they began). Default 50.
     pub horizon: usize,
-    /// Seed of the random steps `w`.
+    /// How the input moves ([`Strategy::Ramps`] by default).
+    pub strategy: Strategy,
+    /// Seed of the random steps and ramps.
     pub seed: u64,
     /// Training parameters of the HBN: the transition GP of the explorer and
     /// [`Explorer::model`] use them (rate, kernels, `max_points`, `n_inducing`, ...).
@@ -128,7 +146,7 @@ impl ExploreParams {
     /// Default of [`ExploreParams::candidates`].
     pub const DEFAULT_CANDIDATES: usize = 21;
     /// Default of [`ExploreParams::horizon`].
-    pub const DEFAULT_HORIZON: usize = 10;
+    pub const DEFAULT_HORIZON: usize = 50;
 
     /// The defaults for inputs in `[u_min, u_max]` with increments at most `max_step`.
     pub fn new(u_min: f64, u_max: f64, max_step: f64) -> Self {
@@ -145,6 +163,7 @@ impl ExploreParams {
             optimize_every: Self::DEFAULT_OPTIMIZE_EVERY,
             candidates: Self::DEFAULT_CANDIDATES,
             horizon: Self::DEFAULT_HORIZON,
+            strategy: Strategy::Ramps,
             seed: 0,
             model: HbnParams::default(),
         }
@@ -270,6 +289,60 @@ pub enum ExploreError {
     Model(#[from] ModelError),
 }
 
+/// How the explorer moves the input.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Strategy {
+    /// Ramps, like the random-ramp inputs of `hbn simulate`: each ramp goes to a target level
+    /// at a constant slope; when it arrives, the next ramp is, with probability `alpha`, the
+    /// one along which the transition GP is most uncertain (targets among `candidates`
+    /// levels, slopes [`RAMP_SLOPES`] `x max_step`, scored by the mean latent variance over
+    /// the first `horizon` samples), else a random one (target uniform in the bounds, slope
+    /// uniform in `[0.1, 1] max_step`). The thesis' random phase is random ramps here.
+    #[default]
+    Ramps,
+    /// The thesis' per-sample rule: `u_t = u_{t-1} + a eps + (1 - a) w`, `w` uniform in
+    /// `[-eta, eta]`, `eps` the step whose ramp of `horizon` samples ends where the variance
+    /// is largest. Measured (docs/exploration.md): its inputs move at nearly `a eta` every
+    /// sample, so the data miss slow inputs, and the models it trains were less accurate
+    /// than random ramps'.
+    Steps,
+}
+
+impl Strategy {
+    /// `ramps` or `steps`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Strategy::Ramps => "ramps",
+            Strategy::Steps => "steps",
+        }
+    }
+}
+
+impl std::str::FromStr for Strategy {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "ramps" => Ok(Strategy::Ramps),
+            "steps" => Ok(Strategy::Steps),
+            _ => Err(format!("unknown strategy `{s}`; choose ramps or steps")),
+        }
+    }
+}
+
+/// Slopes of the candidate ramps of [`Strategy::Ramps`], as fractions of `max_step`.
+pub const RAMP_SLOPES: [f64; 4] = [0.1, 0.3, 0.6, 1.0];
+
+/// Points at which a candidate ramp's variance is sampled (evenly along its first `horizon`
+/// samples).
+const RAMP_POINTS: usize = 8;
+
+/// A ramp the explorer follows: towards `target` by `slope` per sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Ramp {
+    target: f64,
+    slope: f64,
+}
+
 /// Where the explorer is in its schedule.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Phase {
@@ -305,6 +378,8 @@ pub struct Explorer {
     seeking_from: Option<usize>,
     /// Re-learn hyperparameters at refits (off while planning on predicted samples).
     learn: bool,
+    /// The ramp being followed ([`Strategy::Ramps`]).
+    ramp: Option<Ramp>,
     warnings: Vec<String>,
 }
 
@@ -322,6 +397,7 @@ impl Explorer {
             optimized_at: 0,
             seeking_from: None,
             learn: true,
+            ramp: None,
             warnings: Vec::new(),
         })
     }
@@ -418,6 +494,7 @@ impl Explorer {
     /// Starts a new run: the robot was reset, so the next samples do not follow the last
     /// ones (no training row straddles the two). The next proposal is `u_start`.
     pub fn start_run(&mut self) {
+        self.ramp = None;
         if self.runs.last().is_some_and(|r| !r.u.is_empty()) {
             self.runs.push(Run::default());
         }
@@ -439,6 +516,9 @@ impl Explorer {
             return lo;
         }
         let eta = p.max_step * STEP_MARGIN;
+        if p.strategy == Strategy::Ramps {
+            return self.propose_ramp(u_prev, eta);
+        }
         let w = self.rng.uniform_in(-eta, eta);
         let step = match self.phase() {
             Phase::Random => w,
@@ -457,6 +537,83 @@ impl Explorer {
             u = 2.0 * lo - u;
         }
         u.clamp(u_prev - eta, u_prev + eta).clamp(lo, hi)
+    }
+
+    /// [`Strategy::Ramps`]: the next input along the current ramp, after choosing a new ramp
+    /// when the last one has arrived.
+    fn propose_ramp(&mut self, u_prev: f64, eta: f64) -> f64 {
+        let p = &*self.params;
+        let (lo, hi) = (p.u_min, p.u_max);
+        let ramp = match self.ramp {
+            Some(r) if (r.target - u_prev).abs() > f64::EPSILON * r.target.abs().max(1.0) => r,
+            _ => {
+                let r = self.next_ramp(u_prev, eta);
+                self.ramp = Some(r);
+                r
+            }
+        };
+        let d = ramp.target - u_prev;
+        let u = u_prev + d.signum() * d.abs().min(ramp.slope);
+        u.clamp(u_prev - eta, u_prev + eta).clamp(lo, hi)
+    }
+
+    /// A new ramp: with probability `alpha` the one the transition GP is most uncertain
+    /// along, else (and in the random phase) a random one: target uniform in the bounds,
+    /// slope uniform in `[0.1, 1] eta`.
+    fn next_ramp(&mut self, u_prev: f64, eta: f64) -> Ramp {
+        let (lo, hi) = (self.params.u_min, self.params.u_max);
+        // Both draws always happen, so the random stream does not depend on the GP.
+        let coin = self.rng.uniform();
+        let random = Ramp {
+            target: self.rng.uniform_in(lo, hi),
+            slope: self.rng.uniform_in(0.1, 1.0) * eta,
+        };
+        if coin < self.alpha()
+            && let Some(r) = self.seek_ramp(u_prev, eta)
+        {
+            return r;
+        }
+        random
+    }
+
+    /// The ramp (target among `candidates` levels evenly spread over the bounds, slope among
+    /// [`RAMP_SLOPES`] `x eta`) with the largest mean latent variance of the transition GP
+    /// over its first `horizon` samples; `None` without a GP or history.
+    fn seek_ramp(&self, u_prev: f64, eta: f64) -> Option<Ramp> {
+        let gp = self.transition.as_ref()?;
+        let run = self.runs.last()?;
+        let n = run.u.len();
+        if n < 2 {
+            return None;
+        }
+        let p = &*self.params;
+        let mut gp = Predictor::new(gp, p.model.increments.mean_input(GpRole::Transition))?;
+        let (x1, x2, u2) = (run.x[n - 1], run.x[n - 2], run.u[n - 2]);
+        let x_now = gp.state([x1, x2, u_prev, u2])?;
+        let c = p.candidates;
+        let mut best: Option<(f64, Ramp)> = None;
+        for i in 0..c {
+            let target = p.u_min + (p.u_max - p.u_min) * i as f64 / (c - 1) as f64;
+            let dist = target - u_prev;
+            for frac in RAMP_SLOPES {
+                let slope = frac * eta;
+                if dist.abs() < slope {
+                    continue;
+                }
+                let steps = (dist.abs() / slope).ceil() as usize;
+                let len = steps.min(p.horizon);
+                let path = |j: usize| u_prev + dist.signum() * (j as f64 * slope).min(dist.abs());
+                let every = len.div_ceil(RAMP_POINTS);
+                let Some(v) = Self::path_variance(&mut gp, [x_now, x1], u_prev, len, every, path)
+                else {
+                    continue;
+                };
+                if best.is_none_or(|(b, _)| v > b) {
+                    best = Some((v, Ramp { target, slope }));
+                }
+            }
+        }
+        best.map(|(_, r)| r)
     }
 
     /// The step `eps` in `[-eta, eta]` (and inside the bounds) whose ramp of `horizon`
@@ -481,7 +638,10 @@ impl Explorer {
         let mut best: Option<(f64, f64)> = None;
         for i in 0..c {
             let eps = e_lo + (e_hi - e_lo) * i as f64 / (c - 1) as f64;
-            let Some(variance) = self.ramp_variance(&mut gp, [x_now, x1], u_prev, eps) else {
+            let ramp = |j: usize| (u_prev + j as f64 * eps).clamp(p.u_min, p.u_max);
+            let Some(variance) =
+                Self::path_variance(&mut gp, [x_now, x1], u_prev, p.horizon, p.horizon, ramp)
+            else {
                 continue;
             };
             // Ties (a flat variance) go to the candidate nearest zero: no drift without cause.
@@ -496,28 +656,34 @@ impl Explorer {
         best.map(|(_, eps)| eps)
     }
 
-    /// Latent variance of the transition GP at the end of a ramp `u_prev + j eps`,
-    /// `j = 1..=horizon` (clamped to the bounds), starting from the states `[x̂_t, x_{t-1}]`.
-    fn ramp_variance(
-        &self,
+    /// Mean latent variance of the transition GP along a path of inputs `path(j)`,
+    /// `j = 1..=len`, starting from the states `[x̂_t, x_{t-1}]` and the last input `u_prev`
+    /// (states rolled forward by the GP mean), sampled every `every` samples and at the end.
+    fn path_variance(
         gp: &mut Predictor<'_>,
         states: [f64; 2],
         u_prev: f64,
-        eps: f64,
+        len: usize,
+        every: usize,
+        path: impl Fn(usize) -> f64,
     ) -> Option<f64> {
-        let p = &*self.params;
         let [mut x_a, mut x_b] = states;
         let mut u_b = u_prev;
-        for j in 1..=p.horizon {
-            let u_a = (u_prev + j as f64 * eps).clamp(p.u_min, p.u_max);
+        let (mut sum, mut count) = (0.0, 0usize);
+        for j in 1..=len {
+            let u_a = path(j);
             let input = [x_a, x_b, u_a, u_b];
-            if j == p.horizon {
-                return gp.variance(input);
+            if j == len || j % every.max(1) == 0 {
+                sum += gp.variance(input)?;
+                count += 1;
+            }
+            if j == len {
+                break;
             }
             let x_next = gp.state(input)?;
             (x_b, x_a, u_b) = (x_a, x_next, u_a);
         }
-        None
+        (count > 0).then(|| sum / count as f64)
     }
 
     /// Records the sample the robot produced for the last input (`u` as applied, measured

@@ -2,7 +2,7 @@
 //! edge cases and a robot that does not follow, determinism, that seeking uncertainty reaches
 //! where random steps do not, planning without a robot, resuming from a first batch, errors.
 
-use hbn_model::explore::{ExploreError, ExploreParams, Explorer, Phase};
+use hbn_model::explore::{ExploreError, ExploreParams, Explorer, Phase, Strategy};
 use hbn_model::{HbnModel, HbnParams, Sequence, Signal};
 use hbn_sim::{SimConfig, Simulator, SystemKind};
 
@@ -105,14 +105,17 @@ fn span_after(u: &[f64], from: usize) -> f64 {
 
 #[test]
 fn seeking_uncertainty_covers_the_range_that_random_steps_leave_out() {
-    // Both explorers share the random phase (same seed) near u = 0. Then one keeps taking
-    // random steps (alpha 0: the thesis' step 1 forever), the other seeks the transition GP's
-    // variance (alpha 1). A bounded random walk of 400 steps of at most 0.02 spreads over
-    // ~0.2; seeking heads for the inputs the GP has not seen and sweeps the whole range.
+    // The thesis' per-sample rule. Both explorers share the random phase (same seed) near
+    // u = 0. Then one keeps taking random steps (alpha 0: the thesis' step 1 forever), the
+    // other seeks the transition GP's variance (alpha 1). A bounded random walk of 400 steps
+    // of at most 0.02 spreads over ~0.2; seeking heads for the inputs the GP has not seen and
+    // sweeps the whole range.
     let mut spans = Vec::new();
     for system in [SystemKind::BoucWen, SystemKind::Preisach] {
         for alpha in [0.0, 1.0] {
             let mut p = quick(ExploreParams::new(0.0, 1.0, 0.02));
+            p.strategy = Strategy::Steps;
+            p.horizon = 10;
             p.random_samples = 60;
             p.alpha_start = alpha;
             p.alpha_end = alpha;
@@ -130,6 +133,22 @@ fn seeking_uncertainty_covers_the_range_that_random_steps_leave_out() {
             "{system}: seeking spans {seeking:.3}, random steps {random:.3}"
         );
     }
+}
+
+#[test]
+fn ramps_move_at_most_max_step_and_arrive_at_their_targets() {
+    // Random ramps only (alpha 0): piecewise-linear inputs whose slopes vary in
+    // [0.1, 1] max_step, so the data hold slow and fast inputs.
+    let mut p = quick(ExploreParams::new(0.0, 1.0, 0.02));
+    p.alpha_start = 0.0;
+    p.alpha_end = 0.0;
+    let mut e = Explorer::new(p).unwrap();
+    let u = drive(&mut e, SystemKind::Duhem, 1, 600);
+    assert_within(&u, 0.0, 1.0, 0.02);
+    let steps: Vec<f64> = u.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    let slow = steps.iter().filter(|&&s| s > 0.0 && s < 0.008).count();
+    let fast = steps.iter().filter(|&&s| s > 0.012).count();
+    assert!(slow > 50 && fast > 50, "slow {slow}, fast {fast}");
 }
 
 #[test]
