@@ -79,8 +79,8 @@ pub fn run(ui: &mut Ui<'_>, args: &ExploreArgs) -> anyhow::Result<Schedule> {
     let p = &schedule.params;
     let u_name = &model.signals().input.name;
     ui.line(format!(
-        "planned {} samples ({:.1} s at {} Hz) of {u_name} in [{}, {}], steps <= {}, continuing \
-         `{}` (last input {}); stands on {} logged samples",
+        "planned {} samples ({:.1} s at {} Hz) of {u_name} in [{:.4}, {:.4}], steps <= {:.4}, \
+         continuing `{}` (last input {:.4}); stands on {} logged samples",
         schedule.u.len(),
         schedule.u.len() as f64 / schedule.rate_hz,
         schedule.rate_hz,
