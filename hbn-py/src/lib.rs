@@ -21,6 +21,7 @@ use std::sync::Arc;
 use hbn_core::{Flags, Mode, Want};
 use hbn_gp::{GaussianProcess, GpError, GpParams, RawHyperparameters, SparseParams};
 use hbn_io::{IoError, SignalPath};
+use hbn_model::explore::{ExploreError, ExploreParams, Explorer, Phase, Strategy};
 use hbn_model::{
     Estimate, Filter, FilterOutput, HbnModel, HbnParams, KernelChoice, ModelError, Param,
     ParamValue, Sequence, SignalInfo, Signals,
@@ -28,7 +29,7 @@ use hbn_model::{
 use hbn_pipeline::{
     LogOption, LogOptions, OptionError, Outputs, PipelineError, SignalChoice, TrainSignals,
 };
-use hbn_sim::{SimConfig, SimError, SystemKind};
+use hbn_sim::{SimConfig, SimError, Simulator, SystemKind};
 use numpy::{PyArray1, PyReadonlyArray1};
 use pyo3::exceptions::{
     PyException, PyFileNotFoundError, PyOSError, PyRuntimeError, PyTypeError, PyValueError,
@@ -322,6 +323,16 @@ impl From<PipelineError> for Fail {
                 Fail::new(kind, e.to_string())
             }
             PipelineError::Sim(s) => s.into(),
+            other => Fail::new(Kind::Data, other.to_string()),
+        }
+    }
+}
+
+impl From<ExploreError> for Fail {
+    fn from(e: ExploreError) -> Self {
+        match e {
+            ExploreError::InvalidParameter { name, reason } => Fail::config(name, reason),
+            ExploreError::Model(m) => m.into(),
             other => Fail::new(Kind::Data, other.to_string()),
         }
     }
@@ -1133,6 +1144,204 @@ impl FilterStep {
 // Functions
 // ---------------------------------------------------------------------------------------------
 
+/// Native explorer (`hbn_model::explore::Explorer`). Use `hbn.Explorer` instead.
+#[pyclass(name = "ExplorerCore", module = "hbn._hbn")]
+pub struct ExplorerCore {
+    inner: Explorer,
+}
+
+#[pymethods]
+impl ExplorerCore {
+    /// Checks the parameters; `params` are the training keywords of `HysteresisModel.fit`.
+    #[new]
+    #[pyo3(signature = (u_min, u_max, max_step, rate, seed, u_start, random_samples,
+        alpha_start, alpha_end, alpha_ramp, refit_every, optimize_every, candidates, horizon,
+        strategy, params))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        u_min: f64,
+        u_max: f64,
+        max_step: f64,
+        rate: Option<f64>,
+        seed: Option<u64>,
+        u_start: Option<f64>,
+        random_samples: Option<usize>,
+        alpha_start: Option<f64>,
+        alpha_end: Option<f64>,
+        alpha_ramp: Option<usize>,
+        refit_every: Option<usize>,
+        optimize_every: Option<usize>,
+        candidates: Option<usize>,
+        horizon: Option<usize>,
+        strategy: Option<&str>,
+        params: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let mut p = ExploreParams::new(u_min, u_max, max_step);
+        p.model = hbn_params(py, params)?;
+        if let Some(r) = rate {
+            p.model.rate_hz = r;
+        }
+        if let Some(s) = seed {
+            p.seed = s;
+            p.model.seed = s;
+        }
+        p.u_start = u_start;
+        p.random_samples = random_samples.unwrap_or(p.random_samples);
+        p.alpha_start = alpha_start.unwrap_or(p.alpha_start);
+        p.alpha_end = alpha_end.unwrap_or(p.alpha_end);
+        p.alpha_ramp = alpha_ramp.unwrap_or(p.alpha_ramp);
+        p.refit_every = refit_every.unwrap_or(p.refit_every);
+        p.optimize_every = optimize_every.unwrap_or(p.optimize_every);
+        p.candidates = candidates.unwrap_or(p.candidates);
+        p.horizon = horizon.unwrap_or(p.horizon);
+        if let Some(s) = strategy {
+            p.strategy =
+                Strategy::from_str(s).map_err(|e| raise(py, Fail::config("strategy", e)))?;
+        }
+        let inner = Explorer::new(p).map_err(|e| raise(py, e))?;
+        Ok(Self { inner })
+    }
+    /// The next input to apply.
+    fn propose(&mut self, py: Python<'_>) -> PyResult<f64> {
+        let inner = &mut self.inner;
+        detached(py, move || Ok(inner.propose()))
+    }
+    /// Records one observed sample; refits when due (GIL released).
+    fn observe(&mut self, py: Python<'_>, u: f64, x: f64, y: f64) -> PyResult<()> {
+        let inner = &mut self.inner;
+        detached(py, move || Ok(inner.observe(u, x, y)?))
+    }
+    /// Trains the HBN on every sample observed (GIL released).
+    fn model(&self, py: Python<'_>) -> PyResult<HysteresisModelCore> {
+        let inner = &self.inner;
+        let model = detached(py, move || Ok(inner.model()?))?;
+        Ok(HysteresisModelCore::wrap(model))
+    }
+    /// A schedule of `steps` inputs and the predicted states (GIL released).
+    fn plan<'py>(&self, py: Python<'py>, steps: usize) -> PyResult<(Arr<'py>, Arr<'py>)> {
+        let inner = &self.inner;
+        let (u, x) = detached(py, move || Ok(inner.plan(steps)))?;
+        Ok((PyArray1::from_vec(py, u), PyArray1::from_vec(py, x)))
+    }
+    /// Starts a new run (the robot was reset).
+    fn start_run(&mut self) {
+        self.inner.start_run();
+    }
+    /// `random` or `seeking`.
+    #[getter]
+    fn phase(&self) -> &'static str {
+        match self.inner.phase() {
+            Phase::Random => "random",
+            Phase::Seeking { .. } => "seeking",
+        }
+    }
+    /// The weight of uncertainty seeking now.
+    #[getter]
+    fn alpha(&self) -> f64 {
+        self.inner.alpha()
+    }
+    /// Samples observed so far.
+    #[getter]
+    fn n_observed(&self) -> usize {
+        self.inner.n_observed()
+    }
+    /// What went wrong and was recovered from.
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.inner.warnings().to_vec()
+    }
+    /// The observed runs as `(u, x, y)` arrays.
+    #[getter]
+    fn runs<'py>(&self, py: Python<'py>) -> Vec<(Arr<'py>, Arr<'py>, Arr<'py>)> {
+        self.inner
+            .runs()
+            .map(|(u, x, y)| {
+                (
+                    PyArray1::from_slice(py, u),
+                    PyArray1::from_slice(py, x),
+                    PyArray1::from_slice(py, y),
+                )
+            })
+            .collect()
+    }
+    /// The explorer's parameters (bounds, schedule; not the training parameters).
+    #[getter]
+    fn settings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        explore_dict(py, self.inner.params())
+    }
+}
+
+/// The explorer's settings by keyword (bounds included).
+fn explore_dict<'py>(py: Python<'py>, p: &ExploreParams) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("u_min", p.u_min)?;
+    d.set_item("u_max", p.u_max)?;
+    d.set_item("max_step", p.max_step)?;
+    d.set_item("u_start", p.u_start)?;
+    d.set_item("random_samples", p.random_samples)?;
+    d.set_item("alpha_start", p.alpha_start)?;
+    d.set_item("alpha_end", p.alpha_end)?;
+    d.set_item("alpha_ramp", p.alpha_ramp)?;
+    d.set_item("refit_every", p.refit_every)?;
+    d.set_item("optimize_every", p.optimize_every)?;
+    d.set_item("candidates", p.candidates)?;
+    d.set_item("horizon", p.horizon)?;
+    d.set_item("strategy", p.strategy.name())?;
+    d.set_item("seed", p.seed)?;
+    Ok(d)
+}
+
+/// The explorer's defaults (`ExploreParams::new`), by keyword; the bounds have none.
+#[pyfunction]
+fn default_explore_params(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let d = explore_dict(py, &ExploreParams::new(0.0, 1.0, 1.0))?;
+    for k in ["u_min", "u_max", "max_step"] {
+        d.del_item(k)?;
+    }
+    Ok(d)
+}
+
+/// Native stepping simulator (`hbn_sim::Simulator`). Use `hbn.Simulator` instead.
+#[pyclass(name = "SimulatorCore", module = "hbn._hbn")]
+pub struct SimulatorCore {
+    inner: Simulator,
+}
+
+#[pymethods]
+impl SimulatorCore {
+    /// The system in its relaxed state; `None` settings take the simulator's defaults.
+    #[new]
+    #[pyo3(signature = (system, seed, noise_gain, rate))]
+    fn new(
+        py: Python<'_>,
+        system: &str,
+        seed: Option<u64>,
+        noise_gain: Option<f64>,
+        rate: Option<f64>,
+    ) -> PyResult<Self> {
+        let kind = SystemKind::from_str(system).map_err(|e| raise(py, e))?;
+        let d = SimConfig::new(kind);
+        let cfg = SimConfig {
+            system: kind,
+            noise_gain: noise_gain.unwrap_or(d.noise_gain),
+            rate_hz: rate.unwrap_or(d.rate_hz),
+            seed: seed.unwrap_or(d.seed),
+        };
+        let inner = Simulator::new(&cfg).map_err(|e| raise(py, e))?;
+        Ok(Self { inner })
+    }
+    /// Applies `u` for one sample: `(x, y)`.
+    fn step(&mut self, py: Python<'_>, u: f64) -> PyResult<(f64, f64)> {
+        self.inner.step(u).map_err(|e| raise(py, e))
+    }
+    /// Samples simulated so far.
+    #[getter]
+    fn steps(&self) -> usize {
+        self.inner.steps()
+    }
+}
+
 /// Simulates a hysteretic system under a random bounded-increment input: `(u, x, y)`.
 /// `None` settings take the simulator's defaults.
 #[pyfunction]
@@ -1320,6 +1529,9 @@ fn _hbn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<HysteresisModelCore>()?;
     m.add_class::<FilterCore>()?;
     m.add_class::<FilterStep>()?;
+    m.add_class::<ExplorerCore>()?;
+    m.add_class::<SimulatorCore>()?;
+    m.add_function(wrap_pyfunction!(default_explore_params, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(systems, m)?)?;
     m.add_function(wrap_pyfunction!(score, m)?)?;

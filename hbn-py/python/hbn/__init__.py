@@ -9,7 +9,10 @@ The same Rust engine as the ``hbn`` command-line tool, with a scikit-learn feel:
   files are the CLI's ``hbn train --out model.hbn`` files;
 * :class:`Filter` -- the streaming estimator (``model.filter()``): one ``step(u, y)`` per sample,
   equal to :meth:`HysteresisModel.estimate` sample for sample;
-* :func:`simulate` -- the hysteretic test systems of ``hbn simulate``;
+* :class:`Explorer` -- which input to apply next while collecting training data (thesis
+  Sec. 3.4), with a robot or a :class:`Simulator` in the loop;
+* :func:`simulate` -- the hysteretic test systems of ``hbn simulate``; :class:`Simulator` steps
+  one of them a sample at a time;
 * :func:`read_mcap` -- numeric signals from MCAP robot logs (ROS 2 or Foxglove), resampled on one
   grid by the CLI's own pipeline; :meth:`HysteresisModel.from_logs` trains from logs exactly like
   ``hbn train``.
@@ -50,12 +53,15 @@ __all__ = [
     "Estimate",
     "Filter",
     "FilterOutput",
+    "Explorer",
+    "Simulator",
     "simulate",
     "read_mcap",
     "list_topics",
     "default_params",
     "default_log_options",
     "default_gp_params",
+    "default_explore_params",
     "HbnError",
     "HbnIOError",
     "HbnFileNotFoundError",
@@ -110,6 +116,12 @@ def default_log_options() -> Dict[str, Any]:
     return _hbn.default_log_options()
 
 
+def default_explore_params() -> Dict[str, Any]:
+    """The :class:`Explorer`'s defaults (the library's ``ExploreParams``), by keyword; the
+    bounds ``u_min``, ``u_max`` and ``max_step`` have none."""
+    return _hbn.default_explore_params()
+
+
 def default_gp_params() -> Dict[str, Any]:
     """The defaults of :class:`GaussianProcess` (``GpParams::new`` in Rust)."""
     return _hbn.default_gp_params()
@@ -155,6 +167,13 @@ def _config_error(keyword: str, problem: str) -> "ConfigError":
     e = ConfigError(f"invalid {keyword}=: {problem}")
     e.keyword = keyword
     return e
+
+
+def _float(v: Any, keyword: str) -> float:
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        raise _config_error(keyword, f"must be a number, got {v!r}") from None
 
 
 def _opt_float(v: Any) -> Optional[float]:
@@ -223,12 +242,13 @@ class GaussianProcess:
     >>> bool(abs(mean[0] - np.sin(1.0)) < 1e-2)
     True
 
-    A sparse GP on every sample of a larger data set:
+    A sparse GP on every sample of a larger data set (the greedy choice of inducing points
+    stops early when the rest of the data add no variance: a sine needs fewer than 32):
 
     >>> X = np.linspace(0, 5, 5000)
     >>> gp = hbn.GaussianProcess(n_inducing=32).fit(X, np.sin(X))
-    >>> gp.is_sparse, gp.n_support
-    (True, 32)
+    >>> gp.is_sparse, 1 <= gp.n_support <= 32
+    (True, True)
     >>> bool(abs(gp.predict([[1.0]])[0] - np.sin(1.0)) < 1e-2)
     True
     """
@@ -897,6 +917,182 @@ class Filter:
     @property
     def steps(self) -> int:
         """Samples processed since the last (re)initialisation."""
+        return self._core.steps
+
+
+class Explorer:
+    """Chooses the next input while training data are collected (thesis Sec. 3.4): random
+    inputs first, then inputs that seek where the transition GP is uncertain.
+
+    ``u_min``, ``u_max``: bounds of the input; ``max_step``: the largest change of the input
+    per sample. Every proposal lies in the bounds and, when the last observed input does,
+    differs from it by at most ``max_step``. ``rate``: the sample rate of the model (Hz);
+    ``seed``: seeds the random steps and the training. The schedule (defaults in
+    :func:`default_explore_params`, from the library): ``u_start`` (the first input; ``None``:
+    ``u_min``), ``random_samples`` (length of the random phase), ``alpha_start``,
+    ``alpha_end``, ``alpha_ramp`` (the weight of uncertainty seeking grows linearly from
+    ``alpha_start`` to ``alpha_end`` over ``alpha_ramp`` samples), ``refit_every`` (refit the
+    transition GP every N samples), ``optimize_every`` (re-learn its hyperparameters,
+    warm-started, every N samples), ``candidates``, ``horizon`` (the uncertainty search) and
+    ``strategy`` (``"ramps"``: ramps to target levels at constant slopes, the next ramp chosen
+    by uncertainty with probability ``alpha``; ``"steps"``: the thesis' per-sample rule
+    ``u += alpha * eps + (1 - alpha) * w``). ``**params``: training parameters of
+    :meth:`HysteresisModel.fit` (``max_points``, ``n_inducing``, ``kernel``, ...), used by the
+    explorer's transition GP and by :meth:`model`. A bad value raises :class:`ConfigError`
+    whose ``keyword`` names it. docs/exploration.md says what it gains over random inputs,
+    measured.
+
+    >>> import hbn
+    >>> explorer = hbn.Explorer(0.0, 1.0, 0.02, random_samples=40, max_points=60, n_restarts=1)
+    >>> robot = hbn.Simulator("duhem", noise_gain=1.0)
+    >>> for _ in range(120):
+    ...     u = explorer.propose()
+    ...     x, y = robot.step(u)
+    ...     explorer.observe(u, x, y)
+    >>> explorer.phase
+    'seeking'
+    >>> model = explorer.model()
+    """
+
+    def __init__(
+        self,
+        u_min: float,
+        u_max: float,
+        max_step: float,
+        rate: Optional[float] = None,
+        seed: Optional[int] = None,
+        u_start: Optional[float] = None,
+        random_samples: Optional[int] = None,
+        alpha_start: Optional[float] = None,
+        alpha_end: Optional[float] = None,
+        alpha_ramp: Optional[int] = None,
+        refit_every: Optional[int] = None,
+        optimize_every: Optional[int] = None,
+        candidates: Optional[int] = None,
+        horizon: Optional[int] = None,
+        strategy: Optional[str] = None,
+        **params: Any,
+    ) -> None:
+        count = GaussianProcess._count
+        self._core = _hbn.ExplorerCore(
+            _float(u_min, "u_min"),
+            _float(u_max, "u_max"),
+            _float(max_step, "max_step"),
+            _opt_float(rate),
+            count(seed, "seed"),
+            _opt_float(u_start),
+            count(random_samples, "random_samples"),
+            _opt_float(alpha_start),
+            _opt_float(alpha_end),
+            count(alpha_ramp, "alpha_ramp"),
+            count(refit_every, "refit_every"),
+            count(optimize_every, "optimize_every"),
+            count(candidates, "candidates"),
+            count(horizon, "horizon"),
+            _opt_str(strategy),
+            params,
+        )
+
+    def __repr__(self) -> str:
+        s = self.settings
+        return (
+            f"Explorer(u_min={s['u_min']}, u_max={s['u_max']}, max_step={s['max_step']}, "
+            f"n_observed={self.n_observed}, phase={self.phase!r})"
+        )
+
+    def propose(self) -> float:
+        """The next input to apply (draws one random step)."""
+        return self._core.propose()
+
+    def observe(self, u: float, x: float, y: float) -> None:
+        """Records the sample the robot produced: ``u`` as applied, measured ``x`` and ``y``
+        (finite; a NaN raises :class:`DataError` and is not recorded). Refits the transition GP
+        when it is due."""
+        self._core.observe(_float(u, "u"), _float(x, "x"), _float(y, "y"))
+
+    def model(self) -> "HysteresisModel":
+        """Trains the HBN on every sample observed (like :meth:`HysteresisModel.fit`)."""
+        return HysteresisModel(self._core.model())
+
+    def plan(self, steps: int) -> Tuple[np.ndarray, np.ndarray]:
+        """A schedule of ``steps`` inputs for a robot without the explorer in its loop, and
+        the states the transition GP predicts along it (what ``hbn explore`` writes); each
+        predicted state is treated as observed. The explorer itself is not changed."""
+        return self._core.plan(GaussianProcess._count(steps, "steps"))
+
+    def start_run(self) -> None:
+        """The robot was reset: the next samples start a new run (the next input is
+        ``u_start``), and no training row straddles the two."""
+        self._core.start_run()
+
+    @property
+    def phase(self) -> str:
+        """``"random"`` or ``"seeking"``."""
+        return self._core.phase
+
+    @property
+    def alpha(self) -> float:
+        """The weight of uncertainty seeking now (0 in the random phase)."""
+        return self._core.alpha
+
+    @property
+    def n_observed(self) -> int:
+        """Samples observed so far, all runs."""
+        return self._core.n_observed
+
+    @property
+    def warnings(self) -> List[str]:
+        """What went wrong and was recovered from (a failed refit keeps the previous GP)."""
+        return self._core.warnings
+
+    @property
+    def runs(self) -> List[Dict[str, np.ndarray]]:
+        """The observed runs, each ``{"u", "x", "y"}``."""
+        return [{"u": u, "x": x, "y": y} for u, x, y in self._core.runs]
+
+    @property
+    def settings(self) -> Dict[str, Any]:
+        """The explorer's settings (bounds and schedule), defaults filled in."""
+        return self._core.settings
+
+
+class Simulator:
+    """One of the systems of :func:`simulate`, stepped one sample at a time: a stand-in robot
+    for :class:`Explorer` or a controller in the loop.
+
+    ``system``: one of :data:`SYSTEMS`; ``seed``, ``noise_gain``, ``rate`` as in
+    :func:`simulate`. Stepping through an input gives exactly the ``x`` and ``y`` that
+    :func:`simulate` gives for it with the same settings.
+
+    >>> import hbn
+    >>> robot = hbn.Simulator("bouc-wen", seed=1, noise_gain=1.0)
+    >>> x, y = robot.step(0.1)
+    >>> robot.steps
+    1
+    """
+
+    def __init__(
+        self,
+        system: str,
+        seed: Optional[int] = None,
+        noise_gain: Optional[float] = None,
+        rate: Optional[float] = None,
+    ) -> None:
+        self._core = _hbn.SimulatorCore(
+            str(system), GaussianProcess._count(seed, "seed"), _opt_float(noise_gain), _opt_float(rate)
+        )
+
+    def __repr__(self) -> str:
+        return f"Simulator(steps={self.steps})"
+
+    def step(self, u: float) -> Tuple[float, float]:
+        """Applies ``u`` for one sample; returns ``(x, y)``. An input that is not finite or
+        lies outside the simulator's range raises :class:`DataError` and changes nothing."""
+        return self._core.step(_float(u, "u"))
+
+    @property
+    def steps(self) -> int:
+        """Samples simulated so far."""
         return self._core.steps
 
 
