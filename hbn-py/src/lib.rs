@@ -1302,6 +1302,24 @@ fn default_explore_params(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     Ok(d)
 }
 
+/// A simulator configuration; `None` settings take the simulator's defaults.
+fn sim_config(
+    py: Python<'_>,
+    system: &str,
+    seed: Option<u64>,
+    noise_gain: Option<f64>,
+    rate: Option<f64>,
+) -> PyResult<SimConfig> {
+    let kind = SystemKind::from_str(system).map_err(|e| raise(py, e))?;
+    let d = SimConfig::new(kind);
+    Ok(SimConfig {
+        system: kind,
+        noise_gain: noise_gain.unwrap_or(d.noise_gain),
+        rate_hz: rate.unwrap_or(d.rate_hz),
+        seed: seed.unwrap_or(d.seed),
+    })
+}
+
 /// Native stepping simulator (`hbn_sim::Simulator`). Use `hbn.Simulator` instead.
 #[pyclass(name = "SimulatorCore", module = "hbn._hbn")]
 pub struct SimulatorCore {
@@ -1320,14 +1338,7 @@ impl SimulatorCore {
         noise_gain: Option<f64>,
         rate: Option<f64>,
     ) -> PyResult<Self> {
-        let kind = SystemKind::from_str(system).map_err(|e| raise(py, e))?;
-        let d = SimConfig::new(kind);
-        let cfg = SimConfig {
-            system: kind,
-            noise_gain: noise_gain.unwrap_or(d.noise_gain),
-            rate_hz: rate.unwrap_or(d.rate_hz),
-            seed: seed.unwrap_or(d.seed),
-        };
+        let cfg = sim_config(py, system, seed, noise_gain, rate)?;
         let inner = Simulator::new(&cfg).map_err(|e| raise(py, e))?;
         Ok(Self { inner })
     }
@@ -1354,14 +1365,7 @@ fn simulate<'py>(
     noise_gain: Option<f64>,
     rate: Option<f64>,
 ) -> PyResult<(Arr<'py>, Arr<'py>, Arr<'py>)> {
-    let kind = SystemKind::from_str(system).map_err(|e| raise(py, e))?;
-    let d = SimConfig::new(kind);
-    let cfg = SimConfig {
-        system: kind,
-        noise_gain: noise_gain.unwrap_or(d.noise_gain),
-        rate_hz: rate.unwrap_or(d.rate_hz),
-        seed: seed.unwrap_or(d.seed),
-    };
+    let cfg = sim_config(py, system, seed, noise_gain, rate)?;
     let t = detached(py, move || Ok(hbn_sim::simulate_random(&cfg, steps)?))?;
     Ok((
         PyArray1::from_vec(py, t.u),

@@ -576,20 +576,29 @@ impl Explorer {
         random
     }
 
-    /// The ramp (target among `candidates` levels evenly spread over the bounds, slope among
-    /// [`RAMP_SLOPES`] `x eta`) with the largest mean latent variance of the transition GP
-    /// over its first `horizon` samples; `None` without a GP or history.
-    fn seek_ramp(&self, u_prev: f64, eta: f64) -> Option<Ramp> {
+    /// Where every candidate starts: the transition GP's predictor and the states
+    /// `[x̂_t, x_{t-1}]` (`x̂_t`, the state of the sample at which the proposal is applied, from
+    /// the GP's mean); `None` without a GP or two samples in the current run.
+    fn start(&self, u_prev: f64) -> Option<(Predictor<'_>, [f64; 2])> {
         let gp = self.transition.as_ref()?;
         let run = self.runs.last()?;
         let n = run.u.len();
         if n < 2 {
             return None;
         }
-        let p = &*self.params;
-        let mut gp = Predictor::new(gp, p.model.increments.mean_input(GpRole::Transition))?;
+        let mean_input = self.params.model.increments.mean_input(GpRole::Transition);
+        let mut gp = Predictor::new(gp, mean_input)?;
         let (x1, x2, u2) = (run.x[n - 1], run.x[n - 2], run.u[n - 2]);
         let x_now = gp.state([x1, x2, u_prev, u2])?;
+        Some((gp, [x_now, x1]))
+    }
+
+    /// The ramp (target among `candidates` levels evenly spread over the bounds, slope among
+    /// [`RAMP_SLOPES`] `x eta`) with the largest mean latent variance of the transition GP
+    /// over its first `horizon` samples; `None` without a GP or history.
+    fn seek_ramp(&self, u_prev: f64, eta: f64) -> Option<Ramp> {
+        let (mut gp, states) = self.start(u_prev)?;
+        let p = &*self.params;
         let c = p.candidates;
         let mut best: Option<(f64, Ramp)> = None;
         for i in 0..c {
@@ -604,8 +613,7 @@ impl Explorer {
                 let len = steps.min(p.horizon);
                 let path = |j: usize| u_prev + dist.signum() * (j as f64 * slope).min(dist.abs());
                 let every = len.div_ceil(RAMP_POINTS);
-                let Some(v) = Self::path_variance(&mut gp, [x_now, x1], u_prev, len, every, path)
-                else {
+                let Some(v) = Self::path_variance(&mut gp, states, u_prev, len, every, path) else {
                     continue;
                 };
                 if best.is_none_or(|(b, _)| v > b) {
@@ -621,17 +629,8 @@ impl Explorer {
     /// transition GP (states along the ramp rolled forward by the GP mean); `None` without a
     /// GP or history.
     fn seek(&self, u_prev: f64, eta: f64) -> Option<f64> {
-        let gp = self.transition.as_ref()?;
-        let run = self.runs.last()?;
-        let n = run.u.len();
-        if n < 2 {
-            return None;
-        }
+        let (mut gp, states) = self.start(u_prev)?;
         let p = &*self.params;
-        let mut gp = Predictor::new(gp, p.model.increments.mean_input(GpRole::Transition))?;
-        let (x1, x2, u2) = (run.x[n - 1], run.x[n - 2], run.u[n - 2]);
-        // x̂_t: the state of the sample at which the proposal is applied.
-        let x_now = gp.state([x1, x2, u_prev, u2])?;
         let e_lo = (-eta).max(p.u_min - u_prev);
         let e_hi = eta.min(p.u_max - u_prev);
         let c = p.candidates;
@@ -640,7 +639,7 @@ impl Explorer {
             let eps = e_lo + (e_hi - e_lo) * i as f64 / (c - 1) as f64;
             let ramp = |j: usize| (u_prev + j as f64 * eps).clamp(p.u_min, p.u_max);
             let Some(variance) =
-                Self::path_variance(&mut gp, [x_now, x1], u_prev, p.horizon, p.horizon, ramp)
+                Self::path_variance(&mut gp, states, u_prev, p.horizon, p.horizon, ramp)
             else {
                 continue;
             };
