@@ -4,8 +4,9 @@
 //! and seed, scored on a fresh random-ramp test run (1500 samples, another seed) that no
 //! training or validation saw.
 //!
-//! Usage: cargo run --release -p hbn-model --example explore_eval -- SYSTEMS SIZES SEEDS
+//! Usage: cargo run --release -p hbn-model --example explore_eval -- SYSTEMS SIZES SEEDS [METHODS]
 //! e.g. `-- bouc-wen,preisach,soft-actuator 500,1000,2000 1,2,3`; prints one CSV line per run.
+//! METHODS (default all): random-ramps, explore-ramps, explore-steps.
 use hbn_model::explore::{ExploreParams, Explorer, Strategy};
 use hbn_model::{HbnModel, HbnParams, Sequence, metrics::nrmse};
 use hbn_sim::{SimConfig, Simulator, SystemKind, simulate_random};
@@ -22,6 +23,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let systems: Vec<SystemKind> = list(systems);
     let sizes: Vec<usize> = list(sizes);
     let seeds: Vec<u64> = list(seeds);
+    let all = "random-ramps,explore-ramps,explore-steps";
+    let methods: Vec<String> = list(args.get(4).map_or(all, |s| s.as_str()));
     println!("system,seed,samples,method,nrmse,seconds");
     for &system in &systems {
         for &seed in &seeds {
@@ -42,17 +45,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 Ok(nrmse(&e.x, &test.x))
             };
             for &n in &sizes {
-                let t0 = std::time::Instant::now();
-                let tr = simulate_random(&cfg, n)?;
-                let m =
-                    HbnModel::fit(&[Sequence::new(&tr.u, &tr.x, &tr.y)], &HbnParams::default())?;
-                let s = score(&m)?;
-                println!(
-                    "{system},{seed},{n},random-ramps,{s},{:.1}",
-                    t0.elapsed().as_secs_f64()
-                );
-                for strategy in [Strategy::Ramps, Strategy::Steps] {
+                for method in &methods {
                     let t0 = std::time::Instant::now();
+                    let strategy = match method.as_str() {
+                        "random-ramps" => {
+                            let tr = simulate_random(&cfg, n)?;
+                            let seqs = [Sequence::new(&tr.u, &tr.x, &tr.y)];
+                            let s = score(&HbnModel::fit(&seqs, &HbnParams::default())?)?;
+                            let t = t0.elapsed().as_secs_f64();
+                            println!("{system},{seed},{n},{method},{s},{t:.1}");
+                            continue;
+                        }
+                        "explore-ramps" => Strategy::Ramps,
+                        "explore-steps" => Strategy::Steps,
+                        other => return Err(format!("unknown method {other}").into()),
+                    };
                     let mut p = ExploreParams::new(0.0, 1.0, hbn_sim::DEFAULT_MAX_INCREMENT);
                     p.seed = seed;
                     p.strategy = strategy;
@@ -64,11 +71,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         explorer.observe(u, x, y)?;
                     }
                     let s = score(&explorer.model()?)?;
-                    println!(
-                        "{system},{seed},{n},explore-{},{s},{:.1}",
-                        strategy.name(),
-                        t0.elapsed().as_secs_f64()
-                    );
+                    let t = t0.elapsed().as_secs_f64();
+                    println!("{system},{seed},{n},{method},{s},{t:.1}");
                 }
             }
         }
