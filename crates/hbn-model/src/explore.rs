@@ -822,8 +822,8 @@ impl Explorer {
     pub fn plan(&self, steps: usize) -> (Vec<f64>, Vec<f64>) {
         let mut planner = self.clone();
         planner.learn = false;
-        let mut u_plan = Vec::with_capacity(steps);
-        let mut x_plan = Vec::with_capacity(steps);
+        let mut u_plan = Vec::with_capacity(steps.min(PLAN_RESERVE));
+        let mut x_plan = Vec::with_capacity(steps.min(PLAN_RESERVE));
         for _ in 0..steps {
             let u = planner.propose();
             let x = planner.predicted_next();
@@ -902,6 +902,10 @@ impl<'a> Predictor<'a> {
         pred.variance.is_finite().then_some(pred.variance)
     }
 }
+
+/// Most samples a plan reserves memory for up front (a huge `steps` grows as it runs instead
+/// of failing to reserve).
+const PLAN_RESERVE: usize = 1 << 20;
 
 /// Salt mixed into the seed, so that an explorer and a simulator seeded alike do not share
 /// one random stream.
