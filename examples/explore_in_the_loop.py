@@ -9,7 +9,7 @@ bound. Needs only numpy and the hbn wheel.
     python examples/explore_in_the_loop.py --system bouc-wen --samples 1000 --seed 1
 
 docs/exploration.md has the study over 4 systems and 3 seeds: on par with random ramps at
-1000 samples, not better.
+1000 samples, not better; about 6 times more accurate than the thesis' random walk.
 """
 
 import argparse

@@ -1,6 +1,7 @@
 """Summarises the CSV of `cargo run --release -p hbn-model --example explore_eval` as the
 Markdown tables of docs/exploration.md: mean nRMSE per system, amount of data and method (over
-seeds), the ratio to random ramps, and the smallest amount of explored data that reaches the
+seeds), each method's ratio to random ramps, the geometric means against random ramps and
+against the thesis' random walk, and the smallest amount of explored data that reaches the
 accuracy of random ramps on the largest amount.
 
 Usage: python benches/explore/table.py RUNS.csv [RUNS2.csv ...]
@@ -10,6 +11,22 @@ import math
 import sys
 from collections import defaultdict
 
+ORDER = ["random-ramps", "random-walk", "explore-ramps", "explore-steps"]
+NAMES = {
+    "random-ramps": "random ramps",
+    "random-walk": "random walk (thesis)",
+    "explore-ramps": "explorer (ramps, default)",
+    "explore-steps": "explorer (thesis steps)",
+}
+
+
+def mean(v):
+    return sum(v) / len(v)
+
+
+def geo(v):
+    return math.exp(sum(math.log(x) for x in v) / len(v))
+
 
 def main(paths):
     runs = defaultdict(list)  # (system, samples, method) -> [nrmse]
@@ -17,48 +34,58 @@ def main(paths):
         with open(path) as f:
             for row in csv.DictReader(f):
                 try:
-                    key = (row["system"], int(row["samples"]), row["method"])
-                    runs[key].append(float(row["nrmse"]))
+                    runs[(row["system"], int(row["samples"]), row["method"])].append(
+                        float(row["nrmse"]))
                 except (KeyError, ValueError):
                     continue
     systems = sorted({k[0] for k in runs})
     sizes = sorted({k[1] for k in runs})
-    methods = ["random-ramps", "explore-ramps", "explore-steps"]
-    print("| system | samples | seeds | random ramps | explorer (ramps, default) | ratio | explorer (thesis steps) | ratio |")
-    print("|---|---|---|---|---|---|---|---|")
+    methods = [m for m in ORDER if any(k[2] == m for k in runs)]
+    head = ["system", "samples", "seeds"]
+    for m in methods:
+        head += [NAMES[m]] + (["ratio"] if m != "random-ramps" else [])
+    print("| " + " | ".join(head) + " |")
+    print("|" + "---|" * len(head))
     ratios = defaultdict(list)
+    vs_walk = defaultdict(list)
     for s in systems:
         for n in sizes:
-            base = runs.get((s, n, methods[0]))
+            base = runs.get((s, n, "random-ramps"))
             if not base:
                 continue
-            mb = sum(base) / len(base)
-            cells = []
-            for m in methods[1:]:
+            walk = runs.get((s, n, "random-walk"))
+            cells = [s, str(n), str(len(base))]
+            for m in methods:
                 v = runs.get((s, n, m))
-                if v:
-                    mv = sum(v) / len(v)
-                    cells += [f"{mv:.4f}", f"{mv / mb:.2f}"]
-                    ratios[m].append(mv / mb)
-                else:
+                if m == "random-ramps":
+                    cells.append(f"{mean(base):.4f}")
+                    continue
+                if not v:
                     cells += ["", ""]
-            print(f"| {s} | {n} | {len(base)} | {mb:.4f} | " + " | ".join(cells) + " |")
+                    continue
+                cells += [f"{mean(v):.4f}", f"{mean(v) / mean(base):.2f}"]
+                ratios[m].append(mean(v) / mean(base))
+                if walk and m.startswith("explore"):
+                    vs_walk[m].append(mean(v) / mean(walk))
+            print("| " + " | ".join(cells) + " |")
+    print()
     for m, r in ratios.items():
-        g = math.exp(sum(math.log(x) for x in r) / len(r))
-        print(f"\n{m}: geometric mean ratio to random ramps {g:.2f} over {len(r)} cells; "
-              f"no worse in {sum(x <= 1.0 for x in r)} of {len(r)}")
+        print(f"- {NAMES[m]} / random ramps: geometric mean {geo(r):.2f} over {len(r)} cells, "
+              f"no worse in {sum(x <= 1.0 for x in r)}")
+    for m, r in vs_walk.items():
+        print(f"- {NAMES[m]} / random walk: geometric mean {geo(r):.2f} over {len(r)} cells, "
+              f"no worse in {sum(x <= 1.0 for x in r)}")
     print("\nData needed to reach the accuracy of random ramps on the most samples:")
     for s in systems:
-        top = max(n for n in sizes if runs.get((s, n, methods[0])))
-        target = sum(runs[(s, top, methods[0])]) / len(runs[(s, top, methods[0])])
-        for m in methods[1:]:
-            need = next(
-                (n for n in sizes
-                 if runs.get((s, n, m)) and sum(runs[(s, n, m)]) / len(runs[(s, n, m)]) <= target),
-                None,
-            )
+        top = max(n for n in sizes if runs.get((s, n, "random-ramps")))
+        target = mean(runs[(s, top, "random-ramps")])
+        for m in methods:
+            if not m.startswith("explore"):
+                continue
+            need = next((n for n in sizes
+                         if runs.get((s, n, m)) and mean(runs[(s, n, m)]) <= target), None)
             said = f"{need} samples" if need else f"more than {top}"
-            print(f"- {s}, {m}: {said} (random ramps: {top} samples, nRMSE {target:.4f})")
+            print(f"- {s}, {NAMES[m]}: {said} (random ramps: {top} samples, nRMSE {target:.4f})")
 
 
 if __name__ == "__main__":

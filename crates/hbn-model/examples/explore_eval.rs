@@ -6,10 +6,13 @@
 //!
 //! Usage: cargo run --release -p hbn-model --example explore_eval -- SYSTEMS SIZES SEEDS [METHODS]
 //! e.g. `-- bouc-wen,preisach,soft-actuator 500,1000,2000 1,2,3`; prints one CSV line per run.
-//! METHODS (default all): random-ramps, explore-ramps, explore-steps.
+//! METHODS (default all): random-ramps, random-walk (the thesis' random inputs: a bounded
+//! random walk, `hbn_sim::InputKind::RandomWalk`), explore-ramps, explore-steps.
 use hbn_model::explore::{ExploreParams, Explorer, Strategy};
 use hbn_model::{HbnModel, HbnParams, Sequence, metrics::nrmse};
-use hbn_sim::{SimConfig, Simulator, SystemKind, simulate_random};
+use hbn_sim::{
+    InputKind, SimConfig, Simulator, SystemKind, generate_input, simulate, simulate_random,
+};
 
 fn list<T: std::str::FromStr>(s: &str) -> Vec<T> {
     s.split(',').filter_map(|v| v.parse().ok()).collect()
@@ -23,7 +26,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let systems: Vec<SystemKind> = list(systems);
     let sizes: Vec<usize> = list(sizes);
     let seeds: Vec<u64> = list(seeds);
-    let all = "random-ramps,explore-ramps,explore-steps";
+    let all = "random-ramps,random-walk,explore-ramps,explore-steps";
     let methods: Vec<String> = list(args.get(4).map_or(all, |s| s.as_str()));
     println!("system,seed,samples,method,nrmse,seconds");
     for &system in &systems {
@@ -50,6 +53,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     let strategy = match method.as_str() {
                         "random-ramps" => {
                             let tr = simulate_random(&cfg, n)?;
+                            let seqs = [Sequence::new(&tr.u, &tr.x, &tr.y)];
+                            let s = score(&HbnModel::fit(&seqs, &HbnParams::default())?)?;
+                            let t = t0.elapsed().as_secs_f64();
+                            println!("{system},{seed},{n},{method},{s},{t:.1}");
+                            continue;
+                        }
+                        "random-walk" => {
+                            let u = generate_input(
+                                InputKind::RandomWalk,
+                                n,
+                                hbn_sim::DEFAULT_MAX_INCREMENT,
+                                seed,
+                            )?;
+                            let tr = simulate(&cfg, &u)?;
                             let seqs = [Sequence::new(&tr.u, &tr.x, &tr.y)];
                             let s = score(&HbnModel::fit(&seqs, &HbnParams::default())?)?;
                             let t = t0.elapsed().as_secs_f64();
