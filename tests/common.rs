@@ -1,11 +1,23 @@
 //! Shared helpers of the end-to-end tests: the thesis protocol of `hbn_pipeline::experiment`,
-//! in small.
+//! in small, and the CLI run in-process.
 #![allow(dead_code)]
 
 use hbn::model::{HbnModel, HbnParams};
 use hbn::pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
 use hbn::pipeline::sequences;
 use hbn::sim::{SystemKind, Trajectory};
+
+/// Runs `hbn ARGS` in-process; returns the error line `main` would print (if any) and stdout.
+pub fn hbn(args: &[&str]) -> (Option<String>, String) {
+    let mut out = Vec::new();
+    let mut err = Vec::new();
+    let full: Vec<&str> = std::iter::once("hbn").chain(args.iter().copied()).collect();
+    let r = hbn_cli::run_with(full, &mut out, &mut err);
+    (
+        r.err().map(|e| hbn_cli::error_message(&e)),
+        String::from_utf8_lossy(&out).into_owned(),
+    )
+}
 
 fn config(max_points: usize, seed: u64, test_steps: usize) -> ExperimentConfig {
     ExperimentConfig {

@@ -4,17 +4,8 @@
 
 use std::path::Path;
 
-/// Runs `hbn ARGS` in-process; returns the error line `main` would print (if any) and stdout.
-fn hbn(args: &[&str]) -> (Option<String>, String) {
-    let mut out = Vec::new();
-    let mut err = Vec::new();
-    let full: Vec<&str> = std::iter::once("hbn").chain(args.iter().copied()).collect();
-    let r = hbn_cli::run_with(full, &mut out, &mut err);
-    (
-        r.err().map(|e| hbn_cli::error_message(&e)),
-        String::from_utf8_lossy(&out).into_owned(),
-    )
-}
+mod common;
+use common::hbn;
 
 /// A first batch (400 samples of bouc-wen) and a model trained on it.
 fn first_batch() -> (tempfile::TempDir, String, String) {
