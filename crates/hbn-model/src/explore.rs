@@ -502,7 +502,9 @@ impl Explorer {
     }
 
     /// The next input to apply: in `[u_min, u_max]`, within `max_step` of the last observed
-    /// input (see the [module documentation](self)). Draws one random step.
+    /// input (see the [module documentation](self)). Draws random numbers for a step
+    /// ([`Strategy::Steps`]) or for a new ramp ([`Strategy::Ramps`], when the last one has
+    /// arrived).
     pub fn propose(&mut self) -> f64 {
         let p = &*self.params;
         let (lo, hi) = (p.u_min, p.u_max);
