@@ -4,8 +4,8 @@
 Methods (see ``docs/baselines.md``):
 
 * ``hbn`` / ``hbn-ekf`` / ``hbn-ekf-blr``: ``hbn.HysteresisModel.fit`` with its defaults on the
-  arrays of ``hbn.read_mcap`` (rate from the log; filter-aware training on the end of every
-  training log), then ``estimate()`` in the model's default mode (what a user gets), and in
+  arrays of ``hbn.read_mcap`` (rate from the log; filter-aware training by blocked
+  cross-validation over every training log), then ``estimate()`` in the model's default mode (what a user gets), and in
   each mode;
 * ``hbn-open-loop``: the same model's GP simulation of ``x`` from ``u`` alone (no sensor, no
   standard deviation): what the filter must beat;

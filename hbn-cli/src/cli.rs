@@ -377,8 +377,9 @@ pub struct TrainArgs {
     /// BLR window as a fraction of each coordinate's range.
     #[arg(long, allow_negative_numbers = true, default_value_t = params().blr_window)]
     pub blr_window: f64,
-    /// Fraction of the data held out to learn the filter's noise scales and default mode
-    /// (the end of every log); 0 turns filter tuning off.
+    /// Fraction of every log held out at a time to learn the filter's noise scales and default
+    /// mode (blocked cross-validation: 0.25 holds out each quarter of every log in turn);
+    /// 0 turns filter tuning off.
     #[arg(long, allow_negative_numbers = true, default_value_t = params().validation)]
     pub validation: f64,
     /// Log reading options.

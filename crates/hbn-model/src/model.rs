@@ -195,15 +195,26 @@ impl HbnModel {
         let mut model = Self::fit_gps(trajectories, params, None, observe)?;
         match crate::tuning::split(trajectories, params.validation) {
             Some(split) => {
-                // The GPs of the training part, with the hyperparameters learned on everything
-                // (no second search): the filter is tuned on data their posterior never saw.
-                let trial = Self::fit_gps(
-                    &split.train,
-                    params,
-                    Some((&model.transition, &model.sensor)),
-                    &mut |_, _| {},
-                )?;
-                match crate::tuning::tune(&trial, &split)? {
+                // Per fold, the GPs of its training part with the hyperparameters learned on
+                // everything (no second search): the filter is tuned on data their posterior
+                // never saw.
+                let trials = split
+                    .folds
+                    .into_iter()
+                    .map(|fold| {
+                        let model = Self::fit_gps(
+                            &fold.train,
+                            params,
+                            Some((&model.transition, &model.sensor)),
+                            &mut |_, _| {},
+                        )?;
+                        Ok(crate::tuning::Trial {
+                            model,
+                            runs: fold.validation,
+                        })
+                    })
+                    .collect::<Result<Vec<_>, ModelError>>()?;
+                match crate::tuning::tune(trials, &split.holdout)? {
                     Some((tuning, report)) => {
                         model.tuning = tuning;
                         model.summary.validation = Some(report);

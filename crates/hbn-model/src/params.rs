@@ -276,8 +276,10 @@ pub struct HbnParams {
     pub blr_window: f64,
     /// BLR prior settings.
     pub blr: LocalRegression,
-    /// Fraction of the data held out to learn the filter's noise scales and default mode
-    /// (filter-aware training, [`crate::tuning`]): the end of every run. `0` turns tuning off
+    /// Fraction of every run held out at a time to learn the filter's noise scales and default
+    /// mode (filter-aware training, [`crate::tuning`]): blocked cross-validation with
+    /// `floor(1 / validation)` folds (at most [`crate::tuning::MAX_FOLDS`]), fold `j` holding
+    /// out the `j`-th block of this length from the end of every run. `0` turns tuning off
     /// (noise scales 1, EKF by default).
     /// Model files written before tuning existed read as `0`.
     #[serde(default)]

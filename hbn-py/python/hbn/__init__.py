@@ -609,9 +609,10 @@ class HysteresisModel:
     :data:`DEFAULT_INDUCING`), ``max_points``, ``subset`` (``"farthest-point"`` or ``"random"``),
     ``n_restarts`` (optimiser starts per GP), ``max_iter`` (L-BFGS iterations per start),
     ``seed``, ``normalize``, ``noise_floor``, ``blr_window`` (half-width of the EKF+BLR window as a
-    fraction of each coordinate's range), ``validation`` (fraction of every run, at its end,
-    held out to learn the filter's noise scales and default mode; 0 turns this filter-aware
-    training off; see :attr:`tuning`). They are the flags of ``hbn train``. A bad value
+    fraction of each coordinate's range), ``validation`` (fraction of every run held out at a
+    time to learn the filter's noise scales and default mode, by blocked cross-validation: 0.25
+    holds out each quarter of every run in turn; 0 turns this filter-aware training off; see
+    :attr:`tuning`). They are the flags of ``hbn train``. A bad value
     raises :class:`ConfigError` whose ``keyword`` names it.
 
     >>> import hbn
