@@ -116,10 +116,15 @@ class NumpyGP:
             self.chol_inv = np.linalg.solve(chol, np.eye(n))
             self.sigma_factor = None
         else:
-            # Sparse GP (docs/sparse.md): var = k** - |L^{-1} k|^2 + |C k|^2, both factors stored
-            # already inverted.
-            self.chol_inv = unpack(sparse["kmm_inv_factor"])
-            self.sigma_factor = unpack(sparse["sigma_factor"])
+            # Sparse GP (docs/sparse.md): var = k** - |R k|^2 with R^T R = K_mm^{-1} - Sigma, the
+            # folded factor the file stores; files of model format 2 store L^{-1} and
+            # C = L_B^{-1} L^{-1} instead: var = k** - |L^{-1} k|^2 + |C k|^2.
+            if sparse.get("variance_factor"):
+                self.chol_inv = unpack(sparse["variance_factor"])
+                self.sigma_factor = None
+            else:
+                self.chol_inv = unpack(sparse["kmm_inv_factor"])
+                self.sigma_factor = unpack(sparse["sigma_factor"])
 
     def _profile(self, r2: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """Kernel profile ``f(r2)`` and its slope ``df/dr2``."""

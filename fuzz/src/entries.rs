@@ -300,7 +300,6 @@ pub fn step(data: &[u8]) {
         dirs: Vec<f64>,
         alpha: Vec<f64>,
         f1: Vec<f64>,
-        f2: Vec<f64>,
         out: [f64; 3],
         sparse: bool,
     }
@@ -328,8 +327,12 @@ pub fn step(data: &[u8]) {
             dirs: b.vec(n),
             alpha: b.vec(n),
             f1: b.vec(tri),
-            f2: b.vec(tri),
-            out: [b.f64(), b.f64(), b.f64()],
+            // Sparse views had a second factor until the two were folded into one; its bytes
+            // are still consumed so that the committed corpora keep their meaning.
+            out: {
+                let _second_factor = b.vec(tri);
+                [b.f64(), b.f64(), b.f64()]
+            },
             sparse: flags & 64 != 0,
             spec,
         }
@@ -349,8 +352,7 @@ pub fn step(data: &[u8]) {
             alpha: &o.alpha,
             variance: if o.sparse {
                 Variance::Sparse {
-                    kmm_inv_factor: &o.f1,
-                    sigma_factor: &o.f2,
+                    variance_factor: &o.f1,
                 }
             } else {
                 Variance::Exact { chol_packed: &o.f1 }

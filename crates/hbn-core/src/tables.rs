@@ -27,7 +27,7 @@ use crate::kernel::{Kernel, KernelSpec, Metric, Profile};
 /// First value of every layout: `"HBN1"` as little-endian bytes.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"HBN1");
 /// Format version written by [`encode`] and read by [`Tables::model`].
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 /// Last value of every layout (catches a truncated or misaligned table).
 pub const END: u32 = u32::from_le_bytes(*b"END1");
 /// A `u32` standing for "none" (no mean input, no direction factor).
@@ -197,15 +197,12 @@ fn encode_gp<S: TableSink>(gp: &GpView<'_>, sink: &mut S) -> Result<(), CoreErro
         None => NONE,
     });
     sink.int(count(p.kernel.whiten().len())?);
-    let (a, b): (&[f64], &[f64]) = match p.variance {
-        Variance::Exact { chol_packed } => (chol_packed, &[]),
-        Variance::Sparse {
-            kmm_inv_factor,
-            sigma_factor,
-        } => (kmm_inv_factor, sigma_factor),
+    let factor = match p.variance {
+        Variance::Exact { chol_packed } => chol_packed,
+        Variance::Sparse { variance_factor } => variance_factor,
     };
     let scalars = [p.output_mean, p.output_scale, p.noise_var];
-    let arrays: [&[f64]; 10] = [
+    let arrays: [&[f64]; 9] = [
         p.kernel.theta(),
         p.kernel.whiten(),
         p.input_mean,
@@ -214,8 +211,7 @@ fn encode_gp<S: TableSink>(gp: &GpView<'_>, sink: &mut S) -> Result<(), CoreErro
         p.features,
         p.directions,
         p.alpha,
-        a,
-        b,
+        factor,
     ];
     for v in arrays.iter().flat_map(|s| s.iter()) {
         sink.real(*v);
@@ -486,8 +482,7 @@ fn read_gp<'a>(r: &mut Reader<'a>) -> Result<GpView<'a>, CoreError> {
     let t = tri(n)?;
     let variance = if sparse {
         Variance::Sparse {
-            kmm_inv_factor: r.reals(t)?,
-            sigma_factor: r.reals(t)?,
+            variance_factor: r.reals(t)?,
         }
     } else {
         Variance::Exact {

@@ -10,8 +10,9 @@ use std::path::Path;
 /// Format tag of a standalone GP file.
 pub const GP_FORMAT: &str = "hbn-gp";
 /// Current GP file format version (2 added the sparse GP; 3 leaves out the exact GP's
-/// Cholesky factor, recomputed on load; versions 1 and 2 still load).
-pub const GP_FORMAT_VERSION: u32 = 3;
+/// Cholesky factor, recomputed on load; 4 stores a sparse GP's one folded variance factor
+/// instead of two; versions 1 to 3 still load).
+pub const GP_FORMAT_VERSION: u32 = 4;
 /// Oldest GP file format version this build reads.
 pub const GP_FORMAT_OLDEST: u32 = 1;
 
@@ -123,12 +124,21 @@ impl TrainingReport {
     }
 }
 
-/// The two prediction factors of a sparse GP (see [`hbn_core::Variance::Sparse`]).
+/// The prediction factor of a sparse GP (see [`hbn_core::Variance::Sparse`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SparseFactors {
-    /// `L^{-1}` with `L L^T = K_mm`, row-packed lower triangle.
+    /// `R` with `R^T R = K_mm^{-1} - Sigma`, row-packed lower triangle
+    /// ([`crate::sparse::fold_sparse_variance`]). Files of format 3 and older do not have it;
+    /// [`GaussianProcess::restore_factor`] folds it from their two factors on load.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub variance_factor: Vec<f64>,
+    /// Files of format 3 and older: `L^{-1}` with `L L^T = K_mm`, row-packed lower triangle
+    /// (read, folded into `variance_factor`, then dropped; never written).
+    #[serde(default, skip_serializing)]
     pub kmm_inv_factor: Vec<f64>,
-    /// `L_B^{-1} L^{-1}`, row-packed lower triangle.
+    /// Files of format 3 and older: `L_B^{-1} L^{-1}`, row-packed lower triangle (read,
+    /// folded, dropped; never written).
+    #[serde(default, skip_serializing)]
     pub sigma_factor: Vec<f64>,
 }
 
@@ -186,8 +196,7 @@ impl GaussianProcess {
             alpha: &self.alpha,
             variance: match &self.sparse {
                 Some(f) => Variance::Sparse {
-                    kmm_inv_factor: &f.kmm_inv_factor,
-                    sigma_factor: &f.sigma_factor,
+                    variance_factor: &f.variance_factor,
                 },
                 None => Variance::Exact {
                     chol_packed: &self.chol_packed,
@@ -301,7 +310,37 @@ impl GaussianProcess {
     /// Loaders call it; it gives the factor [`crate::fit`] made, bit for bit, because training
     /// ends by computing the factor with this same routine.
     pub fn restore_factor(&mut self) -> Result<(), GpError> {
-        if self.sparse.is_some() || !self.chol_packed.is_empty() {
+        if let Some(f) = &mut self.sparse {
+            if f.variance_factor.is_empty() {
+                // A file of format 3 or older: fold its two factors, A = L^{-1} and
+                // C = L_B^{-1} A, into one (L_B^{-1} = C A^{-1}).
+                let m = self.alpha.len();
+                let tri = m * (m + 1) / 2;
+                for (what, v) in [
+                    ("kmm_inv_factor", &f.kmm_inv_factor),
+                    ("sigma_factor", &f.sigma_factor),
+                ] {
+                    if v.len() != tri {
+                        return Err(GpError::Shape {
+                            what,
+                            expected: tri,
+                            got: v.len(),
+                        });
+                    }
+                }
+                let a = crate::sparse::unpack_lower(&f.kmm_inv_factor, m);
+                let c = crate::sparse::unpack_lower(&f.sigma_factor, m);
+                let l = crate::sparse::lower_inverse_of(a.as_ref());
+                let g = &c * &l;
+                let g = faer::Mat::from_fn(m, m, |i, j| if j <= i { g[(i, j)] } else { 0.0 });
+                let (r, _jitter) = crate::sparse::fold_sparse_variance(a.as_ref(), g.as_ref(), 8)?;
+                f.variance_factor = r;
+                f.kmm_inv_factor = Vec::new();
+                f.sigma_factor = Vec::new();
+            }
+            return Ok(());
+        }
+        if !self.chol_packed.is_empty() {
             return Ok(());
         }
         self.chol_packed = self.exact_factor()?;

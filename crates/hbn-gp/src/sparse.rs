@@ -82,11 +82,10 @@ pub struct SparsePosterior {
     pub bound: f64,
     /// Prediction weights `beta = Sigma K_mn y / s2` (`m`).
     pub beta: Vec<f64>,
-    /// `L^{-1}`, row-packed lower triangle.
-    pub kmm_inv_factor: Vec<f64>,
-    /// `C = L_B^{-1} L^{-1}`, row-packed lower triangle.
-    pub sigma_factor: Vec<f64>,
-    /// Jitter added to `K_mm`'s diagonal (0 if none).
+    /// `R` with `R^T R = K_mm^{-1} - Sigma`, row-packed lower triangle
+    /// ([`fold_sparse_variance`]).
+    pub variance_factor: Vec<f64>,
+    /// Jitter added to `K_mm`'s, `B`'s or the folded factor's diagonal, the largest (0 if none).
     pub jitter: f64,
     /// Mean squared training residual `|y - K_nm beta|^2 / n` (standardised units).
     pub mean_squared_residual: f64,
@@ -107,6 +106,8 @@ struct Core {
     tr_q: f64,
     linv: Mat<f64>,
     c_factor: Mat<f64>,
+    /// `L_B^{-1}`.
+    lb_inv: Mat<f64>,
     beta: Vec<f64>,
 }
 
@@ -142,6 +143,63 @@ fn lower_inverse(l: faer::MatRef<'_, f64>) -> Mat<f64> {
         }
     }
     inv
+}
+
+/// Folds the sparse GP's latent variance `k** - k^T (K_mm^{-1} - Sigma) k` into one
+/// lower-triangular factor: from `A = L^{-1}` (`L L^T = K_mm`) and `G = L_B^{-1}`
+/// (`L_B L_B^T = B = I + A K_mn K_nm A^T / s2`), returns `R`, row-packed, with
+/// `R^T R = K_mm^{-1} - Sigma`, and the jitter its factorisation needed.
+///
+/// Since `Sigma = A^T B^{-1} A`, `K_mm^{-1} - Sigma = A^T M A` with `M = I - G^T G = I - B^{-1}`,
+/// whose eigenvalues lie in `[0, 1)`: forming `M` subtracts numbers of order 1, never two large
+/// quadratic forms (which is what the two-factor form `|A k|^2 - |G A k|^2` did at every
+/// prediction). With `J` the reversal permutation and `J M J = F F^T` (Cholesky), `M = U U^T` with
+/// `U = J F J` upper-triangular, so `R = U^T A` is lower-triangular and the variance is one packed
+/// triangular product, `k** - |R k|^2`. `M` is only semi-definite where the data do not inform an
+/// inducing direction; the factorisation then retries with reported jitter `delta`, which lowers
+/// the variance by `delta k^T K_mm^{-1} k <= delta k**`.
+pub fn fold_sparse_variance(
+    a: faer::MatRef<'_, f64>,
+    g: faer::MatRef<'_, f64>,
+    max_jitter_retries: usize,
+) -> Result<(Vec<f64>, f64), GpError> {
+    let m = a.nrows();
+    let gtg = g.transpose() * g;
+    // J M J, symmetric by construction.
+    let mut mr = Mat::from_fn(m, m, |i, j| {
+        let (p, q) = (m - 1 - i, m - 1 - j);
+        let v = 0.5 * (gtg[(p, q)] + gtg[(q, p)]);
+        if i == j { 1.0 - v } else { -v }
+    });
+    let factor = factor_with_jitter(&mut mr, max_jitter_retries)?;
+    let f = factor.llt.L();
+    // U^T[i][j] = U[j][i] = F[m-1-j][m-1-i]: lower-triangular.
+    let ut = Mat::from_fn(m, m, |i, j| {
+        if j <= i {
+            f[(m - 1 - j, m - 1 - i)]
+        } else {
+            0.0
+        }
+    });
+    let a_lower = Mat::from_fn(m, m, |i, j| if j <= i { a[(i, j)] } else { 0.0 });
+    let r = &ut * &a_lower;
+    Ok((pack_lower(&r), factor.jitter))
+}
+
+/// Unpacks a row-packed lower triangle (`m (m + 1) / 2` values) into a dense matrix.
+pub(crate) fn unpack_lower(packed: &[f64], m: usize) -> Mat<f64> {
+    Mat::from_fn(m, m, |i, j| {
+        if j <= i {
+            packed.get(i * (i + 1) / 2 + j).copied().unwrap_or(0.0)
+        } else {
+            0.0
+        }
+    })
+}
+
+/// `L^{-1}` of a lower-triangular `L` (upper part zero).
+pub(crate) fn lower_inverse_of(l: faer::MatRef<'_, f64>) -> Mat<f64> {
+    lower_inverse(l)
 }
 
 fn pack_lower(a: &Mat<f64>) -> Vec<f64> {
@@ -378,6 +436,7 @@ impl<'a> SparseBound<'a> {
             tr_q,
             linv,
             c_factor,
+            lb_inv,
             beta,
         })
     }
@@ -388,12 +447,16 @@ impl<'a> SparseBound<'a> {
         let kernel = Kernel::new(self.data.spec, theta, self.data.whiten)?;
         let core = self.core(&kernel, z, s2)?;
         let (mean_squared_residual, loo_mean_squared_residual) = self.residuals(&kernel, &core, s2);
+        let (variance_factor, fold_jitter) = fold_sparse_variance(
+            core.linv.as_ref(),
+            core.lb_inv.as_ref(),
+            self.max_jitter_retries,
+        )?;
         Ok(SparsePosterior {
             bound: core.bound,
-            kmm_inv_factor: pack_lower(&core.linv),
-            sigma_factor: pack_lower(&core.c_factor),
+            variance_factor,
             beta: core.beta,
-            jitter: core.jitter,
+            jitter: core.jitter.max(fold_jitter),
             mean_squared_residual,
             loo_mean_squared_residual,
         })
@@ -921,8 +984,9 @@ pub(crate) fn fit_sparse(
         alpha: post.beta,
         chol_packed: Vec::new(),
         sparse: Some(SparseFactors {
-            kmm_inv_factor: post.kmm_inv_factor,
-            sigma_factor: post.sigma_factor,
+            variance_factor: post.variance_factor,
+            kmm_inv_factor: Vec::new(),
+            sigma_factor: Vec::new(),
         }),
         log_marginal_likelihood: post.bound,
         loo_error_variance: post.loo_mean_squared_residual * s2_out,

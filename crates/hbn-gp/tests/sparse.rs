@@ -387,9 +387,17 @@ fn persistence_round_trips_and_old_files_load() {
     v["gp"].as_object_mut().unwrap().remove("sparse");
     let old = GaussianProcess::from_json(&v.to_string(), "old").unwrap();
     assert_eq!(old, exact);
+    // The file carries the one folded factor, not the two of format 3.
+    let value: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let sparse = &value["gp"]["sparse"];
+    assert_eq!(
+        sparse["variance_factor"].as_array().unwrap().len(),
+        16 * 17 / 2
+    );
+    assert!(sparse.get("kmm_inv_factor").is_none() && sparse.get("sigma_factor").is_none());
     // A sparse file whose factor is cut short is refused with a format error.
-    let mut bad: serde_json::Value = serde_json::from_str(&text).unwrap();
-    bad["gp"]["sparse"]["sigma_factor"]
+    let mut bad = value.clone();
+    bad["gp"]["sparse"]["variance_factor"]
         .as_array_mut()
         .unwrap()
         .pop();
@@ -397,6 +405,48 @@ fn persistence_round_trips_and_old_files_load() {
         GaussianProcess::from_json(&bad.to_string(), "bad"),
         Err(GpError::Format { .. })
     ));
+}
+
+/// Sparse GP files of format 3 carried two factors, `L^{-1}` and `L_B^{-1} L^{-1}`; loading
+/// folds them into one. `fixtures/sparse_gp_format3.json` holds two such files as the build
+/// before the fold wrote them (SE with noise 0.05 and m = 16; Matern 5/2 with noise 1e-4 and
+/// m = 32, where the two quadratic forms are large and nearly cancel) and what that build
+/// predicted at 20 points, inside and outside the data. The folded GP predicts the same.
+#[test]
+fn sparse_files_of_format_3_load_folded_and_predict_as_before() {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../fixtures/sparse_gp_format3.json"
+    ))
+    .unwrap();
+    let cases: Vec<serde_json::Value> = serde_json::from_str(&text).unwrap();
+    assert_eq!(cases.len(), 2);
+    for case in &cases {
+        assert_eq!(case["file"]["version"], 3);
+        assert!(case["file"]["gp"]["sparse"].get("sigma_factor").is_some());
+        let gp = GaussianProcess::from_json(&case["file"].to_string(), "format 3").unwrap();
+        let points: Vec<f64> = case["points"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(vecf)
+            .collect();
+        let preds = gp.predict_many(&points, Want::EKF).unwrap();
+        let (means, vars) = (vecf(&case["mean"]), vecf(&case["variance"]));
+        let prior = preds.iter().map(|p| p.prior_variance).fold(0.0, f64::max);
+        for ((p, m), v) in preds.iter().zip(&means).zip(&vars) {
+            assert_eq!(p.mean.to_bits(), m.to_bits(), "the mean does not change");
+            // The variance now comes from one factor: equal to rounding, relative to the prior.
+            assert!(
+                (p.variance - v).abs() <= 1e-10 * prior,
+                "variance {} vs {v} (prior {prior})",
+                p.variance
+            );
+        }
+        // Saved again, it is a format-4 file with the folded factor, and reloads as is.
+        let again = GaussianProcess::from_json(&gp.to_json().unwrap(), "again").unwrap();
+        assert_eq!(again, gp);
+    }
 }
 
 #[test]

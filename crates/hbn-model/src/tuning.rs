@@ -190,10 +190,41 @@ pub const MIN_TUNING_SAMPLES: usize = 50;
 /// runs repeat one input: the end alone gave a band that held 89% of a fresh run's truth).
 pub const MAX_FOLDS: usize = 4;
 
+/// Samples of a run before a held-out block that the filter runs over unscored (fewer where the
+/// block starts earlier): the block is scored from the filter's running state, as most of a
+/// long log is, not from a cold start. Measured on the 16-cell grid of `docs/results.md`, cold
+/// starts on short blocks had made the learned scales fit start-up transients.
+pub const BURN_IN: usize = 20;
+
+/// A held-out block: what the filter runs over (up to [`BURN_IN`] samples of the run before
+/// the block, then the block) and how many of those lead in unscored.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Block<'a> {
+    pub seq: Sequence<'a>,
+    pub burn_in: usize,
+}
+
+impl<'a> Block<'a> {
+    /// Samples scored.
+    fn scored(&self) -> usize {
+        self.seq.u.len().saturating_sub(self.burn_in)
+    }
+
+    /// The block cut to its first `keep` scored samples.
+    fn prefix(&self, keep: usize) -> Self {
+        let end = (self.burn_in + keep).min(self.seq.u.len());
+        let s = &self.seq;
+        Self {
+            seq: Sequence::new(&s.u[..end], &s.x[..end], &s.y[..end]),
+            burn_in: self.burn_in,
+        }
+    }
+}
+
 /// One fold: the runs without one block each (a run may leave two pieces), and the blocks.
 pub(crate) struct Fold<'a> {
     pub train: Vec<Sequence<'a>>,
-    pub validation: Vec<Sequence<'a>>,
+    pub validation: Vec<Block<'a>>,
 }
 
 /// The folds of filter-aware training, and what they hold out.
@@ -234,13 +265,17 @@ pub(crate) fn split<'a>(runs: &[Sequence<'a>], fraction: f64) -> Option<Split<'a
                 train.push(part(to, len));
             }
             if to - from >= 3 {
-                validation.push(part(from, to));
+                let burn_in = from.min(BURN_IN);
+                validation.push(Block {
+                    seq: part(from - burn_in, to),
+                    burn_in,
+                });
             }
             if j == 0 {
                 from_last.push(from);
             }
         }
-        let held_out: usize = validation.iter().map(|s| s.u.len()).sum();
+        let held_out: usize = validation.iter().map(Block::scored).sum();
         let trained: usize = train.iter().map(|s| s.u.len()).sum();
         if held_out >= MIN_TUNING_SAMPLES && trained >= MIN_TUNING_SAMPLES {
             folds.push(Fold { train, validation });
@@ -251,7 +286,7 @@ pub(crate) fn split<'a>(runs: &[Sequence<'a>], fraction: f64) -> Option<Split<'a
     let held_out = folds
         .iter()
         .flat_map(|f| &f.validation)
-        .map(|s| s.u.len())
+        .map(Block::scored)
         .sum();
     Some(Split {
         holdout: Holdout {
@@ -264,29 +299,46 @@ pub(crate) fn split<'a>(runs: &[Sequence<'a>], fraction: f64) -> Option<Split<'a
     })
 }
 
-/// A fold's model (its GPs fitted on the fold's training part) and the held-out runs it is
+/// A fold's model (its GPs fitted on the fold's training part) and the held-out blocks it is
 /// scored on.
 pub(crate) struct Trial<'a> {
     pub model: HbnModel,
-    pub runs: Vec<Sequence<'a>>,
+    pub blocks: Vec<Block<'a>>,
 }
 
-/// The held-out blocks of all folds, each cut to a prefix so that they hold at most `cap`
-/// samples together.
-fn capped<'a>(folds: &[Vec<Sequence<'a>>], cap: usize) -> Vec<Vec<Sequence<'a>>> {
-    let total: usize = folds.iter().flatten().map(|s| s.u.len()).sum();
+/// Shortest piece of a block worth scoring when the cap cuts it.
+const MIN_PIECE: usize = 25;
+
+/// The held-out blocks of every fold under a cap of `cap` scored samples: each fold gets an
+/// equal share, filled with whole blocks (fold `j` starting at run `j`, so that the folds score
+/// different runs where the runs repeat one input) and the last one cut to fit (dropped if
+/// under [`MIN_PIECE`] samples). Whole blocks, not a short prefix of every block: with many
+/// runs, prefixes of 19 samples made the scales fit start-up transients.
+fn capped<'a>(folds: &[Vec<Block<'a>>], cap: usize) -> Vec<Vec<Block<'a>>> {
+    let total: usize = folds.iter().flatten().map(Block::scored).sum();
     if total <= cap {
         return folds.to_vec();
     }
+    let share = cap / folds.len().max(1);
     folds
         .iter()
-        .map(|runs| {
-            runs.iter()
-                .map(|s| {
-                    let keep = (s.u.len() * cap).div_ceil(total).min(s.u.len());
-                    Sequence::new(&s.u[..keep], &s.x[..keep], &s.y[..keep])
-                })
-                .collect()
+        .enumerate()
+        .map(|(j, blocks)| {
+            let mut out = Vec::new();
+            let mut left = share;
+            for i in 0..blocks.len() {
+                let b = blocks[(i + j) % blocks.len()];
+                let keep = b.scored().min(left);
+                if keep < MIN_PIECE.min(b.scored()) {
+                    break;
+                }
+                out.push(b.prefix(keep));
+                left -= keep;
+                if left == 0 {
+                    break;
+                }
+            }
+            out
         })
         .collect()
 }
@@ -329,11 +381,13 @@ fn sums(trials: &[Trial<'_>], mode: Mode, q: f64, r: f64) -> Sums {
     let mut out = Sums::default();
     for t in trials {
         let config = config_of(&t.model, mode, q, r);
-        for s in &t.runs {
+        for b in &t.blocks {
+            let s = &b.seq;
             let Ok(est) = t.model.estimate_with(s.u, s.y, &config) else {
                 return Sums::default();
             };
-            for ((&xh, &sd), &xr) in est.x.iter().zip(&est.x_std).zip(s.x) {
+            let scored = est.x.iter().zip(&est.x_std).zip(s.x).skip(b.burn_in);
+            for ((&xh, &sd), &xr) in scored {
                 if !(xh.is_finite() && sd.is_finite() && sd > 0.0 && xr.is_finite()) {
                     continue;
                 }
@@ -357,11 +411,17 @@ fn scores(
     for t in trials {
         let mut config = t.model.untuned_config(mode);
         scales.apply(&mut config);
-        for s in &t.runs {
+        for b in &t.blocks {
+            let s = &b.seq;
             let est = t.model.estimate_with(s.u, s.y, &config)?;
-            x.extend_from_slice(&est.x);
-            sd.extend_from_slice(&est.x_std);
-            xr.extend_from_slice(s.x);
+            let k = b
+                .burn_in
+                .min(est.x.len())
+                .min(est.x_std.len())
+                .min(s.x.len());
+            x.extend_from_slice(&est.x[k..]);
+            sd.extend_from_slice(&est.x_std[k..]);
+            xr.extend_from_slice(&s.x[k..]);
         }
     }
     Ok(HeldOutScores {
@@ -503,16 +563,20 @@ pub(crate) fn tune(
     trials: Vec<Trial<'_>>,
     holdout: &Holdout,
 ) -> Result<Option<(FilterTuning, ValidationReport)>, ModelError> {
-    let runs: Vec<Vec<Sequence<'_>>> = trials.iter().map(|t| t.runs.clone()).collect();
+    let blocks: Vec<Vec<Block<'_>>> = trials.iter().map(|t| t.blocks.clone()).collect();
     let trials: Vec<Trial<'_>> = trials
         .into_iter()
-        .zip(capped(&runs, MAX_VALIDATION_SAMPLES))
-        .map(|(t, runs)| Trial {
+        .zip(capped(&blocks, MAX_VALIDATION_SAMPLES))
+        .map(|(t, blocks)| Trial {
             model: t.model,
-            runs,
+            blocks,
         })
         .collect();
-    let samples: usize = trials.iter().flat_map(|t| &t.runs).map(|s| s.u.len()).sum();
+    let samples: usize = trials
+        .iter()
+        .flat_map(|t| &t.blocks)
+        .map(Block::scored)
+        .sum();
     let mut tuning = FilterTuning::default();
     let mut rows = Vec::new();
     let mut first_optimum: Option<(f64, f64)> = None;
@@ -582,26 +646,31 @@ mod tests {
                 folds: 4,
             }
         );
-        // Fold 0: the end of every run; the training part is what precedes it.
+        // Fold 0: the end of every run, led in by the samples before it; the training part is
+        // what precedes it.
         let f0 = &s.folds[0];
         assert_eq!((f0.train[0].u.len(), f0.train[1].u.len()), (300, 75));
-        assert_eq!(f0.validation[0].x.first(), Some(&300.0));
-        assert_eq!(f0.validation[1].u.first(), Some(&1075.0));
+        let b = f0.validation[0];
+        assert_eq!((b.burn_in, b.seq.u.len()), (BURN_IN, 100 + BURN_IN));
+        assert_eq!(b.seq.x[b.burn_in], 300.0);
+        assert_eq!(f0.validation[1].seq.u[BURN_IN], 1075.0);
         // Fold 1: the block before; the training part is both sides of it.
         let f1 = &s.folds[1];
         let starts: Vec<f64> = f1.train.iter().map(|t| t.u[0]).collect();
         assert_eq!(starts, vec![0.0, 300.0, 1000.0, 1075.0]);
-        assert_eq!(f1.validation[0].u.first(), Some(&200.0));
-        assert_eq!(f1.validation[0].u.len(), 100);
-        // Fold 3: the start of every run; training is what follows it.
+        assert_eq!(f1.validation[0].seq.u[BURN_IN], 200.0);
+        assert_eq!(f1.validation[0].scored(), 100);
+        // Fold 3: the start of every run (no samples before it to lead in); training is what
+        // follows it.
         let f3 = &s.folds[3];
-        assert_eq!(f3.validation[0].u, &u[..100]);
+        assert_eq!(f3.validation[0].burn_in, 0);
+        assert_eq!(f3.validation[0].seq.u, &u[..100]);
         assert_eq!(f3.train[0].u, &u[100..]);
-        // Every sample of every run is held out exactly once, and never trained on in its fold.
+        // Every sample of every run is scored exactly once, and never trained on in its fold.
         let mut count = vec![0; 400];
         for f in &s.folds {
-            for v in f.validation.iter().filter(|v| v.u.len() > 30) {
-                for &t in v.u {
+            for b in f.validation.iter().filter(|b| b.scored() > 30) {
+                for &t in &b.seq.u[b.burn_in..] {
                     count[t as usize] += 1;
                     assert!(f.train.iter().all(|tr| !tr.u.contains(&t)));
                 }
@@ -619,16 +688,37 @@ mod tests {
     }
 
     #[test]
-    fn cap_keeps_a_proportional_prefix() {
-        let (u, x, y) = seq(3000);
-        let (u2, x2, y2) = seq(1000);
-        let runs = vec![
-            vec![Sequence::new(&u, &x, &y)],
-            vec![Sequence::new(&u2, &x2, &y2)],
+    fn the_cap_keeps_whole_blocks_an_equal_share_per_fold() {
+        let (u, x, y) = seq(1000);
+        let block = |from: usize, len: usize, burn_in: usize| Block {
+            seq: Sequence::new(
+                &u[from - burn_in..from + len],
+                &x[from - burn_in..from + len],
+                &y[from - burn_in..from + len],
+            ),
+            burn_in,
+        };
+        // Two folds of three 100-sample blocks each (one per run); a cap of 300 gives each
+        // fold 150: one whole block and half of the next, fold j starting at block j.
+        let folds = vec![
+            vec![
+                block(100, 100, 20),
+                block(300, 100, 20),
+                block(500, 100, 20),
+            ],
+            vec![block(0, 100, 0), block(200, 100, 20), block(400, 100, 20)],
         ];
-        let c = capped(&runs, 2000);
-        assert_eq!((c[0][0].u.len(), c[1][0].u.len()), (1500, 500));
-        assert_eq!(c[1][0].u[0], 0.0);
+        let c = capped(&folds, 300);
+        let firsts = |f: &Vec<Block<'_>>| -> Vec<(f64, usize)> {
+            f.iter().map(|b| (b.seq.u[b.burn_in], b.scored())).collect()
+        };
+        assert_eq!(firsts(&c[0]), vec![(100.0, 100), (300.0, 50)]);
+        assert_eq!(firsts(&c[1]), vec![(200.0, 100), (400.0, 50)]);
+        // A share that would leave a piece under MIN_PIECE drops it.
+        let c = capped(&folds, 2 * (100 + MIN_PIECE - 1));
+        assert_eq!(c[0].len(), 1);
+        // Under the cap, everything is kept.
+        assert_eq!(capped(&folds, 600)[1].len(), 3);
     }
 
     #[test]

@@ -34,8 +34,7 @@ impl Gp {
     fn view(&self, sparse: bool) -> GpView<'_> {
         let variance = if sparse {
             Variance::Sparse {
-                kmm_inv_factor: &self.chol,
-                sigma_factor: &self.chol,
+                variance_factor: &self.chol,
             }
         } else {
             Variance::Exact {
