@@ -199,12 +199,17 @@ def ekf_config(model: Dict[str, Any]) -> Dict[str, Any]:
         "p_max": 4.0 * max(sx, sy) ** 2,
         "jac_max": 20.0 * max(sy / sx, sx / sy, 1.0),
         "innovation_min": 1e-14 * sy * sy,
-        "nis_gate": 0.0,
+        # hbn_model::OUTLIER_GATE: every trained model's filter ships with it.
+        "nis_gate": 25.0,
         "x_bounds": (xs["min"] - 0.5 * sx, xs["max"] + 0.5 * sx),
         "y_bounds": (ys["min"] - 0.5 * sy, ys["max"] + 0.5 * sy),
         "x0_mean": xs["mean"],
         "x0_var": max(xs["var"], 1e-12 * sx * sx),
     }
+
+
+# hbn_core::MAX_REJECTED_RUN: the gate rejects at most this many measurements in a row.
+MAX_REJECTED_RUN = 10
 
 
 def _clamp(v: float, b: Tuple[float, float]) -> float:
@@ -279,6 +284,7 @@ class NumpyEkf:
             "p": p,
             "u_last": u0,
             "u_prev": u0,
+            "rejected_run": 0,
         }
         return c["x0_mean"], c["std_scale"] * math.sqrt(p[0, 0])
 
@@ -333,8 +339,20 @@ class NumpyEkf:
         # ---- update (Joseph form, H = [0, 0, 1]) ----
         if math.isfinite(y_k):
             s_var = p[2, 2] + r
-            if math.isfinite(s_var) and s_var >= c["innovation_min"]:
-                innov = y_k - z[2]
+            innov = y_k - z[2]
+            nis = innov * innov / s_var if math.isfinite(s_var) and s_var > 0 else 0.0
+            gated = (
+                math.isfinite(s_var)
+                and s_var >= c["innovation_min"]
+                and c["nis_gate"] > 0.0
+                and nis > c["nis_gate"]
+                and st["rejected_run"] < MAX_REJECTED_RUN
+            )
+            if gated:
+                # The outlier gate (hbn_core::ekf::update): the measurement is skipped.
+                st["rejected_run"] += 1
+            elif math.isfinite(s_var) and s_var >= c["innovation_min"]:
+                st["rejected_run"] = 0
                 gain = p[:, 2] / s_var
                 zn = z + gain * innov
                 ikh = np.eye(3)
@@ -376,8 +394,8 @@ def load_model_json(path: str) -> Dict[str, Any]:
     """The ``model`` object of an hbn model file (checks the format tag)."""
     with open(path, "r", encoding="utf-8") as fh:
         doc = json.load(fh)
-    if doc.get("format") != "hbn-model" or doc.get("version") not in (1, 2):
-        raise ValueError(f"{path}: not an hbn model file of format version 1 or 2")
+    if doc.get("format") != "hbn-model" or doc.get("version") not in (1, 2, 3):
+        raise ValueError(f"{path}: not an hbn model file of format version 1, 2 or 3")
     return doc["model"]
 
 
