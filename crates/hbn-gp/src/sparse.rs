@@ -993,3 +993,68 @@ pub(crate) fn fit_sparse(
         report,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A lower-triangular matrix with a positive diagonal from a seed (test data).
+    fn lower(m: usize, seed: u64) -> Mat<f64> {
+        let mut rng = hbn_core::rng::Rng::new(seed);
+        Mat::from_fn(m, m, |i, j| match i.cmp(&j) {
+            std::cmp::Ordering::Greater => rng.uniform_in(-0.5, 0.5),
+            std::cmp::Ordering::Equal => rng.uniform_in(0.5, 2.0),
+            std::cmp::Ordering::Less => 0.0,
+        })
+    }
+
+    /// `R^T R = A^T (I - G^T G) A` for the folded factor, and `R` is lower-triangular.
+    #[test]
+    fn the_folded_factor_reproduces_the_two_factor_form() {
+        let m = 7;
+        let a = lower(m, 1);
+        // G = L_B^{-1} for some B = I + Q (Q positive semi-definite): B = I + C C^T.
+        let c = lower(m, 2);
+        let b = Mat::<f64>::identity(m, m) + &c * c.transpose();
+        let lb = b.llt(faer::Side::Lower).unwrap().L().to_owned();
+        let g = lower_inverse(lb.as_ref());
+        let (r_packed, jitter) = fold_sparse_variance(a.as_ref(), g.as_ref(), 8).unwrap();
+        assert_eq!(jitter, 0.0);
+        assert_eq!(r_packed.len(), m * (m + 1) / 2);
+        let r = unpack_lower(&r_packed, m);
+        let want = a.transpose() * (Mat::<f64>::identity(m, m) - g.transpose() * &g) * &a;
+        let got = r.transpose() * &r;
+        let scale = (0..m).map(|i| want[(i, i)]).fold(0.0, f64::max);
+        for i in 0..m {
+            for j in 0..m {
+                assert!(
+                    (got[(i, j)] - want[(i, j)]).abs() <= 1e-12 * scale,
+                    "({i}, {j}): {} vs {}",
+                    got[(i, j)],
+                    want[(i, j)]
+                );
+            }
+        }
+    }
+
+    /// Where the data inform no direction (`B = I`, so `M = 0`), the factorisation retries with
+    /// jitter, says so, and gives a finite factor whose variance reduction is that jitter's.
+    #[test]
+    fn an_uninformed_direction_is_folded_with_reported_jitter() {
+        let m = 4;
+        let a = lower(m, 3);
+        let g = Mat::<f64>::identity(m, m);
+        let (r_packed, jitter) = fold_sparse_variance(a.as_ref(), g.as_ref(), 8).unwrap();
+        assert!(jitter > 0.0 && jitter < 1e-8, "jitter {jitter}");
+        assert!(r_packed.iter().all(|v| v.is_finite()));
+        // R^T R = jitter * A^T A: the variance reduction is at most jitter * k^T K_mm^{-1} k.
+        let r = unpack_lower(&r_packed, m);
+        let want = a.transpose() * &a * faer::Scale(jitter);
+        let got = r.transpose() * &r;
+        for i in 0..m {
+            for j in 0..m {
+                assert!((got[(i, j)] - want[(i, j)]).abs() <= 1e-6 * jitter * 10.0);
+            }
+        }
+    }
+}
