@@ -350,6 +350,7 @@ pub fn step(data: &[u8]) {
             features: &o.feats,
             directions: if o.spec.direction.is_some() { &o.dirs } else { &[] },
             alpha: &o.alpha,
+            alpha_lo: &o.alpha,
             variance: if o.sparse {
                 Variance::Sparse {
                     variance_factor: &o.f1,

@@ -77,9 +77,9 @@ pub fn run(ui: &mut Ui<'_>, args: &ExportArgs) -> anyhow::Result<()> {
         && !(model.transition().is_sparse() && model.sensor().is_sparse())
     {
         ui.warn(
-            "f32 tables of an exact GP can lose the accuracy of its Cholesky factor (measured in \
-             docs/firmware.md: nRMSE 0.58 instead of 0.016 on 500 support points); export it \
-             with --precision f64, or train a sparse model (hbn train --inducing 32) for f32",
+            "the tables of an exact GP hold its packed Cholesky factor, n (n + 1) / 2 reals per \
+             GP (about 1 MB in f32 at the default 500 support points, see docs/firmware.md): for \
+             a microcontroller, train a sparse model (hbn train --inducing 32)",
         );
     }
     let sizes = hbn_export::size_report(&model, precision, args.init_pairs)

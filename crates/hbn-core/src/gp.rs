@@ -90,6 +90,7 @@ pub struct GpView<'a> {
     features: &'a [f64],
     directions: &'a [f64],
     alpha: &'a [f64],
+    alpha_lo: &'a [f64],
     variance: Variance<'a>,
     noise_var: f64,
     mean_input: Option<usize>,
@@ -141,6 +142,12 @@ pub struct GpParts<'a> {
     /// Mean weights: `alpha = (K + s_n^2 I)^{-1} y_std` (`n`) for the exact GP, or
     /// `Sigma K_mn y_std / s_n^2` for a sparse GP (one per inducing point).
     pub alpha: &'a [f64],
+    /// Low parts of the mean weights, empty or one per support point: the weights are
+    /// `alpha + alpha_lo`. Models leave it empty; model tables ([`crate::tables`]) split each
+    /// weight into an `f32`-representable high part and the rest, so that an `f32` export keeps
+    /// the weights to about 48 bits (the mean `k^T alpha` cancels: rounding `alpha` alone to
+    /// `f32` moved a sparse model's estimate by 5% of the range of `x`).
+    pub alpha_lo: &'a [f64],
     /// The variance factors (exact or sparse).
     pub variance: Variance<'a>,
     /// Learned noise variance `s_n^2` in standardised output units.
@@ -166,6 +173,9 @@ impl<'a> GpView<'a> {
         expect(parts.input_mean.len(), d)?;
         expect(parts.input_scale.len(), d)?;
         expect(parts.features.len(), n * d)?;
+        if !parts.alpha_lo.is_empty() {
+            expect(parts.alpha_lo.len(), n)?;
+        }
         let tri = n * (n + 1) / 2;
         let factor = match parts.variance {
             Variance::Exact { chol_packed } => chol_packed,
@@ -180,6 +190,7 @@ impl<'a> GpView<'a> {
             && finite(parts.features)
             && finite(parts.directions)
             && finite(parts.alpha)
+            && finite(parts.alpha_lo)
             && finite(factor)
             && parts.output_mean.is_finite()
             && parts.noise_var.is_finite())
@@ -214,6 +225,7 @@ impl<'a> GpView<'a> {
             features: parts.features,
             directions: parts.directions,
             alpha: parts.alpha,
+            alpha_lo: parts.alpha_lo,
             variance: parts.variance,
             noise_var: parts.noise_var,
             mean_input: None,
@@ -232,6 +244,7 @@ impl<'a> GpView<'a> {
             features: self.features,
             directions: self.directions,
             alpha: self.alpha,
+            alpha_lo: self.alpha_lo,
             variance: self.variance,
             noise_var: self.noise_var,
         }
@@ -365,6 +378,7 @@ impl<'a> GpView<'a> {
             features: self.features,
             directions: self.directions,
             alpha: self.alpha,
+            alpha_lo: self.alpha_lo,
             u_star: &u_star,
             g_star,
             sf2: self.kernel.signal_variance(),
@@ -555,6 +569,7 @@ struct Accum<'s> {
     features: &'s [f64],
     directions: &'s [f64],
     alpha: &'s [f64],
+    alpha_lo: &'s [f64],
     u_star: &'s [f64; MAX_DIM],
     g_star: f64,
     sf2: f64,
@@ -578,13 +593,14 @@ impl Accum<'_> {
         }
         let mut mean = 0.0;
         let mut gsum = [0.0; D];
-        for (i, ((row, k_out), &a)) in self
+        for (i, ((row, k_out), &a_hi)) in self
             .features
             .chunks_exact(D)
             .zip(kvec.iter_mut())
             .zip(self.alpha)
             .enumerate()
         {
+            let a = a_hi + at(self.alpha_lo, i);
             let mut delta = [0.0; D];
             let mut r2 = 0.0;
             for ((dj, r), u) in delta.iter_mut().zip(row).zip(&us) {
@@ -813,6 +829,7 @@ mod tests {
                 &[]
             },
             alpha: &o.alpha,
+            alpha_lo: &[],
             variance: Variance::Exact {
                 chol_packed: &o.packed,
             },
@@ -1058,6 +1075,7 @@ mod tests {
                 features: &feats,
                 directions: if spec.direction.is_some() { &zg } else { &[] },
                 alpha: &beta,
+                alpha_lo: &[],
                 variance: Variance::Sparse {
                     variance_factor: &r_packed,
                 },

@@ -22,7 +22,7 @@ use crate::CoreError;
 use crate::blr::{LocalRegression, Neighbourhood, NeighbourhoodParts};
 use crate::ekf::{EkfConfig, HbnView, InitPrior, Mode};
 use crate::gp::{GpParts, GpView, Variance};
-use crate::kernel::{Kernel, KernelSpec, Metric, Profile};
+use crate::kernel::{Kernel, KernelSpec, Metric, Profile, at};
 
 /// First value of every layout: `"HBN1"` as little-endian bytes.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"HBN1");
@@ -202,7 +202,7 @@ fn encode_gp<S: TableSink>(gp: &GpView<'_>, sink: &mut S) -> Result<(), CoreErro
         Variance::Sparse { variance_factor } => variance_factor,
     };
     let scalars = [p.output_mean, p.output_scale, p.noise_var];
-    let arrays: [&[f64]; 9] = [
+    let arrays: [&[f64]; 7] = [
         p.kernel.theta(),
         p.kernel.whiten(),
         p.input_mean,
@@ -210,13 +210,38 @@ fn encode_gp<S: TableSink>(gp: &GpView<'_>, sink: &mut S) -> Result<(), CoreErro
         &scalars,
         p.features,
         p.directions,
-        p.alpha,
-        factor,
     ];
     for v in arrays.iter().flat_map(|s| s.iter()) {
         sink.real(*v);
     }
+    // The mean weights as an f32-representable high part and the rest: their sum is the weight
+    // exactly in f64, and to about 48 bits once both are rounded to f32 (see
+    // `GpParts::alpha_lo`).
+    let weight = |i: usize| at(p.alpha, i) + at(p.alpha_lo, i);
+    for i in 0..p.alpha.len() {
+        sink.real(split_f32(weight(i)).0);
+    }
+    for i in 0..p.alpha.len() {
+        sink.real(split_f32(weight(i)).1);
+    }
+    for v in factor {
+        sink.real(*v);
+    }
     Ok(())
+}
+
+/// `v` as `(hi, lo)`: `hi` the nearest `f32` value (as `f64`) and `lo = v - hi`, exact in
+/// `f64`, so that `hi + lo == v`; `(v, 0)` where `v` is outside `f32`'s range (the `f32`
+/// export then refuses it, as any such real).
+fn split_f32(v: f64) -> (f64, f64) {
+    // `as` rounds to the nearest `f32` (and saturates to infinity outside its range).
+    #[allow(clippy::cast_possible_truncation)]
+    let hi = f64::from(v as f32);
+    if hi.is_finite() && v.is_finite() {
+        (hi, v - hi)
+    } else {
+        (v, 0.0)
+    }
 }
 
 fn encode_local<S: TableSink>(nb: &Neighbourhood<'_>, sink: &mut S) -> Result<(), CoreError> {
@@ -479,6 +504,7 @@ fn read_gp<'a>(r: &mut Reader<'a>) -> Result<GpView<'a>, CoreError> {
     let features = r.reals(mul(n, dim)?)?;
     let directions = r.reals(if direction.is_some() { n } else { 0 })?;
     let alpha = r.reals(n)?;
+    let alpha_lo = r.reals(n)?;
     let t = tri(n)?;
     let variance = if sparse {
         Variance::Sparse {
@@ -498,6 +524,7 @@ fn read_gp<'a>(r: &mut Reader<'a>) -> Result<GpView<'a>, CoreError> {
         features,
         directions,
         alpha,
+        alpha_lo,
         variance,
         noise_var,
     })?;

@@ -194,6 +194,7 @@ impl GaussianProcess {
             features: &self.features,
             directions: &self.directions,
             alpha: &self.alpha,
+            alpha_lo: &[],
             variance: match &self.sparse {
                 Some(f) => Variance::Sparse {
                     variance_factor: &f.variance_factor,

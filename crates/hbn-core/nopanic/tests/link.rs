@@ -50,6 +50,7 @@ impl Gp {
             features: &self.feats,
             directions: &[],
             alpha: &self.alpha,
+            alpha_lo: &self.alpha,
             variance,
             noise_var: 0.01,
         })
