@@ -404,10 +404,8 @@ pub(crate) fn add_pair_theta_grad(
     }
 }
 
-/// argmin adapter: minimise the negated objective times a positive scale (`1 / n` for the
-/// sparse bound, so that the solver's absolute tolerances mean the same per sample at any
-/// `n`; 1 for the exact GP).
-pub(crate) struct NegLml<'b, O: Objective>(pub &'b O, pub f64);
+/// argmin adapter: minimise the negated objective.
+pub(crate) struct NegLml<'b, O: Objective>(pub &'b O);
 
 /// Cost the optimiser sees where the objective cannot be evaluated (a covariance that is not
 /// positive definite even with jitter, or a non-finite value): large enough that the line
@@ -420,7 +418,7 @@ impl<O: Objective> argmin::core::CostFunction for NegLml<'_, O> {
     type Param = Vec<f64>;
     type Output = f64;
     fn cost(&self, p: &Self::Param) -> Result<f64, argmin::core::Error> {
-        Ok(self.0.evaluate(p).map_or(FAILED_COST, |e| -e.lml * self.1))
+        Ok(self.0.evaluate(p).map_or(FAILED_COST, |e| -e.lml))
     }
 }
 
@@ -429,7 +427,7 @@ impl<O: Objective> argmin::core::Gradient for NegLml<'_, O> {
     type Gradient = Vec<f64>;
     fn gradient(&self, p: &Self::Param) -> Result<Vec<f64>, argmin::core::Error> {
         Ok(match self.0.evaluate(p) {
-            Ok(e) => e.grad.iter().map(|g| -g * self.1).collect(),
+            Ok(e) => e.grad.iter().map(|g| -g).collect(),
             Err(_) => vec![0.0; p.len()],
         })
     }

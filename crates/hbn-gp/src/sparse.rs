@@ -893,13 +893,8 @@ pub(crate) fn fit_sparse(
         } else {
             bound_on(all, &z_std, &z_dirs, sp, params)
         };
-        // The bound grows with the samples; per sample, L-BFGS's absolute tolerances stop it
-        // where the bound has stopped improving at any n (unscaled, starts on 3,000 samples
-        // spent about 240 evaluations each, most in line searches at the rounding floor).
-        let search_n = if use_subset { sp.search_samples } else { n };
         let mut p = multi_start(
             &search,
-            1.0 / search_n.max(1) as f64,
             &theta0,
             noise0,
             &tail,
@@ -921,7 +916,7 @@ pub(crate) fn fit_sparse(
         let full = bound_on(all, &z_std, &z_dirs, sp, params);
         if sp.refine_iters > 0 && (use_subset || reselect) {
             let initial_lml = full.evaluate(&p).ok().map(|e| e.lml);
-            let run = run_lbfgs(&full, p.clone(), sp.refine_iters, 1.0 / n.max(1) as f64);
+            let run = run_lbfgs(&full, p.clone(), sp.refine_iters);
             report.refinement = Some(match run {
                 Ok((q, lml, iterations, _termination)) => {
                     p = q;

@@ -202,16 +202,7 @@ pub fn fit_observed(
         ..Default::default()
     };
     let (theta, noise) = if params.optimize {
-        let p = multi_start(
-            &lik,
-            1.0,
-            &theta0,
-            noise0,
-            &[],
-            params,
-            &mut report,
-            observe,
-        )?;
+        let p = multi_start(&lik, &theta0, noise0, &[], params, &mut report, observe)?;
         report.add_stats(lik.stats());
         let n_k = spec.n_params();
         (p[..n_k].to_vec(), lik.noise_of(p[n_k]))
@@ -346,10 +337,8 @@ pub(crate) fn starting_point(
 /// random in `theta` and the noise; `tail`, e.g. inducing inputs, is appended unchanged) and
 /// returns the best optimised vector. Every start is recorded in `report` (the caller adds
 /// the objective's counters with [`TrainingReport::add_stats`]).
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn multi_start<O: Objective>(
     objective: &O,
-    cost_scale: f64,
     theta0: &[f64],
     noise0: f64,
     tail: &[f64],
@@ -372,7 +361,7 @@ pub(crate) fn multi_start<O: Objective>(
         }
         p0.extend_from_slice(tail);
         let initial_lml = objective.evaluate(&p0).ok().map(|e| e.lml);
-        let (lml, termination) = match run_lbfgs(objective, p0, params.max_iters, cost_scale) {
+        let (lml, termination) = match run_lbfgs(objective, p0, params.max_iters) {
             Ok((p, lml, iters, termination)) => {
                 report.starts.push(StartReport {
                     initial_lml,
@@ -434,24 +423,23 @@ fn randomize(p: &mut [f64], spec: &hbn_core::KernelSpec, rng: &mut Rng) {
 }
 
 /// One L-BFGS start: best parameters, their log marginal likelihood, iterations, and why it
-/// stopped. The solver minimises `-lml * cost_scale` (see [`NegLml`]); the result is unscaled.
+/// stopped.
 pub(crate) fn run_lbfgs<O: Objective>(
     lik: &O,
     p0: Vec<f64>,
     max_iters: u64,
-    cost_scale: f64,
 ) -> Result<(Vec<f64>, f64, u64, Termination), StartFailure> {
     let linesearch = MoreThuenteLineSearch::new();
     let solver = LBFGS::new(linesearch, 10)
         .with_tolerance_grad(1e-5)
         .and_then(|s| s.with_tolerance_cost(1e-8))
         .map_err(|e| StartFailure::of(&e))?;
-    let res = Executor::new(NegLml(lik, cost_scale), solver)
+    let res = Executor::new(NegLml(lik), solver)
         .configure(|state| state.param(p0).max_iters(max_iters))
         .run()
         .map_err(|e| StartFailure::of(&e))?;
     let state = res.state();
-    let lml = -state.get_best_cost() / cost_scale;
+    let lml = -state.get_best_cost();
     let p = match state.get_best_param() {
         Some(p) if lml.is_finite() => p.clone(),
         _ => return Err(StartFailure::NonFiniteLikelihood),
