@@ -735,6 +735,14 @@ mod tests {
     use hbn_model::{HbnParams, Sequence};
     use hbn_sim::{SimConfig, SystemKind, simulate_random};
 
+    /// The f32 tables of `t` as a firmware reads them: rounded to f32, widened back to f64.
+    fn widened(t: &ModelTables) -> Vec<f64> {
+        let r32 = t.reals_f32().unwrap();
+        let mut wide = vec![0.0; r32.len()];
+        tables::widen(&r32, &mut wide).unwrap();
+        wide
+    }
+
     fn model(inducing: Option<usize>) -> HbnModel {
         let cfg = SimConfig {
             noise_gain: 1.0,
@@ -780,13 +788,10 @@ mod tests {
                     assert_eq!(o.x_std.to_bits(), est.x_std[k].to_bits(), "{mode} k={k}");
                 }
                 // f32
-                let r32 = t.reals_f32().unwrap();
-                let mut wide = vec![0.0; r32.len()];
-                let reals = tables::widen(&r32, &mut wide).unwrap();
+                let wide = widened(&t);
                 let tm = Tables {
-                    layout: &t.layout,
-                    keys: &t.keys,
-                    reals,
+                    reals: &wide,
+                    ..t.tables()
                 }
                 .model()
                 .unwrap();
@@ -808,13 +813,10 @@ mod tests {
     fn f32_tables_keep_the_mean_weights_to_48_bits() {
         for m in [model(Some(16)), model(None)] {
             let t = model_tables(&m, Mode::Ekf).unwrap();
-            let r32 = t.reals_f32().unwrap();
-            let mut wide = vec![0.0; r32.len()];
-            let reals = tables::widen(&r32, &mut wide).unwrap();
+            let wide = widened(&t);
             let tm = Tables {
-                layout: &t.layout,
-                keys: &t.keys,
-                reals,
+                reals: &wide,
+                ..t.tables()
             }
             .model()
             .unwrap();
@@ -853,13 +855,10 @@ mod tests {
         for mode in Mode::ALL {
             let base = m.estimate(&test.u, &test.y, mode).unwrap();
             let t = model_tables(&m, mode).unwrap();
-            let r32 = t.reals_f32().unwrap();
-            let mut wide = vec![0.0; r32.len()];
-            let reals = tables::widen(&r32, &mut wide).unwrap();
+            let wide = widened(&t);
             let tm = Tables {
-                layout: &t.layout,
-                keys: &t.keys,
-                reals,
+                reals: &wide,
+                ..t.tables()
             }
             .model()
             .unwrap();

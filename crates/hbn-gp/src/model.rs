@@ -331,7 +331,7 @@ impl GaussianProcess {
                 }
                 let a = crate::sparse::unpack_lower(&f.kmm_inv_factor, m);
                 let c = crate::sparse::unpack_lower(&f.sigma_factor, m);
-                let l = crate::sparse::lower_inverse_of(a.as_ref());
+                let l = crate::sparse::lower_inverse(a.as_ref());
                 let g = &c * &l;
                 let g = faer::Mat::from_fn(m, m, |i, j| if j <= i { g[(i, j)] } else { 0.0 });
                 let (r, _jitter) = crate::sparse::fold_sparse_variance(a.as_ref(), g.as_ref(), 8)?;

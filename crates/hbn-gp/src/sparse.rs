@@ -133,7 +133,8 @@ fn mat_t_vec(a: &Mat<f64>, x: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-fn lower_inverse(l: faer::MatRef<'_, f64>) -> Mat<f64> {
+/// `L^{-1}` of a lower-triangular `L` (upper part zero).
+pub(crate) fn lower_inverse(l: faer::MatRef<'_, f64>) -> Mat<f64> {
     let m = l.nrows();
     let mut inv = Mat::zeros(m, m);
     invert_lower_triangular(inv.as_mut(), l, Par::Seq);
@@ -195,11 +196,6 @@ pub(crate) fn unpack_lower(packed: &[f64], m: usize) -> Mat<f64> {
             0.0
         }
     })
-}
-
-/// `L^{-1}` of a lower-triangular `L` (upper part zero).
-pub(crate) fn lower_inverse_of(l: faer::MatRef<'_, f64>) -> Mat<f64> {
-    lower_inverse(l)
 }
 
 fn pack_lower(a: &Mat<f64>) -> Vec<f64> {
