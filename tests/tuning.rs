@@ -135,3 +135,70 @@ fn noise_scales_reach_the_step() {
         assert!(d.q_x.iter().zip(&a.q_x).skip(1).any(|(qd, qa)| qd > qa));
     }
 }
+
+/// Model selection: among candidates that differ in the inducing setting, the one with the
+/// lowest held-out NLPD is returned whichever is listed first, it is the model training that
+/// candidate alone gives, and the table reports every candidate.
+#[test]
+fn selection_returns_the_candidate_with_the_best_held_out_score() {
+    use hbn::model::{Param, ParamValue, Selection};
+    let cfg = ExperimentConfig {
+        train_steps: 400,
+        repeats: 1,
+        test_steps: 300,
+        ..ExperimentConfig::default()
+    };
+    let train: Vec<Trajectory> = (0..3u64)
+        .flat_map(|r| training_set(SystemKind::Duhem, 1.0, 60 + r, &cfg).expect("simulate"))
+        .collect();
+    let base = HbnParams {
+        max_points: 120,
+        n_starts: 1,
+        seed: 2,
+        ..HbnParams::default()
+    };
+    // Three inducing points cannot follow a hysteresis loop: held out, the exact GP wins.
+    let tiny = Some(3);
+    let alone = HbnModel::fit(&sequences(&train), &base).expect("exact alone");
+    for (primary, alternative) in [(tiny, None), (None, tiny)] {
+        let params = HbnParams {
+            n_inducing: primary,
+            select: Selection {
+                kernels: vec![],
+                inducing: vec![alternative],
+            },
+            ..base.clone()
+        };
+        assert_eq!(params.candidates().len(), 2);
+        let model = HbnModel::fit(&sequences(&train), &params).expect("fit");
+        let report = model.summary().validation.as_ref().expect("validation");
+        let rows = &report.candidates;
+        assert_eq!(rows.len(), 2);
+        assert_eq!(rows[0].candidate.n_inducing, primary);
+        let nlpd = |i: usize| rows[i].scored.expect("scored").1.calibration.nlpd;
+        let best = if nlpd(0) < nlpd(1) { 0 } else { 1 };
+        assert_eq!(rows.iter().filter(|r| r.chosen).count(), 1);
+        assert!(rows[best].chosen, "{rows:?}");
+        assert_eq!(rows[best].candidate.n_inducing, None, "{rows:?}");
+        // The chosen candidate's own model: its parameters (no alternatives left) and the
+        // same held-out table as training it alone.
+        assert_eq!(model.params().n_inducing, None);
+        assert!(model.params().select.is_empty());
+        let alone_report = alone.summary().validation.as_ref().expect("validation");
+        assert_eq!(report.rows, alone_report.rows);
+        assert_eq!(model.tuning(), alone.tuning());
+    }
+    // Choosing needs held-out data; the check names the parameter.
+    let mut p = HbnParams {
+        validation: 0.0,
+        ..base
+    };
+    p.set(
+        Param::Inducing,
+        ParamValue::List(vec![ParamValue::Text("exact".into()), ParamValue::Int(64)]),
+    )
+    .expect("a list");
+    assert_eq!(p.select.inducing, vec![Some(64)]);
+    let e = p.check().expect_err("validation 0");
+    assert_eq!(e.param, Param::Inducing);
+}

@@ -57,7 +57,8 @@ pub use model::{
     SignalStats, StartSummary, TrainingSummary,
 };
 pub use params::{
-    CheckedHbnParams, ConfigError, DEFAULT_INDUCING, HbnParams, Increments, KernelChoice,
-    KernelFamily, Param, ParamValue, Problem, SignalInfo, Signals, UnknownKernel,
+    Candidate, CheckedHbnParams, ConfigError, DEFAULT_INDUCING, HbnParams, Increments,
+    KernelChoice, KernelFamily, Param, ParamValue, Problem, Selection, SignalInfo, Signals,
+    UnknownKernel,
 };
-pub use tuning::{FilterTuning, NoiseScales, ValidationReport};
+pub use tuning::{CandidateRow, FilterTuning, NoiseScales, ValidationReport};

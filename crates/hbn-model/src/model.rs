@@ -187,12 +187,118 @@ impl HbnModel {
     /// hyperparameters found (no second search), and the filter's noise scales of every mode
     /// are learned on the held-out part ([`crate::tuning`]). The GPs of the returned model are
     /// those of `validation = 0`; the held-out table is in [`TrainingSummary::validation`].
+    ///
+    /// With alternatives in `params.select` ([`crate::Selection`]), every candidate
+    /// configuration is trained and tuned this way on the same folds, and the one whose default
+    /// mode has the lowest held-out NLPD is returned; the table of candidates is in the
+    /// validation report ([`crate::tuning::CandidateRow`]). A candidate that fails to train is
+    /// reported there and skipped; training fails only when every candidate fails (with the
+    /// first candidate's error).
     pub fn fit_checked(
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
         let t0 = Instant::now();
+        let candidates = params.candidates();
+        let selecting =
+            candidates.len() > 1 && crate::tuning::split(trajectories, params.validation).is_some();
+        if !selecting {
+            let primary = params.for_candidate(params.candidate());
+            let mut model = Self::fit_tuned(trajectories, &primary, observe)?;
+            if candidates.len() > 1 {
+                model.summary.warnings.push(format!(
+                    "no model selection: too little data to hold out {:.0}% for validation; \
+                     the first of {} candidates ({}) trained",
+                    100.0 * params.validation,
+                    candidates.len(),
+                    params.candidate()
+                ));
+            }
+            model.summary.seconds = t0.elapsed().as_secs_f64();
+            return Ok(model);
+        }
+        let mut rows = Vec::with_capacity(candidates.len());
+        let mut best: Option<(f64, usize, HbnModel)> = None;
+        let mut first_error = None;
+        // The first candidate trained, kept in case none can be scored.
+        let mut fallback: Option<(usize, HbnModel)> = None;
+        for candidate in candidates {
+            let t = Instant::now();
+            let p = params.for_candidate(candidate);
+            let (scored, note) = match Self::fit_tuned(trajectories, &p, observe) {
+                Ok(model) => {
+                    let scored = model.summary.validation.as_ref().and_then(|v| {
+                        v.rows
+                            .iter()
+                            .find(|r| r.mode == v.default_mode)
+                            .map(|r| (r.mode, r.tuned))
+                    });
+                    match scored {
+                        Some((_, s)) if s.calibration.nlpd.is_finite() => {
+                            let nlpd = s.calibration.nlpd;
+                            if best.as_ref().is_none_or(|(b, _, _)| nlpd < *b) {
+                                best = Some((nlpd, rows.len(), model));
+                            }
+                            (scored, None)
+                        }
+                        _ => {
+                            if fallback.is_none() {
+                                fallback = Some((rows.len(), model));
+                            }
+                            (
+                                None,
+                                Some("the filter was not tuned on the held-out data".to_owned()),
+                            )
+                        }
+                    }
+                }
+                Err(e) => {
+                    let note = e.to_string();
+                    first_error.get_or_insert(e);
+                    (None, Some(note))
+                }
+            };
+            rows.push(crate::tuning::CandidateRow {
+                candidate,
+                scored,
+                seconds: t.elapsed().as_secs_f64(),
+                note,
+                chosen: false,
+            });
+        }
+        let (chosen, mut model) = match (best, fallback, first_error) {
+            (Some((_, i, model)), _, _) => (i, model),
+            (None, Some(first), _) => first,
+            (None, None, Some(e)) => return Err(e),
+            // Unreachable: every candidate either trains or fails, and there are several.
+            (None, None, None) => return Err(ModelError::Data(crate::DataError::NoTrajectories)),
+        };
+        if let Some(row) = rows.get_mut(chosen) {
+            row.chosen = true;
+        }
+        for row in &rows {
+            if let Some(note) = &row.note {
+                model
+                    .summary
+                    .warnings
+                    .push(format!("candidate {} not scored: {note}", row.candidate));
+            }
+        }
+        if let Some(v) = model.summary.validation.as_mut() {
+            v.candidates = rows;
+        }
+        model.summary.seconds = t0.elapsed().as_secs_f64();
+        Ok(model)
+    }
+
+    /// One configuration: its GPs fitted on every run, then (with `params.validation > 0`)
+    /// refitted per fold and the filter tuned on the held-out blocks.
+    fn fit_tuned(
+        trajectories: &[Sequence<'_>],
+        params: &CheckedHbnParams,
+        observe: &mut dyn FnMut(GpRole, &FitProgress),
+    ) -> Result<Self, ModelError> {
         let mut model = Self::fit_gps(trajectories, params, None, observe)?;
         match crate::tuning::split(trajectories, params.validation) {
             Some(split) => {
@@ -235,7 +341,6 @@ impl HbnModel {
             )),
             None => {}
         }
-        model.summary.seconds = t0.elapsed().as_secs_f64();
         Ok(model)
     }
 

@@ -288,8 +288,65 @@ pub struct HbnParams {
     /// this option read as [`Increments::None`].
     #[serde(default)]
     pub increments: Increments,
+    /// Alternative kernels and inducing settings that filter-aware training chooses among on
+    /// the held-out data ([`Selection`]); empty (the default): this configuration only. Model
+    /// files hold the configuration that was chosen, with this list empty.
+    #[serde(default)]
+    pub select: Selection,
     /// Signal names, paths and units.
     pub signals: Signals,
+}
+
+/// Model selection on held-out data: alternatives to the primary configuration
+/// ([`HbnParams::transition_kernel`], [`HbnParams::sensor_kernel`], [`HbnParams::n_inducing`]).
+///
+/// Every combination of a kernel (the primary pair, or one of `kernels` for both GPs) and an
+/// inducing setting (the primary one, or one of `inducing`) is a [`Candidate`]
+/// ([`HbnParams::candidates`]). Each is trained, and its filter tuned, on the same folds of
+/// filter-aware training; the candidate whose default mode has the lowest held-out NLPD becomes
+/// the model (the rule that chooses the mode). Each candidate costs one training, so `k`
+/// candidates take about `k` times as long. Needs `validation > 0`.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Selection {
+    /// Kernels (each for both GPs) to try besides the primary pair.
+    #[serde(default)]
+    pub kernels: Vec<KernelChoice>,
+    /// Inducing settings to try besides the primary one (`None` is the exact GP).
+    #[serde(default)]
+    pub inducing: Vec<Option<usize>>,
+}
+
+impl Selection {
+    /// No alternatives.
+    pub fn is_empty(&self) -> bool {
+        self.kernels.is_empty() && self.inducing.is_empty()
+    }
+}
+
+/// One configuration model selection trains: both kernels and the inducing setting.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct Candidate {
+    /// Kernel of the transition GP.
+    pub transition_kernel: KernelChoice,
+    /// Kernel of the sensor GP.
+    pub sensor_kernel: KernelChoice,
+    /// Inducing points per GP, `None` for exact GPs.
+    pub n_inducing: Option<usize>,
+}
+
+/// `matern52 exact`, `se-ard m=64`; both kernels when they differ (`se,matern52 exact`).
+impl std::fmt::Display for Candidate {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.transition_kernel == self.sensor_kernel {
+            write!(f, "{}", self.transition_kernel)?;
+        } else {
+            write!(f, "{},{}", self.transition_kernel, self.sensor_kernel)?;
+        }
+        match self.n_inducing {
+            Some(m) => write!(f, " m={m}"),
+            None => f.write_str(" exact"),
+        }
+    }
 }
 
 impl Default for HbnParams {
@@ -310,6 +367,7 @@ impl Default for HbnParams {
             blr: LocalRegression::default(),
             validation: 0.25,
             increments: Increments::None,
+            select: Selection::default(),
             signals: Signals::default(),
         }
     }
@@ -488,6 +546,9 @@ pub enum ParamValue {
     Bool(bool),
     /// A name (kernel, subset policy).
     Text(String),
+    /// Several values to choose among on held-out data ([`Param::Kernel`],
+    /// [`Param::Inducing`]; [`Selection`]): the first is the primary one.
+    List(Vec<ParamValue>),
 }
 
 /// [`HbnParams`] that passed [`HbnParams::check`]: training takes only these.
@@ -520,6 +581,12 @@ impl CheckedHbnParams {
         p.check_ref()?;
         self.0 = p;
         Ok(self)
+    }
+
+    /// The parameters of one of [`HbnParams::candidates`] (checked with the rest: every
+    /// alternative was).
+    pub(crate) fn for_candidate(&self, c: Candidate) -> CheckedHbnParams {
+        CheckedHbnParams(self.0.with_candidate(c))
     }
 
     /// GP parameters for one kernel structure (valid by construction).
@@ -556,6 +623,50 @@ impl HbnParams {
         }
     }
 
+    /// The primary configuration.
+    pub fn candidate(&self) -> Candidate {
+        Candidate {
+            transition_kernel: self.transition_kernel,
+            sensor_kernel: self.sensor_kernel,
+            n_inducing: self.n_inducing,
+        }
+    }
+
+    /// Every configuration model selection trains ([`Selection`]), the primary one first, then
+    /// kernel by kernel, each with every inducing setting; no configuration twice.
+    pub fn candidates(&self) -> Vec<Candidate> {
+        let kernels = std::iter::once((self.transition_kernel, self.sensor_kernel))
+            .chain(self.select.kernels.iter().map(|&k| (k, k)));
+        let mut out: Vec<Candidate> = Vec::new();
+        for (transition_kernel, sensor_kernel) in kernels {
+            let inducing =
+                std::iter::once(self.n_inducing).chain(self.select.inducing.iter().copied());
+            for n_inducing in inducing {
+                let c = Candidate {
+                    transition_kernel,
+                    sensor_kernel,
+                    n_inducing,
+                };
+                if !out.contains(&c) {
+                    out.push(c);
+                }
+            }
+        }
+        out
+    }
+
+    /// These parameters with `c` as the configuration and no alternatives: what a model trained
+    /// as candidate `c` records (training with them again trains the same model).
+    pub fn with_candidate(&self, c: Candidate) -> HbnParams {
+        HbnParams {
+            transition_kernel: c.transition_kernel,
+            sensor_kernel: c.sensor_kernel,
+            n_inducing: c.n_inducing,
+            select: Selection::default(),
+            ..self.clone()
+        }
+    }
+
     /// Checks every field once; training then trusts them. Each error names the [`Param`].
     pub fn check(self) -> Result<CheckedHbnParams, ConfigError> {
         self.check_ref()?;
@@ -584,8 +695,25 @@ impl HbnParams {
             self.max_points as u64,
             hbn_gp::MIN_POINTS as u64,
         )?;
-        if let Some(m) = self.n_inducing {
+        for m in std::iter::once(self.n_inducing)
+            .chain(self.select.inducing.iter().copied())
+            .flatten()
+        {
             at_least(Param::Inducing, m as u64, 1)?;
+        }
+        if !self.select.is_empty() && self.validation <= 0.0 {
+            let param = if self.select.kernels.is_empty() {
+                Param::Inducing
+            } else {
+                Param::Kernel
+            };
+            return Err(ConfigError::new(
+                param,
+                Problem::Invalid {
+                    reason: "several values are chosen among on held-out data: they need \
+                             validation > 0",
+                },
+            ));
         }
         at_least(Param::Starts, self.n_starts as u64, 1)?;
         at_least(Param::MaxIters, self.max_iters, 1)?;
@@ -631,7 +759,14 @@ impl HbnParams {
                 SENSOR_DIM,
                 SENSOR_DIRECTION,
             ),
-        ] {
+        ]
+        .into_iter()
+        .chain(self.select.kernels.iter().flat_map(|&k| {
+            [
+                (Param::Kernel, k, TRANSITION_DIM, TRANSITION_DIRECTION),
+                (Param::Kernel, k, SENSOR_DIM, SENSOR_DIRECTION),
+            ]
+        })) {
             kernel.spec(dim, dir).validate().map_err(|e| {
                 ConfigError::new(
                     param,
@@ -669,30 +804,81 @@ impl HbnParams {
                 )
             })
         };
+        let inducing = |v: ParamValue| match v {
+            ParamValue::Int(m) => Ok(Some(count(m)?)),
+            ParamValue::Text(t) if t.trim().eq_ignore_ascii_case("exact") => Ok(None),
+            ParamValue::Text(t) => Err(ConfigError::new(
+                param,
+                Problem::Unknown {
+                    given: t,
+                    choices: "a count of inducing points, or exact",
+                },
+            )),
+            _ => Err(ConfigError::new(
+                param,
+                Problem::WrongType {
+                    expected: "a count of inducing points, or \"exact\"",
+                },
+            )),
+        };
+        let kernel_value = |v: ParamValue| match v {
+            ParamValue::Text(t) => kernel(&t),
+            _ => Err(ConfigError::new(
+                param,
+                Problem::WrongType {
+                    expected: "a kernel name",
+                },
+            )),
+        };
+        // A list: the first value is the primary one, the rest are alternatives.
+        let split_list = |v: Vec<ParamValue>| {
+            let mut it = v.into_iter();
+            match it.next() {
+                Some(first) => Ok((first, it.collect::<Vec<_>>())),
+                None => Err(ConfigError::new(
+                    param,
+                    Problem::WrongType {
+                        expected: "a non-empty list",
+                    },
+                )),
+            }
+        };
         match (param, value) {
             (Param::Rate, ParamValue::Real(v)) => self.rate_hz = v,
             (Param::Rate, ParamValue::Int(v)) => self.rate_hz = v as f64,
+            (Param::Kernel, ParamValue::List(v)) => {
+                let (first, rest) = split_list(v)?;
+                let k = kernel_value(first)?;
+                let alternatives = rest
+                    .into_iter()
+                    .map(kernel_value)
+                    .collect::<Result<Vec<_>, _>>()?;
+                self.transition_kernel = k;
+                self.sensor_kernel = k;
+                self.select.kernels = alternatives;
+            }
             (Param::Kernel, ParamValue::Text(t)) => {
                 let k = kernel(&t)?;
                 self.transition_kernel = k;
                 self.sensor_kernel = k;
+                self.select.kernels.clear();
             }
             (Param::TransitionKernel, ParamValue::Text(t)) => self.transition_kernel = kernel(&t)?,
             (Param::SensorKernel, ParamValue::Text(t)) => self.sensor_kernel = kernel(&t)?,
-            (Param::Inducing, ParamValue::Int(v)) => self.n_inducing = Some(count(v)?),
-            (Param::Inducing, ParamValue::Text(t)) if t.trim().eq_ignore_ascii_case("exact") => {
-                self.n_inducing = None
+            (Param::Inducing, ParamValue::List(v)) => {
+                let (first, rest) = split_list(v)?;
+                let m = inducing(first)?;
+                let alternatives = rest
+                    .into_iter()
+                    .map(inducing)
+                    .collect::<Result<Vec<_>, _>>()?;
+                self.n_inducing = m;
+                self.select.inducing = alternatives;
             }
-            (Param::Inducing, ParamValue::Text(t)) => {
-                return Err(ConfigError::new(
-                    param,
-                    Problem::Unknown {
-                        given: t,
-                        choices: "a count of inducing points, or exact",
-                    },
-                ));
+            (Param::Inducing, v) => {
+                self.n_inducing = inducing(v)?;
+                self.select.inducing.clear();
             }
-            (Param::Inducing, _) => return wrong("a count of inducing points, or \"exact\""),
             (Param::MaxPoints, ParamValue::Int(v)) => self.max_points = count(v)?,
             (Param::SubsetPolicy, ParamValue::Text(t)) => {
                 self.subset_policy = match t.trim().to_ascii_lowercase().as_str() {
@@ -720,7 +906,8 @@ impl HbnParams {
             (Param::Rate | Param::NoiseFloor | Param::BlrWindow | Param::Validation, _) => {
                 return wrong("a number");
             }
-            (Param::Kernel | Param::TransitionKernel | Param::SensorKernel, _) => {
+            (Param::Kernel, _) => return wrong("a kernel name, or a list of them"),
+            (Param::TransitionKernel | Param::SensorKernel, _) => {
                 return wrong("a kernel name");
             }
             (Param::SubsetPolicy, _) => return wrong("a subset policy name"),
@@ -738,14 +925,23 @@ impl HbnParams {
     pub fn get(&self, param: Param) -> Option<ParamValue> {
         Some(match param {
             Param::Rate => ParamValue::Real(self.rate_hz),
+            Param::Kernel if !self.select.kernels.is_empty() => ParamValue::List(
+                std::iter::once(self.transition_kernel)
+                    .chain(self.select.kernels.iter().copied())
+                    .map(|k| ParamValue::Text(k.to_string()))
+                    .collect(),
+            ),
             Param::Kernel | Param::TransitionKernel => {
                 ParamValue::Text(self.transition_kernel.to_string())
             }
             Param::SensorKernel => ParamValue::Text(self.sensor_kernel.to_string()),
-            Param::Inducing => match self.n_inducing {
-                Some(m) => ParamValue::Int(m as u64),
-                None => ParamValue::Text("exact".to_owned()),
-            },
+            Param::Inducing if !self.select.inducing.is_empty() => ParamValue::List(
+                std::iter::once(self.n_inducing)
+                    .chain(self.select.inducing.iter().copied())
+                    .map(inducing_value)
+                    .collect(),
+            ),
+            Param::Inducing => inducing_value(self.n_inducing),
             Param::MaxPoints => ParamValue::Int(self.max_points as u64),
             Param::SubsetPolicy => ParamValue::Text(subset_name(self.subset_policy).to_owned()),
             Param::Starts => ParamValue::Int(self.n_starts as u64),
@@ -757,6 +953,13 @@ impl HbnParams {
             Param::Validation => ParamValue::Real(self.validation),
             Param::Blr => return None,
         })
+    }
+}
+
+fn inducing_value(m: Option<usize>) -> ParamValue {
+    match m {
+        Some(m) => ParamValue::Int(m as u64),
+        None => ParamValue::Text("exact".to_owned()),
     }
 }
 

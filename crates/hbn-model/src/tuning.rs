@@ -174,6 +174,28 @@ pub struct ValidationReport {
     pub rows: Vec<ValidationRow>,
     /// The mode chosen as the default (lowest tuned NLPD).
     pub default_mode: Mode,
+    /// Model selection ([`crate::Selection`]): one row per candidate trained, in the order
+    /// trained; empty when there was one configuration. Model files from before selection
+    /// read as empty.
+    #[serde(default)]
+    pub candidates: Vec<CandidateRow>,
+}
+
+/// One candidate of model selection and its held-out scores.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CandidateRow {
+    /// The configuration.
+    pub candidate: crate::Candidate,
+    /// Its default mode and that mode's tuned held-out scores; `None` when it could not be
+    /// scored (see `note`).
+    pub scored: Option<(Mode, HeldOutScores)>,
+    /// Seconds its training and tuning took.
+    pub seconds: f64,
+    /// Why it has no score (a training error, or the filter failing on the held-out data).
+    #[serde(default)]
+    pub note: Option<String>,
+    /// The candidate chosen (the lowest held-out NLPD).
+    pub chosen: bool,
 }
 
 /// Held-out samples the search runs the filter over at most, all folds together (a prefix of
@@ -617,6 +639,7 @@ pub(crate) fn tune(
             samples,
             rows,
             default_mode,
+            candidates: Vec::new(),
         },
     )))
 }
