@@ -215,6 +215,15 @@ fn parse_positive(s: &str) -> Result<f64, String> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Inducing(pub Option<usize>);
 
+/// The primary inducing setting (the first given, else the default) and the alternatives
+/// model selection tries (the rest).
+pub fn inducing_choice(given: &[Inducing]) -> (Option<usize>, Vec<Option<usize>>) {
+    match given.split_first() {
+        Some((first, rest)) => (first.0, rest.iter().map(|i| i.0).collect()),
+        None => (params().n_inducing, Vec::new()),
+    }
+}
+
 fn parse_inducing(s: &str) -> Result<Inducing, String> {
     let t = s.trim();
     if t.eq_ignore_ascii_case("exact") {
@@ -340,9 +349,10 @@ pub struct TrainArgs {
     /// Resampling rate (Hz); default: the input's native rate in the first log.
     #[arg(long, allow_negative_numbers = true)]
     pub rate: Option<f64>,
-    /// Kernel of both GPs (default matern52).
-    #[arg(long, value_parser = parse_kernel)]
-    pub kernel: Option<KernelChoice>,
+    /// Kernel of both GPs (default matern52). Several, comma-separated, are chosen among on
+    /// held-out data (model selection; each costs one training).
+    #[arg(long, value_parser = parse_kernel, value_delimiter = ',', value_name = "KERNEL[,..]")]
+    pub kernel: Vec<KernelChoice>,
     /// Kernel of the transition GP (overrides --kernel).
     #[arg(long, value_parser = parse_kernel)]
     pub transition_kernel: Option<KernelChoice>,
@@ -350,9 +360,10 @@ pub struct TrainArgs {
     #[arg(long, value_parser = parse_kernel)]
     pub sensor_kernel: Option<KernelChoice>,
     /// Inducing points per GP for sparse GPs trained on every sample (64 is a good start), or
-    /// `exact` (the default): exact GPs on at most --max-points samples each.
-    #[arg(long, value_parser = parse_inducing, value_name = "M|exact")]
-    pub inducing: Option<Inducing>,
+    /// `exact` (the default): exact GPs on at most --max-points samples each. Several,
+    /// comma-separated (`exact,64,128`), are chosen among on held-out data, with every --kernel.
+    #[arg(long, value_parser = parse_inducing, value_delimiter = ',', value_name = "M|exact[,..]")]
+    pub inducing: Vec<Inducing>,
     /// Most support points per exact GP (with --inducing exact).
     #[arg(long, default_value_t = params().max_points)]
     pub max_points: usize,
@@ -700,9 +711,10 @@ pub struct ExperimentArgs {
     /// Samples of the test input.
     #[arg(long, default_value_t = experiment().test_steps)]
     pub test_steps: usize,
-    /// Inducing points per GP (sparse GPs on every sample), or `exact` (the default).
-    #[arg(long, value_parser = parse_inducing, value_name = "M|exact")]
-    pub inducing: Option<Inducing>,
+    /// Inducing points per GP (sparse GPs on every sample), or `exact` (the default); several,
+    /// comma-separated, are chosen among on held-out data.
+    #[arg(long, value_parser = parse_inducing, value_delimiter = ',', value_name = "M|exact[,..]")]
+    pub inducing: Vec<Inducing>,
     /// Most support points per GP.
     #[arg(long, default_value_t = params().max_points)]
     pub max_points: usize,

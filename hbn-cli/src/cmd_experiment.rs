@@ -78,12 +78,17 @@ pub fn run(ui: &mut Ui<'_>, args: &ExperimentArgs) -> anyhow::Result<Vec<Experim
         repeats: args.repeats,
         test_steps: args.test_steps,
         max_increment: hbn_sim::DEFAULT_MAX_INCREMENT,
-        params: HbnParams {
-            n_inducing: args
-                .inducing
-                .map_or(HbnParams::default().n_inducing, |i| i.0),
-            max_points: args.max_points,
-            ..HbnParams::default()
+        params: {
+            let (n_inducing, inducing) = crate::cli::inducing_choice(&args.inducing);
+            HbnParams {
+                n_inducing,
+                select: hbn_model::Selection {
+                    kernels: Vec::new(),
+                    inducing,
+                },
+                max_points: args.max_points,
+                ..HbnParams::default()
+            }
         },
     };
     let mut render = Renderer::default();

@@ -1,7 +1,7 @@
 //! `hbn train`: fit the HBN to logs ([`hbn_pipeline::train_from_logs`]).
 
 use anyhow::Context;
-use hbn_model::{GpRole, HbnModel, HbnParams};
+use hbn_model::{GpRole, HbnModel, HbnParams, Selection};
 use hbn_pipeline::{TrainSignals, train_from_logs};
 use serde_json::json;
 
@@ -14,13 +14,16 @@ impl TrainArgs {
     /// The training parameters: the library defaults with the flags applied.
     pub fn params(&self) -> HbnParams {
         let d = HbnParams::default();
-        let kernel = self.kernel.unwrap_or(d.transition_kernel);
+        let kernel = self.kernel.first().copied();
+        let (n_inducing, inducing) = crate::cli::inducing_choice(&self.inducing);
         HbnParams {
-            transition_kernel: self.transition_kernel.unwrap_or(kernel),
-            sensor_kernel: self
-                .sensor_kernel
-                .unwrap_or(self.kernel.unwrap_or(d.sensor_kernel)),
-            n_inducing: self.inducing.map_or(d.n_inducing, |i| i.0),
+            transition_kernel: self.transition_kernel.or(kernel).unwrap_or(d.transition_kernel),
+            sensor_kernel: self.sensor_kernel.or(kernel).unwrap_or(d.sensor_kernel),
+            n_inducing,
+            select: Selection {
+                kernels: self.kernel.iter().skip(1).copied().collect(),
+                inducing,
+            },
             max_points: self.max_points,
             subset_policy: self.subset.into(),
             n_starts: self.starts,

@@ -246,6 +246,49 @@ pub fn validation_table(model: &hbn_model::HbnModel) -> String {
         "    * default mode: {} (lowest held-out NLPD; `hbn estimate` uses it without --mode)\n",
         v.default_mode.name()
     ));
+    s.push_str(&candidate_table(&v.candidates));
+    s
+}
+
+/// The model-selection table (`--kernel a,b`, `--inducing exact,64`): per candidate its
+/// default mode's tuned held-out scores; empty with one candidate.
+fn candidate_table(rows: &[hbn_model::CandidateRow]) -> String {
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut s = format!(
+        "  model selection, {} candidates on the same held-out data:\n    {:<24} {:<8} {:>8} {:>8} \
+         {:>8} {:>8}\n",
+        rows.len(),
+        "candidate",
+        "mode",
+        "nRMSE",
+        "in 2 sd",
+        "NLPD",
+        "seconds"
+    );
+    for r in rows {
+        let star = if r.chosen { "*" } else { " " };
+        let name = format!("{}{star}", r.candidate);
+        match (&r.scored, &r.note) {
+            (Some((mode, sc)), _) => s.push_str(&format!(
+                "    {name:<24} {:<8} {:>8.4} {:>7.1}% {:>8.3} {:>8.1}\n",
+                mode.name(),
+                sc.nrmse,
+                100.0 * sc.calibration.coverage_2sigma,
+                sc.calibration.nlpd,
+                r.seconds
+            )),
+            (None, note) => s.push_str(&format!(
+                "    {name:<24} not scored: {}\n",
+                note.as_deref().unwrap_or("no held-out score")
+            )),
+        }
+    }
+    s.push_str(
+        "    * chosen: the lowest held-out NLPD of its default mode; the model is that \
+         candidate's\n",
+    );
     s
 }
 
