@@ -499,3 +499,47 @@ fn eval_on_a_log_without_the_state_points_to_estimate() {
     let (e, _) = hbn(&["estimate", "--model", &p("m.hbn"), "--log", &p("run.mcap")]);
     assert!(e.is_none(), "{e:?}");
 }
+
+/// `--inducing` and `--kernel` take lists: model selection on held-out data, its table in the
+/// train summary and in `hbn inspect`; without held-out data the flag is named.
+#[test]
+fn model_selection_lists_print_their_table() {
+    let (d, log, _) = small_model();
+    let m2 = d.path().join("sel.hbn").to_string_lossy().into_owned();
+    let train = |extra: &[&str]| {
+        let mut a = vec![
+            "train",
+            "--log",
+            &log,
+            "--max-points",
+            "50",
+            "--starts",
+            "1",
+            "--out",
+            &m2,
+        ];
+        a.extend_from_slice(extra);
+        hbn(&a)
+    };
+    let (e, out) = train(&["--inducing", "exact,4", "--verbose"]);
+    assert!(e.is_none(), "{e:?}");
+    assert!(
+        out.contains("model selection, 2 candidates")
+            && out.contains("matern52 exact")
+            && out.contains("matern52 m=4"),
+        "{out}"
+    );
+    assert_eq!(out.matches("* chosen").count(), 1, "{out}");
+    let (e, out) = hbn(&["inspect", &m2]);
+    assert!(e.is_none(), "{e:?}");
+    assert!(out.contains("model selection, 2 candidates"), "{out}");
+    let (e, _) = train(&["--inducing", "exact,4", "--validation", "0"]);
+    let text = e.expect("no held-out data to choose on");
+    assert!(
+        text.contains("--inducing") && text.contains("validation"),
+        "{text}"
+    );
+    let (e, _) = train(&["--kernel", "matern52,rbf"]);
+    let text = e.expect("unknown kernel");
+    assert!(text.contains("--kernel") && text.contains("rbf"), "{text}");
+}

@@ -149,9 +149,15 @@ def simulate_logs(
 
 
 def run_hbn(
-    train: Sequence[common.Log], test: common.Log, seed: int, paths: Mapping[str, str]
+    train: Sequence[common.Log],
+    test: common.Log,
+    seed: int,
+    paths: Mapping[str, str],
+    hbn_params: Optional[Mapping[str, Any]] = None,
 ) -> Dict[str, Dict[str, Any]]:
-    """hbn with its defaults: one fit (``rate`` from the logs), then the default mode, both
+    """hbn with its defaults (or with the training parameters ``hbn_params``, keyword arguments
+    of ``hbn.HysteresisModel.fit``, e.g. ``{"n_inducing": [None, 64]}`` for model selection):
+    one fit (``rate`` from the logs), then the default mode, both
     filter modes and the open-loop simulation. Returns ``{"hbn": {...}, "hbn-ekf": {...},
     "hbn-ekf-blr": {...}, "hbn-open-loop": {...}}`` with ``x``, ``x_std`` (``None`` for the open
     loop), seconds (the training time is the same fit's for all), the guard ``flags`` counts and
@@ -166,6 +172,7 @@ def run_hbn(
         rate=train[0].rate,
         seed=seed,
         signals={k: paths[k] for k in ("u", "x", "y")},
+        **dict(hbn_params or {}),
     )
     t_fit = time.perf_counter() - t0
     out: Dict[str, Dict[str, Any]] = {}
@@ -210,8 +217,10 @@ def evaluate(
     gp_rows: int = gp_ekf.GP_ROWS,
     lstm_config: Optional[lstm.LstmConfig] = None,
     log: Any = None,
+    hbn_params: Optional[Mapping[str, Any]] = None,
 ) -> Dict[str, Any]:
-    """Trains every method in ``methods`` on ``train_paths`` and scores it on ``test_path``.
+    """Trains every method in ``methods`` on ``train_paths`` and scores it on ``test_path``
+    (hbn with the training parameters ``hbn_params``, see :func:`run_hbn`).
 
     Returns ``{"rate", "train_logs", "test_log", "seed", "n_train", "n_test", "notices",
     "methods": {name: {metrics..., "samples", extra}}}``; a method that fails gets
@@ -241,7 +250,7 @@ def evaluate(
 
     if any(m in HBN_FIT_METHODS for m in methods):
         try:
-            raw.update({k: v for k, v in run_hbn(train, test, seed, paths).items() if k in methods})
+            raw.update({k: v for k, v in run_hbn(train, test, seed, paths, hbn_params).items() if k in methods})
         except Exception as e:  # a failing method must not hide the others' figures
             for m in methods:
                 if m in HBN_FIT_METHODS:
@@ -409,6 +418,7 @@ def grid(
     lstm_config: Optional[lstm.LstmConfig] = None,
     keep_logs: bool = False,
     log: Any = None,
+    hbn_params: Optional[Mapping[str, Any]] = None,
 ) -> Dict[str, Any]:
     """Runs :func:`evaluate` on simulated logs for every system x gain x seed, writing
     ``out_dir/grid.json`` (after every run, so a long grid can be stopped and read) and
@@ -422,6 +432,7 @@ def grid(
         "steps": steps,
         "methods": list(methods),
         "gp_rows": gp_rows,
+        "hbn_params": dict(hbn_params or {}),
         "runs": [],
     }
     for system in systems:
@@ -431,7 +442,7 @@ def grid(
                 with tempfile.TemporaryDirectory(prefix="hbn-baselines-") as tmp:
                     wd = out_dir / "logs" / f"{system}-g{gain:g}-s{seed}" if keep_logs else Path(tmp)
                     train, test = simulate_logs(system, gain, seed, wd, steps=steps)
-                    rep = evaluate(train, test, seed=seed, methods=methods, gp_rows=gp_rows, lstm_config=lstm_config, log=log)
+                    rep = evaluate(train, test, seed=seed, methods=methods, gp_rows=gp_rows, lstm_config=lstm_config, log=log, hbn_params=hbn_params)
                 if not keep_logs:
                     _forget_tmp(rep)
                 doc["runs"].append({"system": system, "gain": float(gain), "seed": seed, "report": rep})
@@ -479,7 +490,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument("--workdir", type=Path, default=None, help="keep simulated logs here (default: a temporary directory)")
     ap.add_argument("--json", type=Path, default=None, help="write the report as JSON")
     ap.add_argument("--out-dir", type=Path, default=Path("baselines-grid"), help="--grid output directory")
+    ap.add_argument("--hbn-params", type=json.loads, default={}, metavar="JSON",
+                    help='hbn training parameters, keyword arguments of hbn.HysteresisModel.fit, e.g. \'{"n_inducing": [null, 64]}\'')  # fmt: skip
     a = ap.parse_args(argv)
+    if not isinstance(a.hbn_params, dict):
+        ap.error("--hbn-params must be a JSON object")
 
     methods = [m for m in _csv(a.methods, str) if not (a.no_lstm and m == "lstm")]
     paths = {"u": a.u, "x": a.x, "y": a.y}
@@ -494,7 +509,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if a.grid:
         t0 = time.perf_counter()
         doc = grid(_csv(a.systems, str), _csv(a.gains, float), _csv(a.seeds, int), a.out_dir, steps=a.steps,
-                   methods=methods, gp_rows=a.gp_rows, lstm_config=cfg, keep_logs=a.workdir is not None)  # fmt: skip
+                   methods=methods, gp_rows=a.gp_rows, lstm_config=cfg, keep_logs=a.workdir is not None, hbn_params=a.hbn_params)  # fmt: skip
         print(markdown_tables(doc.get("summary", [])))
         print(f"grid: {len(doc['runs'])} runs in {time.perf_counter() - t0:.0f} s; wrote {a.out_dir / 'grid.json'} and {a.out_dir / 'grid.md'}")
         return 0
@@ -503,7 +518,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         with tempfile.TemporaryDirectory(prefix="hbn-baselines-") as tmp:
             wd = a.workdir if a.workdir is not None else Path(tmp)
             train, test = simulate_logs(a.simulate, a.gain, seed, wd, steps=a.steps)
-            rep = evaluate(train, test, paths, seed=seed, methods=methods, gp_rows=a.gp_rows, lstm_config=cfg)
+            rep = evaluate(train, test, paths, seed=seed, methods=methods, gp_rows=a.gp_rows, lstm_config=cfg, hbn_params=a.hbn_params)
         if a.workdir is None:  # the temporary directory is gone: keep the file names only
             _forget_tmp(rep)
         rep.update({"system": a.simulate, "gain": a.gain, "protocol": protocol_seeds(seed)})
@@ -511,7 +526,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if not a.train or not a.test:
             ap.error("--train needs --test, and --test needs at least one --train")
         seed = 0 if a.seed is None else a.seed
-        rep = evaluate(a.train, a.test, paths, seed=seed, methods=methods, gp_rows=a.gp_rows, lstm_config=cfg)
+        rep = evaluate(a.train, a.test, paths, seed=seed, methods=methods, gp_rows=a.gp_rows, lstm_config=cfg, hbn_params=a.hbn_params)
     print(format_report(rep))
     if a.json is not None:
         a.json.write_text(json.dumps(rep, indent=1))

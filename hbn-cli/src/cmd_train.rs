@@ -17,7 +17,10 @@ impl TrainArgs {
         let kernel = self.kernel.first().copied();
         let (n_inducing, inducing) = crate::cli::inducing_choice(&self.inducing);
         HbnParams {
-            transition_kernel: self.transition_kernel.or(kernel).unwrap_or(d.transition_kernel),
+            transition_kernel: self
+                .transition_kernel
+                .or(kernel)
+                .unwrap_or(d.transition_kernel),
             sensor_kernel: self.sensor_kernel.or(kernel).unwrap_or(d.sensor_kernel),
             n_inducing,
             select: Selection {

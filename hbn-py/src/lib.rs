@@ -418,9 +418,23 @@ fn log_options(
     Ok(o)
 }
 
-/// A Python value as a parameter value (ints stay ints, bools stay bools).
+/// A Python value as a parameter value (ints stay ints, bools stay bools). A list or tuple is
+/// several values to choose among on held-out data (`kernel=`, `n_inducing=`, where `None` is
+/// the exact GP).
 fn param_value(v: &Bound<'_, PyAny>) -> Option<ParamValue> {
-    if v.is_instance_of::<PyBool>() {
+    if v.is_instance_of::<PyList>() || v.is_instance_of::<PyTuple>() {
+        let items = v.try_iter().ok()?;
+        let mut out = Vec::new();
+        for item in items {
+            let item = item.ok()?;
+            out.push(if item.is_none() {
+                ParamValue::Text("exact".to_owned())
+            } else {
+                param_value(&item)?
+            });
+        }
+        Some(ParamValue::List(out))
+    } else if v.is_instance_of::<PyBool>() {
         v.extract().ok().map(ParamValue::Bool)
     } else if v.is_instance_of::<PyInt>() {
         v.extract().ok().map(ParamValue::Int)
@@ -479,6 +493,13 @@ fn value_to_py<'py>(py: Python<'py>, v: &ParamValue) -> PyResult<Bound<'py, PyAn
         ParamValue::Real(r) => r.into_pyobject(py)?.into_any(),
         ParamValue::Bool(b) => PyBool::new(py, *b).to_owned().into_any(),
         ParamValue::Text(t) => t.into_pyobject(py)?.into_any(),
+        ParamValue::List(items) => {
+            let l = PyList::empty(py);
+            for item in items {
+                l.append(value_to_py(py, item)?)?;
+            }
+            l.into_any()
+        }
     })
 }
 

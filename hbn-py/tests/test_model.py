@@ -126,3 +126,25 @@ def test_estimate_score_reports_accuracy_and_calibration():
     assert s["samples"] == 300
     with pytest.raises(ValueError, match="same length"):
         est.score(te["x"][:10])
+
+
+def test_model_selection_among_inducing_settings():
+    """A list of n_inducing values is chosen among on held-out data: the table lists every
+    candidate, the chosen one has the lowest held-out NLPD, and params hold it."""
+    runs = [hbn.simulate("duhem", 400, seed=s, noise_gain=1.0) for s in (1, 2, 3)]
+    u, x, y = ([r[k] for r in runs] for k in "uxy")
+    model = hbn.HysteresisModel.fit(u, x, y, n_inducing=[3, None], max_points=120, n_restarts=1)
+    rows = model.summary["validation"]["candidates"]
+    assert [r["candidate"]["n_inducing"] for r in rows] == [3, None]
+    nlpd = [r["scored"][1]["calibration"]["nlpd"] for r in rows]
+    chosen = [r["chosen"] for r in rows]
+    assert chosen == [nlpd[0] < nlpd[1], nlpd[1] <= nlpd[0]]
+    # Three inducing points cannot follow the loops: the exact GP wins, and the model is it.
+    assert chosen == [False, True]
+    assert model.params["n_inducing"] == "exact"
+    with pytest.raises(hbn.ConfigError) as e:
+        hbn.HysteresisModel.fit(u, x, y, n_inducing=[None, 8], validation=0.0)
+    assert e.value.keyword == "n_inducing"
+    with pytest.raises(hbn.ConfigError) as e:
+        hbn.HysteresisModel.fit(u, x, y, kernel=["matern52", "rbf"])
+    assert e.value.keyword == "kernel"

@@ -710,8 +710,8 @@ impl HbnParams {
             return Err(ConfigError::new(
                 param,
                 Problem::Invalid {
-                    reason: "several values are chosen among on held-out data: they need \
-                             validation > 0",
+                    reason: "several values are chosen among on held-out data, which needs a \
+                             validation fraction > 0",
                 },
             ));
         }

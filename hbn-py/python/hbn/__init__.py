@@ -615,6 +615,12 @@ class HysteresisModel:
     :attr:`tuning`). They are the flags of ``hbn train``. A bad value
     raises :class:`ConfigError` whose ``keyword`` names it.
 
+    Model selection: ``kernel`` and ``n_inducing`` also take a list (``kernel=["matern52",
+    "se-ard"]``, ``n_inducing=[None, 64]``, ``None`` being the exact GP). Every combination is
+    trained and its filter tuned on the same held-out data, and the one whose default mode has
+    the lowest held-out NLPD becomes the model; each candidate costs one training. The table is
+    ``summary["validation"]["candidates"]``, and :attr:`params` holds the chosen configuration.
+
     >>> import hbn
     >>> tr = hbn.simulate("maxwell-slip", 500, seed=1, noise_gain=1.0)
     >>> model = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=150)
