@@ -41,6 +41,23 @@ fn write_log(file: &Path, u: &[f64], x: &[f64], y: &[f64]) {
     hbn_io::write_scalar_log(file, &t, &topics, hbn_io::Encoding::Json).expect("write");
 }
 
+/// `hbn train` of a small model from `log` into `out`, with `extra` flags.
+fn train_small(log: &str, out: &str, extra: &[&str]) -> (Option<String>, String) {
+    let mut a = vec![
+        "train",
+        "--log",
+        log,
+        "--max-points",
+        "50",
+        "--starts",
+        "1",
+        "--out",
+        out,
+    ];
+    a.extend_from_slice(extra);
+    hbn(&a)
+}
+
 /// A small model trained on a simulated log; returns (dir, log, model).
 fn small_model() -> (tempfile::TempDir, String, String) {
     let d = tempfile::tempdir().expect("tempdir");
@@ -48,17 +65,7 @@ fn small_model() -> (tempfile::TempDir, String, String) {
     let (log, model) = (p("a.mcap"), p("m.hbn"));
     let (e, _) = hbn(&["simulate", "--steps", "300", "--out", &log]);
     assert!(e.is_none(), "{e:?}");
-    let (e, _) = hbn(&[
-        "train",
-        "--log",
-        &log,
-        "--max-points",
-        "50",
-        "--starts",
-        "1",
-        "--out",
-        &model,
-    ]);
+    let (e, _) = train_small(&log, &model, &[]);
     assert!(e.is_none(), "{e:?}");
     (d, log, model)
 }
@@ -277,21 +284,8 @@ fn details_are_behind_verbose_and_json() {
     let d = tempfile::tempdir().expect("tempdir");
     let m2 = d.path().join("m2.hbn").to_string_lossy().into_owned();
     let train = |extra: &str| {
-        let mut a = vec![
-            "train",
-            "--log",
-            &log,
-            "--max-points",
-            "50",
-            "--starts",
-            "1",
-            "--out",
-            &m2,
-        ];
-        if !extra.is_empty() {
-            a.push(extra);
-        }
-        hbn(&a)
+        let extra: &[&str] = if extra.is_empty() { &[] } else { &[extra] };
+        train_small(&log, &m2, extra)
     };
     let (_, short) = train("");
     assert!(
@@ -506,21 +500,7 @@ fn eval_on_a_log_without_the_state_points_to_estimate() {
 fn model_selection_lists_print_their_table() {
     let (d, log, _) = small_model();
     let m2 = d.path().join("sel.hbn").to_string_lossy().into_owned();
-    let train = |extra: &[&str]| {
-        let mut a = vec![
-            "train",
-            "--log",
-            &log,
-            "--max-points",
-            "50",
-            "--starts",
-            "1",
-            "--out",
-            &m2,
-        ];
-        a.extend_from_slice(extra);
-        hbn(&a)
-    };
+    let train = |extra: &[&str]| train_small(&log, &m2, extra);
     let (e, out) = train(&["--inducing", "exact,4", "--verbose"]);
     assert!(e.is_none(), "{e:?}");
     assert!(

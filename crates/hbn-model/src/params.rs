@@ -831,28 +831,25 @@ impl HbnParams {
             )),
         };
         // A list: the first value is the primary one, the rest are alternatives.
-        let split_list = |v: Vec<ParamValue>| {
+        fn primary_and_rest<T>(
+            param: Param,
+            v: Vec<ParamValue>,
+            one: impl Fn(ParamValue) -> Result<T, ConfigError>,
+        ) -> Result<(T, Vec<T>), ConfigError> {
             let mut it = v.into_iter();
-            match it.next() {
-                Some(first) => Ok((first, it.collect::<Vec<_>>())),
-                None => Err(ConfigError::new(
-                    param,
-                    Problem::WrongType {
-                        expected: "a non-empty list",
-                    },
-                )),
-            }
-        };
+            let first = it.next().ok_or(ConfigError::new(
+                param,
+                Problem::WrongType {
+                    expected: "a non-empty list",
+                },
+            ))?;
+            Ok((one(first)?, it.map(one).collect::<Result<Vec<_>, _>>()?))
+        }
         match (param, value) {
             (Param::Rate, ParamValue::Real(v)) => self.rate_hz = v,
             (Param::Rate, ParamValue::Int(v)) => self.rate_hz = v as f64,
             (Param::Kernel, ParamValue::List(v)) => {
-                let (first, rest) = split_list(v)?;
-                let k = kernel_value(first)?;
-                let alternatives = rest
-                    .into_iter()
-                    .map(kernel_value)
-                    .collect::<Result<Vec<_>, _>>()?;
+                let (k, alternatives) = primary_and_rest(param, v, kernel_value)?;
                 self.transition_kernel = k;
                 self.sensor_kernel = k;
                 self.select.kernels = alternatives;
@@ -866,12 +863,7 @@ impl HbnParams {
             (Param::TransitionKernel, ParamValue::Text(t)) => self.transition_kernel = kernel(&t)?,
             (Param::SensorKernel, ParamValue::Text(t)) => self.sensor_kernel = kernel(&t)?,
             (Param::Inducing, ParamValue::List(v)) => {
-                let (first, rest) = split_list(v)?;
-                let m = inducing(first)?;
-                let alternatives = rest
-                    .into_iter()
-                    .map(inducing)
-                    .collect::<Result<Vec<_>, _>>()?;
+                let (m, alternatives) = primary_and_rest(param, v, inducing)?;
                 self.n_inducing = m;
                 self.select.inducing = alternatives;
             }
@@ -1044,5 +1036,56 @@ mod tests {
             q.set(param, v).unwrap();
             assert_eq!(q, d, "{param}");
         }
+    }
+
+    /// Lists set alternatives (the first value is the primary one), read back as lists, and
+    /// give the candidates in order; a single value drops the alternatives.
+    #[test]
+    fn lists_set_the_candidates() {
+        let text = |t: &str| ParamValue::Text(t.to_owned());
+        let mut p = HbnParams::default();
+        let kernels = ParamValue::List(vec![text("se-ard"), text("matern52")]);
+        p.set(Param::Kernel, kernels.clone()).unwrap();
+        let inducing = ParamValue::List(vec![ParamValue::Int(32), text("exact")]);
+        p.set(Param::Inducing, inducing.clone()).unwrap();
+        assert_eq!(p.get(Param::Kernel), Some(kernels));
+        assert_eq!(p.get(Param::Inducing), Some(inducing));
+        let names: Vec<String> = p.candidates().iter().map(|c| c.to_string()).collect();
+        assert_eq!(
+            names,
+            [
+                "se-ard m=32",
+                "se-ard exact",
+                "matern52 m=32",
+                "matern52 exact"
+            ]
+        );
+        assert!(p.check_ref().is_ok());
+        // A candidate's parameters have no alternatives left.
+        let c = p.candidates()[3];
+        let q = p.with_candidate(c);
+        assert_eq!(q.candidates(), vec![c]);
+        // A repeated value is one candidate; a bad one names the parameter.
+        p.set(
+            Param::Inducing,
+            ParamValue::List(vec![text("exact"), text("exact")]),
+        )
+        .unwrap();
+        assert_eq!(p.candidates().len(), 2);
+        let e = p
+            .set(
+                Param::Kernel,
+                ParamValue::List(vec![text("se"), text("rbf")]),
+            )
+            .unwrap_err();
+        assert_eq!(e.param, Param::Kernel);
+        let e = p
+            .set(Param::Inducing, ParamValue::List(vec![]))
+            .unwrap_err();
+        assert_eq!(e.param, Param::Inducing);
+        p.set(Param::Kernel, text("se")).unwrap();
+        p.set(Param::Inducing, ParamValue::Int(8)).unwrap();
+        assert!(p.select.is_empty());
+        assert_eq!(p.candidates().len(), 1);
     }
 }
