@@ -187,6 +187,7 @@ def run_hbn(
             "estimate_seconds": time.perf_counter() - t1,
             "flags": est.flag_counts(),
             "model_rate": model.rate,
+            "config": _config(model),
         }
     t1 = time.perf_counter()
     x_open = np.asarray(model.simulate_open_loop(test.u))
@@ -199,6 +200,14 @@ def run_hbn(
         "model_rate": model.rate,
     }
     return out
+
+
+def _config(model: Any) -> str:
+    """The trained configuration (the chosen one under model selection), e.g. ``"matern52
+    exact"`` or ``"se-ard m=64"``."""
+    p = model.params
+    m = p["n_inducing"]
+    return f"{p['transition_kernel']} {'exact' if m == 'exact' else f'm={m}'}"
 
 
 def _finite_or_none(v: Any) -> Any:
