@@ -187,7 +187,7 @@ fn gp_text(model: &HbnModel, role: GpRole, kernel: KernelChoice) -> String {
     }
     s.push_str(&format!(
         "\n  training {}      {:.3}\n  starts            {} ({} failed; best: start {} of {}), {} \
-         evaluations\n  jitter            {} evaluations needed it (max {:.1e}), final {:.1e}\n",
+         evaluations\n  jitter            {} evaluations needed it (at most {:.0e} of the mean diagonal), final {:.1e}\n",
         if gp.is_sparse() { "bound" } else { "LML  " },
         gp.log_marginal_likelihood(),
         r.starts.len(),

@@ -15,6 +15,18 @@ pub struct Factor {
 }
 
 impl Factor {
+    /// The jitter relative to the matrix's mean diagonal (`1e-10 * 10^(retries - 1)`, 0 when
+    /// none was needed): comparable across matrices and hyperparameters, where the absolute
+    /// jitter scales with the matrix (a line-search trial at a tiny noise makes the sparse
+    /// bound's `B` huge, and its jitter with it).
+    pub fn relative_jitter(&self) -> f64 {
+        if self.retries == 0 {
+            0.0
+        } else {
+            1e-10 * 10f64.powi(self.retries as i32 - 1)
+        }
+    }
+
     /// `K^{-1}` from the factor (`O(n^3)`).
     pub fn inverse(&self) -> Mat<f64> {
         self.llt.inverse()
@@ -67,4 +79,33 @@ pub fn factor_with_jitter(k: &mut Mat<f64>, max_retries: usize) -> Result<Factor
         jitter,
         retries: max_retries,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A singular matrix is factored with jitter, and the relative jitter is the absolute one
+    /// over the mean diagonal, whatever the matrix's scale.
+    #[test]
+    fn relative_jitter_does_not_scale_with_the_matrix() {
+        for scale in [1.0, 1e120] {
+            // Rank one: [1 1; 1 1] times scale.
+            let mut k = Mat::from_fn(2, 2, |_, _| scale);
+            let f = factor_with_jitter(&mut k, 8).expect("factored with jitter");
+            assert!(f.retries > 0 && f.jitter > 0.0);
+            let rel = f.relative_jitter();
+            assert!(
+                (f.jitter / scale - rel).abs() <= 1e-12 * rel,
+                "{} {rel}",
+                f.jitter
+            );
+            assert!(rel <= 1e-3, "{rel}");
+            // The matrix is given back unchanged.
+            assert_eq!(k[(0, 0)], scale);
+        }
+        let mut k = Mat::from_fn(2, 2, |i, j| if i == j { 2.0 } else { 0.5 });
+        let f = factor_with_jitter(&mut k, 8).expect("positive definite");
+        assert_eq!((f.retries, f.jitter, f.relative_jitter()), (0, 0.0, 0.0));
+    }
 }

@@ -49,6 +49,8 @@ pub struct Evaluation {
     pub grad: Vec<f64>,
     /// Jitter the factorisation needed (0 if none).
     pub jitter: f64,
+    /// The same relative to the factored matrix's mean diagonal ([`crate::factor::Factor::relative_jitter`]).
+    pub relative_jitter: f64,
 }
 
 /// Counters of what the likelihood did, for the training report.
@@ -58,7 +60,7 @@ pub struct EvalStats {
     pub evaluations: usize,
     /// Evaluations that needed jitter.
     pub jitter_evaluations: usize,
-    /// Largest jitter used.
+    /// Largest jitter used, relative to the mean diagonal of the matrix factored.
     pub max_jitter: f64,
 }
 
@@ -84,7 +86,7 @@ impl EvalMemo {
             s.evaluations += 1;
             if ev.jitter > 0.0 {
                 s.jitter_evaluations += 1;
-                s.max_jitter = s.max_jitter.max(ev.jitter);
+                s.max_jitter = s.max_jitter.max(ev.relative_jitter);
             }
         }
         if let Ok(mut last) = self.last.lock() {
@@ -323,6 +325,7 @@ impl<'a> Likelihood<'a> {
             lml: solved.lml - penalty,
             grad,
             jitter: solved.factor.jitter,
+            relative_jitter: solved.factor.relative_jitter(),
         };
         self.memo.record(p, &ev);
         Ok(ev)

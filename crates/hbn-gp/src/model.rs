@@ -57,7 +57,8 @@ pub struct TrainingReport {
     pub evaluations: usize,
     /// Evaluations whose Cholesky needed jitter.
     pub jitter_evaluations: usize,
-    /// Largest jitter used during optimisation.
+    /// Largest jitter used during optimisation, relative to the mean diagonal of the matrix
+    /// factored (model files from before 2026-11-24 hold the absolute jitter).
     pub max_jitter: f64,
     /// Jitter in the final factor (added to the noise variance on the diagonal).
     pub final_jitter: f64,
@@ -103,7 +104,8 @@ impl TrainingReport {
         }
         if self.jitter_evaluations > 0 {
             w.push(format!(
-                "{} of {} likelihood evaluations needed Cholesky jitter (max {:e})",
+                "{} of {} likelihood evaluations needed Cholesky jitter (at most {:.0e} of \
+                 the mean diagonal)",
                 self.jitter_evaluations, self.evaluations, self.max_jitter
             ));
         }

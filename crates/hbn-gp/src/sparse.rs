@@ -97,6 +97,8 @@ pub struct SparsePosterior {
 struct Core {
     bound: f64,
     jitter: f64,
+    /// The larger relative jitter of the two factorisations (`K_mm`, `B`).
+    relative_jitter: f64,
     /// Inducing features `m x d`.
     uz: Vec<f64>,
     kmm: Mat<f64>,
@@ -424,6 +426,7 @@ impl<'a> SparseBound<'a> {
         Ok(Core {
             bound,
             jitter: jitter.max(factor_b.jitter),
+            relative_jitter: factor.relative_jitter().max(factor_b.relative_jitter()),
             uz,
             kmm,
             cmm,
@@ -684,6 +687,7 @@ impl<'a> SparseBound<'a> {
             lml: core.bound - penalty,
             grad,
             jitter: core.jitter,
+            relative_jitter: core.relative_jitter,
         };
         if !ev.grad.iter().all(|g| g.is_finite()) {
             return Err(GpError::NonFinite {
