@@ -686,3 +686,37 @@ fn an_innovation_variance_that_overflows_saturates_and_the_output_stays_finite()
         assert!(out.innovation_var.is_finite(), "{mode:?}: {out:?}");
     }
 }
+
+/// A state pinned against its box keeps its uncertainty: the unscented prediction does not
+/// clamp its sigma points (that collapsed their spread, so the reported std fell to the floor
+/// exactly where the estimate was worst), and its predicted variance stays of the order of the
+/// linearised one.
+#[test]
+fn a_state_pinned_at_its_bound_keeps_its_uncertainty() {
+    let f = fixture();
+    let (_, mut scratch, state) = warm(f, cfg(Mode::Ekf), 150);
+    let st = state.unwrap();
+    // A box whose top lies well below the predicted state.
+    let sx = f.model.stats().1.span();
+    let top = st.z.x - 0.2 * sx;
+    let boxed = |mode| EkfConfig {
+        x_bounds: (top - sx, top),
+        ..cfg(mode)
+    };
+    let mut st = st;
+    st.z.x = top;
+    st.z.y = top;
+    let ekf = Ekf::new(f.model.view().unwrap(), boxed(Mode::Ekf)).unwrap();
+    let ukf = Ekf::new(f.model.view().unwrap(), boxed(Mode::Ukf)).unwrap();
+    let (e, e_out) = predict_only(&ekf, &mut scratch, st, f.test.u[150]);
+    let (s, s_out) = predict_only(&ukf, &mut scratch, st, f.test.u[150]);
+    assert!(e_out.flags.has(Flags::STATE_CLAMPED) && s_out.flags.has(Flags::STATE_CLAMPED));
+    let p_min = boxed(Mode::Ukf).p_min;
+    assert!(
+        s.p[(0, 0)] > 0.25 * e.p[(0, 0)] && s.p[(0, 0)] > 1e3 * p_min,
+        "UKF x variance {} against the EKF's {} (p_min {p_min})",
+        s.p[(0, 0)],
+        e.p[(0, 0)]
+    );
+    assert_eq!(s.z.x, top);
+}
