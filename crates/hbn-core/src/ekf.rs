@@ -858,9 +858,11 @@ impl<'m> Ekf<'m> {
         let spread = 2.0;
         let w_dev = spread * sqrt(q_x);
         let mut sum = Vector3::zeros();
+        let mut free_sum = Vector3::zeros();
         let mut points = [Vector3::zeros(); 8];
+        let mut boxed_points = [Vector3::zeros(); 8];
         let mut ok = true;
-        for (i, point) in points.iter_mut().enumerate() {
+        for (i, (point, boxed)) in points.iter_mut().zip(&mut boxed_points).enumerate() {
             let sign = if i % 2 == 0 { spread } else { -spread };
             // Points 0..6: the state columns of `L`; points 6, 7: the noise `w`.
             let column = match i / 2 {
@@ -883,28 +885,31 @@ impl<'m> Ekf<'m> {
                 ok = false;
                 break;
             };
-            // The sensor GP sees the point inside the box, but the point keeps its own
-            // value: clamping every point to the box would collapse their spread, and with it
-            // the covariance, exactly where the state is pinned against its bound (measured:
-            // a std of 5e-7 and a mean NEES of 5e8 on a noise-free Preisach run). The mean is
-            // clamped below, as in the EKF.
             let xk = xk + w;
             let x_in = clamp_to(xk, cfg.x_bounds.0, cfg.x_bounds.1);
             let Some(sk) = self.mean_of(Relation::Sensor, &[a, c, x_in], scratch) else {
                 ok = false;
                 break;
             };
+            // The mean is that of the points clamped to the box (the state's support); the
+            // covariance is that of the points as they are. Clamping them for the covariance
+            // too collapsed their spread where the state was pinned against its bound, so the
+            // reported std fell to the floor exactly where the estimate was worst (measured: a
+            // std of 5e-7 and a mean NEES of 5e8 on a noise-free Preisach run).
             *point = Vector3::new(xk, a, sk);
-            sum += *point;
+            *boxed = Vector3::new(x_in, a, clamp_to(sk, cfg.y_bounds.0, cfg.y_bounds.1));
+            sum += *boxed;
+            free_sum += *point;
         }
         if !ok {
             *flags |= Flags::MODEL_INVALID;
             return self.random_walk(st);
         }
         let mean = sum / 8.0;
+        let free_mean = free_sum / 8.0;
         let mut p = Matrix3::zeros();
         for point in &points {
-            let dev = point - mean;
+            let dev = point - free_mean;
             p += dev * dev.transpose();
         }
         p /= 8.0;

@@ -687,10 +687,10 @@ fn an_innovation_variance_that_overflows_saturates_and_the_output_stays_finite()
     }
 }
 
-/// A state pinned against its box keeps its uncertainty: the unscented prediction does not
-/// clamp its sigma points (that collapsed their spread, so the reported std fell to the floor
-/// exactly where the estimate was worst), and its predicted variance stays of the order of the
-/// linearised one.
+/// A state pinned against its box keeps its uncertainty: the unscented prediction's covariance
+/// is that of its sigma points unclamped (clamped, their spread collapsed, so the reported std
+/// fell to the floor exactly where the estimate was worst), and its predicted variance stays of
+/// the order of the linearised one.
 #[test]
 fn a_state_pinned_at_its_bound_keeps_its_uncertainty() {
     let f = fixture();
@@ -718,5 +718,6 @@ fn a_state_pinned_at_its_bound_keeps_its_uncertainty() {
         s.p[(0, 0)],
         e.p[(0, 0)]
     );
-    assert_eq!(s.z.x, top);
+    // The mean stays in the box.
+    assert!(s.z.x <= top, "{} > {top}", s.z.x);
 }
