@@ -1,6 +1,7 @@
 """Compares hbn in two grid runs of ``run.py --grid`` on the same cells (e.g. the default
 against model selection, ``--hbn-params``): per (system, gain) the mean nRMSE of hbn's default
-mode in each, the better baseline of the second run, the ratios, and the calibration of each.
+mode in each, the better baseline of the second run (of the first, if the second ran hbn
+alone), the ratios, and the calibration of each.
 
     python3 benches/baselines/compare_grids.py A/grid.json B/grid.json [--names default,selection]
 """
@@ -42,7 +43,11 @@ def table(a: Mapping[str, Any], b: Mapping[str, Any], names: Sequence[str]) -> s
     for key in sorted(set(ca) & set(cb)):
         ra, rb = ca[key], cb[key]
         ea, eb = metric(ra, "hbn", "nrmse"), metric(rb, "hbn", "nrmse")
-        base = min(metric(rb, m, "nrmse") for m in BASELINES if any(m in r["report"]["methods"] for r in rb))
+        # The baselines of the second run, or of the first where the second ran hbn alone.
+        have = [m for m in BASELINES if any(m in r["report"]["methods"] for r in rb)]
+        rbase = rb if have else ra
+        have = have or [m for m in BASELINES if any(m in r["report"]["methods"] for r in ra)]
+        base = min(metric(rbase, m, "nrmse") for m in have) if have else math.nan
         chosen: Dict[str, int] = {}
         for r in rb:
             c = r["report"]["methods"]["hbn"].get("config")
