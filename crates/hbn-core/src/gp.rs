@@ -496,7 +496,7 @@ pub const fn predict_scratch(n: usize, sparse: bool, want: Want) -> usize {
 }
 
 /// `out = T k` for a row-packed lower-triangular `T` (`n = out.len()` rows): one independent
-/// dot product per row ([`row_dot`]).
+/// dot product per row (`row_dot`, two-lane sums).
 pub fn lower_packed_times(t_packed: &[f64], k: &[f64], out: &mut [f64]) {
     for (i, o) in out.iter_mut().enumerate() {
         let start = i * (i + 1) / 2;

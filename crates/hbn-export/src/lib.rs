@@ -401,7 +401,7 @@ pub struct GeneratedFile {
     pub text: String,
 }
 
-/// Generates the source of `model` in `mode` (what [`write`] writes). `init_pairs` keeps at
+/// Generates the source of `model` in `mode` (what [`write()`] writes). `init_pairs` keeps at
 /// most that many training `(y, x)` pairs for the prior of `x_0` (`None`: all, and the export
 /// reproduces `hbn estimate` exactly; `Some(0)`: no prior, the filter starts from the training
 /// mean; fewer pairs change the first estimates only). `origin` (e.g. the model file) is named

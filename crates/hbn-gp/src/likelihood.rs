@@ -1,5 +1,5 @@
 //! The log marginal likelihood (thesis Eq. 7) and its analytic gradient: the *problem*,
-//! kept apart from the optimiser that solves it ([`crate::train`]).
+//! kept apart from the optimiser that solves it (`train.rs`).
 //!
 //! With `K_y = K + s_n^2 I = L L^T` and `alpha = K_y^{-1} y`:
 //!
