@@ -501,8 +501,29 @@ fn model_selection_lists_print_their_table() {
     let (d, log, _) = small_model();
     let m2 = d.path().join("sel.hbn").to_string_lossy().into_owned();
     let train = |extra: &[&str]| train_small(&log, &m2, extra);
-    let (e, out) = train(&["--inducing", "exact,4", "--verbose"]);
-    assert!(e.is_none(), "{e:?}");
+    let mut out = Vec::new();
+    let mut err = Vec::new();
+    let args = [
+        "hbn",
+        "train",
+        "--log",
+        &log,
+        "--max-points",
+        "50",
+        "--starts",
+        "1",
+        "--out",
+        &m2,
+        "--inducing",
+        "exact,4",
+        "--verbose",
+    ];
+    hbn_cli::run_with(args, &mut out, &mut err).expect("train with two candidates");
+    let (out, err) = (String::from_utf8_lossy(&out), String::from_utf8_lossy(&err));
+    assert!(
+        err.contains("model selection: training 2 candidates"),
+        "announced on stderr: {err}"
+    );
     assert!(
         out.contains("model selection, 2 candidates")
             && out.contains("matern52 exact")

@@ -50,8 +50,19 @@ pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<HbnModel> {
         output: args.output.clone(),
     };
     let opts = args.read.options(args.rate);
+    let params = args.params();
+    let candidates = params.candidates();
+    if candidates.len() > 1 {
+        let names: Vec<String> = candidates.iter().map(|c| c.to_string()).collect();
+        ui.notice(format!(
+            "model selection: training {} candidates one after the other ({}); the one with the \
+             lowest held-out NLPD becomes the model",
+            candidates.len(),
+            names.join(", ")
+        ));
+    }
     let mut render = Renderer::default();
-    let trained = train_from_logs(&args.logs, &signals, opts, args.params(), &mut |e| {
+    let trained = train_from_logs(&args.logs, &signals, opts, params, &mut |e| {
         render.event(ui, e)
     });
     render.finish();
