@@ -163,3 +163,57 @@ fn saved_model_estimates_identically() {
         assert_eq!(a.flags, b.flags);
     }
 }
+
+/// Play operators ride along in the model file, and a model file from before they existed
+/// (no `memory` parameter, no `play_radii`) loads as a model without them: it estimates bit
+/// for bit as the same model trained with `memory` empty.
+#[test]
+fn model_files_with_and_without_play_operators_load() {
+    let (model, runs) = common::train_model(SystemKind::Preisach, 1.0, 100, 5);
+    let plays = model.plays().unwrap();
+    assert_eq!(plays.len(), hbn::model::DEFAULT_MEMORY.len());
+    let u_span = model.stats().0.span();
+    for (r, f) in plays.radii().iter().zip(hbn::model::DEFAULT_MEMORY) {
+        assert!(
+            (r - f * u_span).abs() <= 1e-12 * u_span,
+            "{r} vs {f} x {u_span}"
+        );
+    }
+    let back = HbnModel::from_json(&model.to_json().unwrap(), "mem").unwrap();
+    assert_eq!(back.plays().unwrap(), plays);
+
+    // Without memory, written as an older build wrote it.
+    let params = HbnParams {
+        memory: Vec::new(),
+        max_points: 100,
+        n_starts: 1,
+        max_iters: 60,
+        seed: 5,
+        ..HbnParams::default()
+    };
+    let plain = HbnModel::fit(&hbn::pipeline::sequences(&runs), &params).unwrap();
+    assert!(plain.plays().unwrap().is_empty());
+    let mut v: serde_json::Value = serde_json::from_str(&plain.to_json().unwrap()).unwrap();
+    let m = v["model"].as_object_mut().unwrap();
+    assert!(m.remove("play_radii").is_some());
+    assert!(
+        m["params"]
+            .as_object_mut()
+            .unwrap()
+            .remove("memory")
+            .is_some()
+    );
+    let old = HbnModel::from_json(&v.to_string(), "old").unwrap();
+    assert!(old.params().memory.is_empty() && old.plays().unwrap().is_empty());
+    let test = common::test_run(SystemKind::Preisach, 1.0, 300, 5);
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+    for mode in Mode::ALL {
+        let a = plain.estimate(&test.u, &test.y, mode).unwrap();
+        let b = old.estimate(&test.u, &test.y, mode).unwrap();
+        assert_eq!(bits(&a.x), bits(&b.x), "{mode:?}");
+    }
+    // The plays change the transition's inputs, so the estimates differ.
+    let with = model.estimate(&test.u, &test.y, Mode::Ekf).unwrap();
+    let without = plain.estimate(&test.u, &test.y, Mode::Ekf).unwrap();
+    assert_ne!(bits(&with.x), bits(&without.x));
+}

@@ -287,7 +287,7 @@ pub fn step(data: &[u8]) {
     use hbn_core::blr::{LocalRegression, Neighbourhood, NeighbourhoodParts};
     use hbn_core::gp::{GpParts, GpView, Variance};
     use hbn_core::kernel::{Kernel, KernelSpec, Metric, Profile};
-    use hbn_core::{EkfConfig, Estimator, HbnView, InitPrior, Mode};
+    use hbn_core::{EkfConfig, Estimator, HbnView, InitPrior, Mode, Plays};
 
     let mut b = Bytes(data);
     struct Owned {
@@ -435,6 +435,9 @@ pub fn step(data: &[u8]) {
         sensor_local: nb(&sl, 3, &STARTS[sl.4]),
         blr,
         init,
+        // The byte layout predates play operators (the corpus replays as it was); the step
+        // advances the plays with or without them.
+        plays: Plays::NONE,
     };
     let mut scratch = vec![0.0; Estimator::scratch_len(&model)];
     let Ok(mut est) = Estimator::new(model, config, &mut scratch) else {

@@ -211,6 +211,45 @@ fn parse_positive(s: &str) -> Result<f64, String> {
     }
 }
 
+/// `--memory`: radii of the transition's play operators as fractions of the input's range,
+/// or none.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Memory(pub Vec<f64>);
+
+fn parse_memory(s: &str) -> Result<Memory, String> {
+    let t = s.trim();
+    if t.eq_ignore_ascii_case("none") {
+        return Ok(Memory(Vec::new()));
+    }
+    t.split(',')
+        .map(|r| match r.trim().parse::<f64>() {
+            Ok(v) if v.is_finite() && v > 0.0 && v <= 1.0 => Ok(v),
+            _ => Err(format!(
+                "expected fractions of the input's range in (0, 1], comma-separated, or `none`; \
+                 got {r:?}"
+            )),
+        })
+        .collect::<Result<Vec<f64>, String>>()
+        .map(Memory)
+}
+
+impl std::fmt::Display for Memory {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&memory_text(&self.0))
+    }
+}
+
+fn memory_text(m: &[f64]) -> String {
+    if m.is_empty() {
+        "none".to_owned()
+    } else {
+        m.iter()
+            .map(|r| r.to_string())
+            .collect::<Vec<_>>()
+            .join(",")
+    }
+}
+
 /// `--inducing`: a count of inducing points (sparse GPs) or `exact`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Inducing(pub Option<usize>);
@@ -393,6 +432,11 @@ pub struct TrainArgs {
     /// 0 turns filter tuning off.
     #[arg(long, allow_negative_numbers = true, default_value_t = params().validation)]
     pub validation: f64,
+    /// The input's long memory: radii of play operators (backlashes) whose outputs the
+    /// transition GP reads besides u_{k-1} and u_{k-2}, as fractions of the input's range,
+    /// comma-separated (at most 4), or `none` for the thesis' four inputs. docs/memory.md.
+    #[arg(long, value_parser = parse_memory, default_value_t = Memory(params().memory), value_name = "R[,..]|none")]
+    pub memory: Memory,
     /// Log reading options.
     #[command(flatten)]
     pub read: ReadArgs,
@@ -718,6 +762,9 @@ pub struct ExperimentArgs {
     /// Most support points per GP.
     #[arg(long, default_value_t = params().max_points)]
     pub max_points: usize,
+    /// Play operators' radii as fractions of the input's range, or `none` (as `hbn train`).
+    #[arg(long, value_parser = parse_memory, default_value_t = Memory(params().memory), value_name = "R[,..]|none")]
+    pub memory: Memory,
     /// Write all rows as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,

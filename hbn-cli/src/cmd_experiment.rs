@@ -87,6 +87,7 @@ pub fn run(ui: &mut Ui<'_>, args: &ExperimentArgs) -> anyhow::Result<Vec<Experim
                     inducing,
                 },
                 max_points: args.max_points,
+                memory: args.memory.0.clone(),
                 ..HbnParams::default()
             }
         },

@@ -36,6 +36,7 @@ impl TrainArgs {
             noise_floor: self.noise_floor,
             blr_window: self.blr_window,
             validation: self.validation,
+            memory: self.memory.0.clone(),
             ..d
         }
     }

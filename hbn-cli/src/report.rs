@@ -27,6 +27,7 @@ pub fn flag(setting: Setting) -> &'static str {
             Param::BlrWindow => "--blr-window",
             Param::Blr => "the BLR prior (set in the Rust API)",
             Param::Validation => "--validation",
+            Param::Memory => "--memory",
         },
         Setting::Log(o) => match o {
             LogOption::Rate => "--rate",

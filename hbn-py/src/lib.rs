@@ -60,6 +60,7 @@ fn param_keyword(p: Param) -> &'static str {
         Param::BlrWindow => "blr_window",
         Param::Blr => "blr",
         Param::Validation => "validation",
+        Param::Memory => "memory",
     }
 }
 

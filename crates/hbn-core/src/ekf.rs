@@ -39,7 +39,8 @@
 use crate::CoreError;
 use crate::blr::{LocalRegression, Neighbourhood};
 use crate::gp::{GpView, Want};
-use crate::kernel::clamp_to;
+use crate::kernel::{MAX_DIM, clamp_to};
+use crate::play::{PlayState, Plays};
 use nalgebra::{Matrix3, Vector3};
 
 /// Guard flags of one step (a bit set).
@@ -422,7 +423,8 @@ impl<'a> InitPrior<'a> {
 /// `static` slices.
 #[derive(Clone, Copy, Debug)]
 pub struct HbnView<'a> {
-    /// Transition GP, inputs `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}]`.
+    /// Transition GP, inputs `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}]` and then the plays
+    /// after `u_{k-1}` (one input per play operator, [`crate::play`]).
     pub transition: GpView<'a>,
     /// Sensor GP, inputs `[x_{k-1}, y_{k-1}, x_k]`.
     pub sensor: GpView<'a>,
@@ -435,14 +437,20 @@ pub struct HbnView<'a> {
     /// Prior of `x_0` from the first measurement; without it (or with a non-finite first
     /// measurement) the filter starts from [`EkfConfig::x0_mean`] and [`EkfConfig::x0_var`].
     pub init: Option<InitPrior<'a>>,
+    /// Play operators whose values extend the transition's inputs ([`Plays::NONE`]: the
+    /// thesis' four inputs).
+    pub plays: Plays,
 }
 
 impl HbnView<'_> {
-    /// Checks that the GPs have the HBN's input dimensions.
+    /// Checks that the GPs have the HBN's input dimensions: 4 plus one per play operator for
+    /// the transition, 3 for the sensor; the local regression of the transition reads its
+    /// first 4 inputs.
     pub fn validate(&self) -> Result<(), CoreError> {
-        if self.transition.dim() != 4 {
+        let transition_dim = 4 + self.plays.len();
+        if self.transition.dim() != transition_dim {
             return Err(CoreError::DimensionMismatch {
-                expected: 4,
+                expected: transition_dim,
                 got: self.transition.dim(),
             });
         }
@@ -508,6 +516,8 @@ pub struct EkfState {
     pub u_last: f64,
     /// `u_{k-1}` of the last step.
     pub u_prev: f64,
+    /// The plays after `u_k` of the last step ([`HbnView::plays`]; unused slots hold `u_k`).
+    pub plays: PlayState,
     /// Steps taken.
     pub steps: u64,
     /// Measurements rejected in a row by the outlier gate (see [`MAX_REJECTED_RUN`]).
@@ -639,6 +649,7 @@ impl<'m> Ekf<'m> {
         st.p = bound_covariance(st.p, cfg.p_min, cfg.p_max, &mut flags);
         st.u_prev = st.u_last;
         st.u_last = u_k;
+        self.model.plays.advance(&mut st.plays, u_k);
 
         // ---- update ----
         let (innovation, s_var, nis) = update(&mut st, y_k, pred.r, &cfg, &mut flags);
@@ -690,6 +701,7 @@ impl<'m> Ekf<'m> {
             p,
             u_last: u0,
             u_prev: u0,
+            plays: self.model.plays.start(u0),
             steps: 1,
             rejected_run: 0,
         };
@@ -770,7 +782,7 @@ impl<'m> Ekf<'m> {
     ) -> Predicted {
         let cfg = self.config;
         let (x1, x2, s1) = (st.z.x, st.z.y, st.z.z);
-        let a_in = [x1, x2, st.u_last, st.u_prev];
+        let a_in = self.transition_input(st, x1, x2);
         let Some(t) = self.linearise(Relation::Transition, &a_in, scratch, flags) else {
             return self.random_walk(st);
         };
@@ -839,9 +851,12 @@ impl<'m> Ekf<'m> {
     ) -> Predicted {
         let cfg = self.config;
         let (x1, x2, s1) = (st.z.x, st.z.y, st.z.z);
-        let (u1, u2) = (st.u_last, st.u_prev);
-        let Some(t) = self.linearise(Relation::Transition, &[x1, x2, u1, u2], scratch, flags)
-        else {
+        let Some(t) = self.linearise(
+            Relation::Transition,
+            &self.transition_input(st, x1, x2),
+            scratch,
+            flags,
+        ) else {
             return self.random_walk(st);
         };
         let xk_mean = clamp_to(t.mean, cfg.x_bounds.0, cfg.x_bounds.1);
@@ -879,14 +894,19 @@ impl<'m> Ekf<'m> {
             let xk = if dz.x == 0.0 && dz.y == 0.0 {
                 Some(t.mean)
             } else {
-                self.mean_of(Relation::Transition, &[a, b, u1, u2], scratch)
+                self.mean_of(
+                    Relation::Transition,
+                    &self.transition_input(st, a, b),
+                    scratch,
+                )
             };
             let Some(xk) = xk else {
                 ok = false;
                 break;
             };
             let xk = xk + w;
-            let x_in = clamp_to(xk, cfg.x_bounds.0, cfg.x_bounds.1);
+            // A point pushed into the box flags it, as a clamped EKF prediction does.
+            let x_in = clamp_flag(xk, cfg.x_bounds, flags);
             let Some(sk) = self.mean_of(Relation::Sensor, &[a, c, x_in], scratch) else {
                 ok = false;
                 break;
@@ -942,6 +962,19 @@ impl<'m> Ekf<'m> {
         }
     }
 
+    /// The transition's input at states `x_{k-1} = x1`, `x_{k-2} = x2`: the inputs and plays
+    /// come from the state (all [`MAX_DIM`] values; the GP reads its first `dim`).
+    fn transition_input(&self, st: &EkfState, x1: f64, x2: f64) -> [f64; MAX_DIM] {
+        let mut input = [0.0; MAX_DIM];
+        for (slot, v) in input
+            .iter_mut()
+            .zip([x1, x2, st.u_last, st.u_prev].into_iter().chain(st.plays))
+        {
+            *slot = v;
+        }
+        input
+    }
+
     /// The GP mean of one relation at `input` (no variance, no gradient), `None` on failure.
     fn mean_of(&self, which: Relation, input: &[f64], scratch: &mut [f64]) -> Option<f64> {
         let gp = match which {
@@ -976,7 +1009,8 @@ impl<'m> Ekf<'m> {
             ),
         };
         let d = gp.dim();
-        // `HbnView::validate` fixed `d` at 4 (transition) or 3 (sensor), the input's length.
+        // `HbnView::validate` fixed `d` at 4 + plays (transition) or 3 (sensor), at most the
+        // input's length.
         let Some(input) = input.get(..d) else {
             *flags |= Flags::MODEL_INVALID;
             return None;

@@ -23,11 +23,15 @@ use crate::blr::{LocalRegression, Neighbourhood, NeighbourhoodParts};
 use crate::ekf::{EkfConfig, HbnView, InitPrior, Mode};
 use crate::gp::{GpParts, GpView, Variance};
 use crate::kernel::{Kernel, KernelSpec, Metric, Profile, at};
+use crate::play::Plays;
 
 /// First value of every layout: `"HBN1"` as little-endian bytes.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"HBN1");
-/// Format version written by [`encode`] and read by [`Tables::model`].
-pub const VERSION: u32 = 2;
+/// Format version written by [`encode`] and read by [`Tables::model`] (3 adds the play
+/// operators after the prior of `x_0`; tables of version 2 are read as having none).
+pub const VERSION: u32 = 3;
+/// Oldest format version [`Tables::model`] reads.
+pub const OLDEST_VERSION: u32 = 2;
 /// Last value of every layout (catches a truncated or misaligned table).
 pub const END: u32 = u32::from_le_bytes(*b"END1");
 /// A `u32` standing for "none" (no mean input, no direction factor).
@@ -161,6 +165,10 @@ pub fn encode<S: TableSink>(
             sink.real(p[0]);
             sink.real(p[1]);
         }
+    }
+    sink.int(count(view.plays.len())?);
+    for &r in view.plays.radii() {
+        sink.real(r);
     }
     sink.int(END);
     Ok(())
@@ -329,7 +337,7 @@ pub fn scratch_len(layout: &[u32]) -> Result<usize, CoreError> {
         keys: &[],
         reals: &[],
     };
-    if r.int()? != MAGIC || r.int()? != VERSION {
+    if r.int()? != MAGIC || !(OLDEST_VERSION..=VERSION).contains(&r.int()?) {
         return Err(CoreError::InvalidSpec(
             "not hbn model tables of this format version",
         ));
@@ -363,7 +371,8 @@ impl<'a> Tables<'a> {
                 "not hbn model tables (the magic number differs)",
             ));
         }
-        if r.int()? != VERSION {
+        let version = r.int()?;
+        if !(OLDEST_VERSION..=VERSION).contains(&version) {
             return Err(CoreError::InvalidSpec(
                 "model tables of another format version: export the model again",
             ));
@@ -441,6 +450,15 @@ impl<'a> Tables<'a> {
         } else {
             None
         };
+        let plays = if version >= 3 {
+            let n = r.size()?;
+            if n > crate::play::MAX_PLAYS {
+                return Err(TRUNCATED);
+            }
+            Plays::new(r.reals(n)?)?
+        } else {
+            Plays::NONE
+        };
         if r.int()? != END || !r.ints.is_empty() || !r.keys.is_empty() || !r.reals.is_empty() {
             return Err(TRUNCATED);
         }
@@ -455,6 +473,7 @@ impl<'a> Tables<'a> {
                 max_neighbours,
             },
             init,
+            plays,
         };
         view.validate()?;
         config.validate()?;

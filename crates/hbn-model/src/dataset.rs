@@ -5,14 +5,18 @@
 //! - sensor set `D_S`: inputs `[x_{k-1}, y_{k-1}, x_k]`, target `y_k`, `k >= 1`... taken from
 //!   `k >= 2` too, so both sets describe the same samples.
 //!
+//! With play operators ([`hbn_core::play`]) the transition's inputs go on with the plays after
+//! `u_{k-1}`, each play started at the trajectory's `u_0`.
+//!
 //! Rows never straddle two trajectories. The direction signs of the advantage kernel
 //! (Eq. 19) are functions of these inputs: `sgn(u_{k-1} - u_{k-2})` for `D_D` (inputs 2, 3) and
 //! `sgn(x_k - x_{k-1})` for `D_S` (inputs 2, 0); see [`TRANSITION_DIRECTION`] and
 //! [`SENSOR_DIRECTION`].
 
 use crate::error::{DataError, Signal};
+use hbn_core::Plays;
 
-/// Inputs of the transition GP.
+/// Inputs of the transition GP without play operators (with them: one more per play).
 pub const TRANSITION_DIM: usize = 4;
 /// Inputs of the sensor GP.
 pub const SENSOR_DIM: usize = 3;
@@ -102,6 +106,22 @@ impl Table {
         t
     }
 
+    /// The table of the first `n` input columns (all of them when `n >= dim`).
+    pub fn first_columns(&self, n: usize) -> Table {
+        if n >= self.dim {
+            return self.clone();
+        }
+        Table {
+            dim: n,
+            inputs: self
+                .inputs
+                .chunks_exact(self.dim.max(1))
+                .flat_map(|row| row.iter().take(n).copied())
+                .collect(),
+            targets: self.targets.clone(),
+        }
+    }
+
     /// Number of rows.
     pub fn len(&self) -> usize {
         self.targets.len()
@@ -121,13 +141,14 @@ pub struct Dataset {
     pub sensor: Table,
 }
 
-/// Builds `D_D` and `D_S` from trajectories, never crossing a boundary.
-pub fn build_dataset(trajectories: &[Sequence<'_>]) -> Result<Dataset, DataError> {
+/// Builds `D_D` (with the values of `plays` after `u_{k-1}` as extra inputs) and `D_S` from
+/// trajectories, never crossing a boundary.
+pub fn build_dataset(trajectories: &[Sequence<'_>], plays: &Plays) -> Result<Dataset, DataError> {
     if trajectories.is_empty() {
         return Err(DataError::NoTrajectories);
     }
     let mut tr = Table {
-        dim: TRANSITION_DIM,
+        dim: TRANSITION_DIM + plays.len(),
         ..Table::default()
     };
     let mut se = Table {
@@ -136,9 +157,14 @@ pub fn build_dataset(trajectories: &[Sequence<'_>]) -> Result<Dataset, DataError
     };
     for (i, t) in trajectories.iter().enumerate() {
         t.validate(i)?;
+        let mut play = plays.start(t.u[0]);
+        plays.advance(&mut play, t.u[0]);
         for k in 2..t.u.len() {
+            // `play` is after `u_{k-2}`; advance it to after `u_{k-1}`.
+            plays.advance(&mut play, t.u[k - 1]);
             tr.inputs
                 .extend([t.x[k - 1], t.x[k - 2], t.u[k - 1], t.u[k - 2]]);
+            tr.inputs.extend(play.iter().take(plays.len()));
             tr.targets.push(t.x[k]);
             se.inputs.extend([t.x[k - 1], t.y[k - 1], t.x[k]]);
             se.targets.push(t.y[k]);
@@ -162,18 +188,21 @@ mod tests {
         let u2 = [5.0, 6.0, 7.0];
         let x2 = [15.0, 16.0, 17.0];
         let y2 = [25.0, 26.0, 27.0];
-        let d = build_dataset(&[
-            Sequence {
-                u: &u1,
-                x: &x1,
-                y: &y1,
-            },
-            Sequence {
-                u: &u2,
-                x: &x2,
-                y: &y2,
-            },
-        ])
+        let d = build_dataset(
+            &[
+                Sequence {
+                    u: &u1,
+                    x: &x1,
+                    y: &y1,
+                },
+                Sequence {
+                    u: &u2,
+                    x: &x2,
+                    y: &y2,
+                },
+            ],
+            &Plays::NONE,
+        )
         .unwrap();
         assert_eq!(d.transition.len(), 3);
         assert_eq!(&d.transition.inputs[..4], &[11.0, 10.0, 1.0, 0.0]);
@@ -185,31 +214,58 @@ mod tests {
     }
 
     #[test]
+    fn plays_extend_the_transition_rows() {
+        // Radius 1: the play starts at u_0 = 0, holds to u = 1, then trails u by 1.
+        let u = [0.0, 1.0, 3.0, 2.5, 0.0];
+        let x = [0.0; 5];
+        let plays = Plays::new(&[1.0]).unwrap();
+        let d = build_dataset(&[Sequence::new(&u, &x, &x)], &plays).unwrap();
+        assert_eq!(d.transition.dim, 5);
+        // Row for x_k holds the play after u_{k-1}: k = 2, 3, 4 -> after 1.0, 3.0, 2.5.
+        let plays_col: Vec<f64> = d.transition.inputs.chunks(5).map(|r| r[4]).collect();
+        assert_eq!(plays_col, vec![0.0, 2.0, 2.0]);
+        assert_eq!(&d.transition.inputs[..4], &[0.0, 0.0, 1.0, 0.0]);
+        let first4 = d.transition.first_columns(4);
+        assert_eq!(first4.dim, 4);
+        assert_eq!(first4.inputs.len(), 12);
+        assert_eq!(&first4.inputs[4..8], &[0.0, 0.0, 3.0, 1.0]);
+    }
+
+    #[test]
     fn bad_trajectories_are_rejected() {
-        assert!(build_dataset(&[]).is_err());
+        assert!(build_dataset(&[], &Plays::NONE).is_err());
         let ok = [0.0, 1.0, 2.0];
         assert!(
-            build_dataset(&[Sequence {
-                u: &ok,
-                x: &ok[..2],
-                y: &ok
-            }])
+            build_dataset(
+                &[Sequence {
+                    u: &ok,
+                    x: &ok[..2],
+                    y: &ok
+                }],
+                &Plays::NONE
+            )
             .is_err()
         );
         assert!(
-            build_dataset(&[Sequence {
-                u: &ok[..2],
-                x: &ok[..2],
-                y: &ok[..2]
-            }])
+            build_dataset(
+                &[Sequence {
+                    u: &ok[..2],
+                    x: &ok[..2],
+                    y: &ok[..2]
+                }],
+                &Plays::NONE
+            )
             .is_err()
         );
         let nan = [0.0, f64::NAN, 2.0];
-        let e = build_dataset(&[Sequence {
-            u: &ok,
-            x: &nan,
-            y: &ok,
-        }])
+        let e = build_dataset(
+            &[Sequence {
+                u: &ok,
+                x: &nan,
+                y: &ok,
+            }],
+            &Plays::NONE,
+        )
         .unwrap_err()
         .to_string();
         assert!(e.contains("x[1]"), "{e}");

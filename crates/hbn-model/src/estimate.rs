@@ -158,10 +158,13 @@ impl HbnModel {
         crate::filter::run(&mut Tracker::new(&ekf), &ekf, u, y)
     }
 
-    /// Open-loop GP simulation: `x_k = mean H_D(x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2})` from the
-    /// training mean, without measurements (the baseline the EKF must beat).
+    /// Open-loop GP simulation: `x_k = mean H_D(x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}, plays)`
+    /// from the training mean, without measurements (the baseline the EKF must beat).
     pub fn simulate_open_loop(&self, u: &[f64]) -> Result<Vec<f64>, ModelError> {
         let view = self.gp_view(crate::GpRole::Transition)?;
+        let plays = self.plays()?;
+        let mut play_states = vec![[0.0; hbn_core::MAX_PLAYS]; u.len()];
+        plays.run(u, &mut play_states);
         let mut scratch = vec![0.0; view.predict_scratch(Want::default())];
         let cfg = self.ekf_config(Mode::Ekf);
         let mut x = Vec::with_capacity(u.len());
@@ -170,7 +173,8 @@ impl HbnModel {
                 x.push(cfg.x0_mean);
                 continue;
             }
-            let input = [x[k - 1], x[k - 2], u[k - 1], u[k - 2]];
+            let mut input = vec![x[k - 1], x[k - 2], u[k - 1], u[k - 2]];
+            input.extend(play_states[k - 1].iter().take(plays.len()));
             let next = match view.predict(&input, Want::default(), &mut scratch) {
                 Ok(p) => p.mean.clamp(cfg.x_bounds.0, cfg.x_bounds.1),
                 Err(_) => x[k - 1],

@@ -69,7 +69,7 @@
 //! ```
 
 use hbn_core::rng::Rng;
-use hbn_core::{GpView, Want};
+use hbn_core::{GpView, MAX_DIM, PlayState, Plays, Want};
 use hbn_gp::{GaussianProcess, Hyperparameters};
 
 use crate::dataset::{Sequence, TRANSITION_DIM, TRANSITION_DIRECTION, Table, build_dataset};
@@ -362,6 +362,18 @@ struct Run {
     u: Vec<f64>,
     x: Vec<f64>,
     y: Vec<f64>,
+    /// The plays after the last input (`None` before the first).
+    play: Option<PlayState>,
+}
+
+impl Run {
+    fn push(&mut self, plays: &Plays, u: f64, x: f64, y: f64) {
+        let st = self.play.get_or_insert(plays.start(u));
+        plays.advance(st, u);
+        self.u.push(u);
+        self.x.push(x);
+        self.y.push(y);
+    }
 }
 
 /// The exploration loop's state: proposes inputs, takes observations, refits (see the
@@ -382,13 +394,21 @@ pub struct Explorer {
     /// The ramp being followed ([`Strategy::Ramps`]).
     ramp: Option<Ramp>,
     warnings: Vec<String>,
+    /// The transition's play operators ([`HbnParams::memory`] of the bounds' range, or those
+    /// of the model an explorer resumes from): the explorer's GP reads the same inputs as the
+    /// model trained from its data.
+    plays: Plays,
 }
 
 impl Explorer {
     /// An explorer with nothing observed yet.
     pub fn new(params: ExploreParams) -> Result<Self, ExploreError> {
         let params = params.check()?;
+        let span = params.u_max - params.u_min;
+        let radii: Vec<f64> = params.model.memory.iter().map(|f| f * span).collect();
+        let plays = Plays::new(&radii).map_err(ModelError::from)?;
         Ok(Self {
+            plays,
             rng: Rng::new(params.seed ^ EXPLORE_SALT),
             params,
             runs: vec![Run::default()],
@@ -414,13 +434,16 @@ impl Explorer {
     ) -> Result<Self, ExploreError> {
         params.model = model.params().clone();
         let mut explorer = Self::new(params)?;
-        build_dataset(history).map_err(ModelError::from)?;
+        explorer.plays = model.plays()?;
+        build_dataset(history, &explorer.plays).map_err(ModelError::from)?;
         explorer.runs = history
             .iter()
-            .map(|s| Run {
-                u: s.u.to_vec(),
-                x: s.x.to_vec(),
-                y: s.y.to_vec(),
+            .map(|s| {
+                let mut run = Run::default();
+                for ((&u, &x), &y) in s.u.iter().zip(s.x).zip(s.y) {
+                    run.push(&explorer.plays, u, x, y);
+                }
+                run
             })
             .collect();
         explorer.observed = explorer.runs.iter().map(|r| r.u.len()).sum();
@@ -579,28 +602,30 @@ impl Explorer {
         random
     }
 
-    /// Where every candidate starts: the transition GP's predictor and the states
+    /// Where every candidate starts: the transition GP's predictor, the states
     /// `[x̂_t, x_{t-1}]` (`x̂_t`, the state of the sample at which the proposal is applied, from
-    /// the GP's mean); `None` without a GP or two samples in the current run.
-    fn start(&self, u_prev: f64) -> Option<(Predictor<'_>, [f64; 2])> {
+    /// the GP's mean) and the plays after the last input `u_prev`; `None` without a GP or two
+    /// samples in the current run.
+    fn start(&self, u_prev: f64) -> Option<(Predictor<'_>, [f64; 2], PlayState)> {
         let gp = self.transition.as_ref()?;
         let run = self.runs.last()?;
         let n = run.u.len();
         if n < 2 {
             return None;
         }
+        let play = run.play?;
         let mean_input = self.params.model.increments.mean_input(GpRole::Transition);
-        let mut gp = Predictor::new(gp, mean_input)?;
+        let mut gp = Predictor::new(gp, mean_input, self.plays.len())?;
         let (x1, x2, u2) = (run.x[n - 1], run.x[n - 2], run.u[n - 2]);
-        let x_now = gp.state([x1, x2, u_prev, u2])?;
-        Some((gp, [x_now, x1]))
+        let x_now = gp.state(transition_input(x1, x2, u_prev, u2, &play))?;
+        Some((gp, [x_now, x1], play))
     }
 
     /// The ramp (target among `candidates` levels evenly spread over the bounds, slope among
     /// [`RAMP_SLOPES`] `x eta`) with the largest mean latent variance of the transition GP
     /// over its first `horizon` samples; `None` without a GP or history.
     fn seek_ramp(&self, u_prev: f64, eta: f64) -> Option<Ramp> {
-        let (mut gp, states) = self.start(u_prev)?;
+        let (mut gp, states, play) = self.start(u_prev)?;
         let p = &*self.params;
         let c = p.candidates;
         let mut best: Option<(f64, Ramp)> = None;
@@ -616,7 +641,8 @@ impl Explorer {
                 let len = steps.min(p.horizon);
                 let path = |j: usize| u_prev + dist.signum() * (j as f64 * slope).min(dist.abs());
                 let every = len.div_ceil(RAMP_POINTS);
-                let Some(v) = Self::path_variance(&mut gp, states, u_prev, len, every, path) else {
+                let from = (states, u_prev, play);
+                let Some(v) = self.path_variance(&mut gp, from, len, every, path) else {
                     continue;
                 };
                 if best.is_none_or(|(b, _)| v > b) {
@@ -632,7 +658,7 @@ impl Explorer {
     /// transition GP (states along the ramp rolled forward by the GP mean); `None` without a
     /// GP or history.
     fn seek(&self, u_prev: f64, eta: f64) -> Option<f64> {
-        let (mut gp, states) = self.start(u_prev)?;
+        let (mut gp, states, play) = self.start(u_prev)?;
         let p = &*self.params;
         let e_lo = (-eta).max(p.u_min - u_prev);
         let e_hi = eta.min(p.u_max - u_prev);
@@ -642,7 +668,7 @@ impl Explorer {
             let eps = e_lo + (e_hi - e_lo) * i as f64 / (c - 1) as f64;
             let ramp = |j: usize| (u_prev + j as f64 * eps).clamp(p.u_min, p.u_max);
             let Some(variance) =
-                Self::path_variance(&mut gp, states, u_prev, p.horizon, p.horizon, ramp)
+                self.path_variance(&mut gp, (states, u_prev, play), p.horizon, p.horizon, ramp)
             else {
                 continue;
             };
@@ -659,22 +685,23 @@ impl Explorer {
     }
 
     /// Mean latent variance of the transition GP along a path of inputs `path(j)`,
-    /// `j = 1..=len`, starting from the states `[x̂_t, x_{t-1}]` and the last input `u_prev`
-    /// (states rolled forward by the GP mean), sampled every `every` samples and at the end.
+    /// `j = 1..=len`, starting (`from`) from the states `[x̂_t, x_{t-1}]`, the last input
+    /// `u_prev` and the plays after it (states rolled forward by the GP mean, plays by the
+    /// path), sampled every `every` samples and at the end.
     fn path_variance(
+        &self,
         gp: &mut Predictor<'_>,
-        states: [f64; 2],
-        u_prev: f64,
+        from: ([f64; 2], f64, PlayState),
         len: usize,
         every: usize,
         path: impl Fn(usize) -> f64,
     ) -> Option<f64> {
-        let [mut x_a, mut x_b] = states;
-        let mut u_b = u_prev;
+        let ([mut x_a, mut x_b], mut u_b, mut play) = from;
         let (mut sum, mut count) = (0.0, 0usize);
         for j in 1..=len {
             let u_a = path(j);
-            let input = [x_a, x_b, u_a, u_b];
+            self.plays.advance(&mut play, u_a);
+            let input = transition_input(x_a, x_b, u_a, u_b, &play);
             if j == len || j % every.max(1) == 0 {
                 sum += gp.variance(input)?;
                 count += 1;
@@ -714,9 +741,7 @@ impl Explorer {
             self.runs.push(Run::default());
         }
         if let Some(run) = self.runs.last_mut() {
-            run.u.push(u);
-            run.x.push(x);
-            run.y.push(y);
+            run.push(&self.plays, u, x, y);
         }
         self.observed += 1;
     }
@@ -763,7 +788,7 @@ impl Explorer {
         let m = &self.params.model;
         let spec = m
             .transition_kernel
-            .spec(TRANSITION_DIM, TRANSITION_DIRECTION);
+            .spec(TRANSITION_DIM + self.plays.len(), TRANSITION_DIRECTION);
         let mut gp_params = m.gp_params(spec);
         let warm = init.is_some();
         gp_params.init = init;
@@ -792,7 +817,7 @@ impl Explorer {
             .filter(|r| r.u.len() >= crate::MIN_SAMPLES)
             .map(|r| Sequence::new(&r.u, &r.x, &r.y))
             .collect();
-        let data = build_dataset(&seqs)?;
+        let data = build_dataset(&seqs, &self.plays)?;
         Ok(data
             .transition
             .increments(self.params.model.increments.mean_input(GpRole::Transition)))
@@ -852,12 +877,19 @@ impl Explorer {
             return last_x;
         };
         let n = run.u.len();
-        if n < 2 {
+        let (true, Some(play)) = (n >= 2, run.play) else {
             return last_x;
-        }
+        };
         let mean_input = self.params.model.increments.mean_input(GpRole::Transition);
-        Predictor::new(gp, mean_input)
-            .and_then(|mut p| p.state([run.x[n - 1], run.x[n - 2], run.u[n - 1], run.u[n - 2]]))
+        let input = transition_input(
+            run.x[n - 1],
+            run.x[n - 2],
+            run.u[n - 1],
+            run.u[n - 2],
+            &play,
+        );
+        Predictor::new(gp, mean_input, self.plays.len())
+            .and_then(|mut p| p.state(input))
             .unwrap_or(last_x)
     }
 }
@@ -869,24 +901,37 @@ struct Predictor<'a> {
     scratch: Vec<f64>,
     /// The input added to the GP's mean when it learns increments.
     mean_input: Option<usize>,
+    /// Inputs the GP reads (4 plus the plays).
+    dim: usize,
+}
+
+/// A transition input `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}, plays after u_{k-1}]` (every play
+/// slot; [`Predictor`] reads the ones its GP has).
+fn transition_input(x1: f64, x2: f64, u1: f64, u2: f64, play: &PlayState) -> [f64; MAX_DIM] {
+    let mut input = [0.0; MAX_DIM];
+    for (slot, v) in input.iter_mut().zip([x1, x2, u1, u2].iter().chain(play)) {
+        *slot = *v;
+    }
+    input
 }
 
 impl<'a> Predictor<'a> {
-    fn new(gp: &'a GaussianProcess, mean_input: Option<usize>) -> Option<Self> {
+    fn new(gp: &'a GaussianProcess, mean_input: Option<usize>, plays: usize) -> Option<Self> {
         let view = gp.view().ok()?;
         let scratch = vec![0.0; view.predict_scratch(Want::VARIANCE)];
         Some(Self {
             view,
             scratch,
             mean_input,
+            dim: TRANSITION_DIM + plays,
         })
     }
 
     /// The mean state for one transition input (levels, whatever the GP learns).
-    fn state(&mut self, input: [f64; TRANSITION_DIM]) -> Option<f64> {
+    fn state(&mut self, input: [f64; MAX_DIM]) -> Option<f64> {
         let pred = self
             .view
-            .predict(&input, Want::MEAN, &mut self.scratch)
+            .predict(input.get(..self.dim)?, Want::MEAN, &mut self.scratch)
             .ok()?;
         let base = self
             .mean_input
@@ -897,10 +942,10 @@ impl<'a> Predictor<'a> {
     }
 
     /// The latent variance at one transition input.
-    fn variance(&mut self, input: [f64; TRANSITION_DIM]) -> Option<f64> {
+    fn variance(&mut self, input: [f64; MAX_DIM]) -> Option<f64> {
         let pred = self
             .view
-            .predict(&input, Want::VARIANCE, &mut self.scratch)
+            .predict(input.get(..self.dim)?, Want::VARIANCE, &mut self.scratch)
             .ok()?;
         pred.variance.is_finite().then_some(pred.variance)
     }

@@ -8,7 +8,7 @@ use crate::error::ModelFileProblem;
 use crate::local::LocalData;
 use crate::params::{CheckedHbnParams, HbnParams, Signals};
 use crate::tuning::FilterTuning;
-use hbn_core::{EkfConfig, GpView, HbnView, InitPrior, Mode};
+use hbn_core::{EkfConfig, GpView, HbnView, InitPrior, Mode, Plays};
 use hbn_gp::{FitProgress, GaussianProcess, Hyperparameters, Termination};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -152,6 +152,11 @@ pub struct HbnModel {
     /// Noise scales per mode and the default mode, learned on held-out data.
     #[serde(default)]
     tuning: FilterTuning,
+    /// Radii of the transition's play operators in the input's units
+    /// ([`HbnParams::memory`] times the training input's range; empty in model files from
+    /// before play operators existed).
+    #[serde(default)]
+    play_radii: Vec<f64>,
     summary: TrainingSummary,
 }
 
@@ -299,7 +304,8 @@ impl HbnModel {
         params: &CheckedHbnParams,
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
-        let mut model = Self::fit_gps(trajectories, params, None, observe)?;
+        let plays = Self::plays_for(trajectories, params)?;
+        let mut model = Self::fit_gps(trajectories, params, &plays, None, observe)?;
         match crate::tuning::split(trajectories, params.validation) {
             Some(split) => {
                 // Per fold, the GPs of its training part with the hyperparameters learned on
@@ -312,6 +318,7 @@ impl HbnModel {
                         let model = Self::fit_gps(
                             &fold.train,
                             params,
+                            &plays,
                             Some((&model.transition, &model.sensor)),
                             &mut |_, _| {},
                         )?;
@@ -344,19 +351,37 @@ impl HbnModel {
         Ok(model)
     }
 
+    /// The play operators of `params.memory` on the input range of `trajectories` (all of
+    /// them, so that the folds of filter-aware training share the radii).
+    fn plays_for(
+        trajectories: &[Sequence<'_>],
+        params: &CheckedHbnParams,
+    ) -> Result<Plays, ModelError> {
+        if params.memory.is_empty() {
+            return Ok(Plays::NONE);
+        }
+        for (i, t) in trajectories.iter().enumerate() {
+            t.validate(i)?;
+        }
+        let span = SignalStats::of(trajectories.iter().flat_map(|t| t.u.iter())).span();
+        let radii: Vec<f64> = params.memory.iter().map(|f| f * span).collect();
+        Ok(Plays::new(&radii)?)
+    }
+
     /// Fits both GPs and the local data on `trajectories`; with `fixed`, every GP keeps the
     /// hyperparameters of the given one (no optimisation: a refit on more data).
     fn fit_gps(
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
+        plays: &Plays,
         fixed: Option<(&GaussianProcess, &GaussianProcess)>,
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
         let t0 = Instant::now();
-        let data = build_dataset(trajectories)?;
+        let data = build_dataset(trajectories, plays)?;
         let tr_spec = params
             .transition_kernel
-            .spec(TRANSITION_DIM, TRANSITION_DIRECTION);
+            .spec(TRANSITION_DIM + plays.len(), TRANSITION_DIRECTION);
         let se_spec = params.sensor_kernel.spec(SENSOR_DIM, SENSOR_DIRECTION);
         let mut starts = Vec::new();
         let mut fit_gp = |which: GpRole, spec, table: &crate::dataset::Table| {
@@ -400,7 +425,11 @@ impl HbnModel {
                 .sensor
                 .increments(params.increments.mean_input(GpRole::Sensor)),
         )?;
-        let transition_local = LocalData::build(&data.transition, params.blr_window)?;
+        // The local regression of the transition reads the thesis' four inputs.
+        let transition_local = LocalData::build(
+            &data.transition.first_columns(TRANSITION_DIM),
+            params.blr_window,
+        )?;
         let sensor_local = LocalData::build(&data.sensor, params.blr_window)?;
         let cat = |f: fn(&Sequence<'_>) -> Vec<f64>| {
             trajectories.iter().flat_map(f).collect::<Vec<f64>>()
@@ -433,6 +462,7 @@ impl HbnModel {
             y_stats: SignalStats::of(y_all.iter()),
             init_pairs,
             tuning: FilterTuning::default(),
+            play_radii: plays.radii().to_vec(),
             summary: TrainingSummary {
                 trajectories: trajectories.len(),
                 rows: data.transition.len(),
@@ -472,7 +502,13 @@ impl HbnModel {
             sensor_local: Some(self.sensor_local.view()?),
             blr: self.params.blr,
             init: self.init_prior()?,
+            plays: self.plays()?,
         })
+    }
+
+    /// The transition's play operators ([`HbnParams::memory`] in the input's units).
+    pub fn plays(&self) -> Result<Plays, ModelError> {
+        Ok(Plays::new(&self.play_radii)?)
     }
 
     /// The borrowed predictor of one relation, in the signal's own units (with the previous

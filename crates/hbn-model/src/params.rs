@@ -182,6 +182,10 @@ impl Default for Signals {
 /// 10 but up to 2.8x less accurate at gains 0 and 1 (`docs/results.md`, "Sparse or exact").
 pub const DEFAULT_INDUCING: usize = 64;
 
+/// Default [`HbnParams::memory`]: two play operators, of 5% and 20% of the input's range
+/// (`docs/memory.md` has the measurements).
+pub const DEFAULT_MEMORY: [f64; 2] = [0.05, 0.2];
+
 /// What the GPs learn: the signal itself, or its change from the previous sample.
 ///
 /// With increments, the transition GP is fitted to `x_k - x_{k-1}` and predicts
@@ -288,6 +292,13 @@ pub struct HbnParams {
     /// this option read as [`Increments::None`].
     #[serde(default)]
     pub increments: Increments,
+    /// Play operators that give the transition GP the input's long memory
+    /// ([`hbn_core::play`]): their radii as fractions of the training input's range
+    /// (`max u - min u`), each in `(0, 1]`, at most [`hbn_core::MAX_PLAYS`]. Empty: the
+    /// thesis' transition on `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}]` alone. Model files written
+    /// before this option read as empty.
+    #[serde(default)]
+    pub memory: Vec<f64>,
     /// Alternative kernels and inducing settings that filter-aware training chooses among on
     /// the held-out data ([`Selection`]); empty (the default): this configuration only. Model
     /// files hold the configuration that was chosen, with this list empty.
@@ -367,6 +378,7 @@ impl Default for HbnParams {
             blr: LocalRegression::default(),
             validation: 0.25,
             increments: Increments::None,
+            memory: DEFAULT_MEMORY.to_vec(),
             select: Selection::default(),
             signals: Signals::default(),
         }
@@ -408,11 +420,13 @@ pub enum Param {
     Blr,
     /// [`HbnParams::validation`].
     Validation,
+    /// [`HbnParams::memory`] (a list of radii, possibly empty).
+    Memory,
 }
 
 impl Param {
     /// Every parameter, in the order front ends list them.
-    pub const ALL: [Param; 15] = [
+    pub const ALL: [Param; 16] = [
         Param::Rate,
         Param::Kernel,
         Param::TransitionKernel,
@@ -428,6 +442,7 @@ impl Param {
         Param::BlrWindow,
         Param::Blr,
         Param::Validation,
+        Param::Memory,
     ];
 
     /// The Rust name (the field of [`HbnParams`]; `kernel` for the shorthand).
@@ -448,6 +463,7 @@ impl Param {
             Param::BlrWindow => "blr_window",
             Param::Blr => "blr",
             Param::Validation => "validation",
+            Param::Memory => "memory",
         }
     }
 }
@@ -667,6 +683,12 @@ impl HbnParams {
         }
     }
 
+    /// Inputs of the transition GP: the thesis' four plus one per play operator
+    /// ([`HbnParams::memory`]).
+    pub fn transition_dim(&self) -> usize {
+        TRANSITION_DIM + self.memory.len()
+    }
+
     /// Checks every field once; training then trusts them. Each error names the [`Param`].
     pub fn check(self) -> Result<CheckedHbnParams, ConfigError> {
         self.check_ref()?;
@@ -715,6 +737,26 @@ impl HbnParams {
                 },
             ));
         }
+        if self.memory.len() > hbn_core::MAX_PLAYS {
+            return Err(ConfigError::new(
+                Param::Memory,
+                Problem::Invalid {
+                    reason: "at most 4 play operators",
+                },
+            ));
+        }
+        for &r in &self.memory {
+            if !(r.is_finite() && r > 0.0 && r <= 1.0) {
+                return Err(ConfigError::new(
+                    Param::Memory,
+                    Problem::OutOfRange {
+                        value: r,
+                        min: 0.0,
+                        max: 1.0,
+                    },
+                ));
+            }
+        }
         at_least(Param::Starts, self.n_starts as u64, 1)?;
         at_least(Param::MaxIters, self.max_iters, 1)?;
         positive(Param::NoiseFloor, self.noise_floor)?;
@@ -750,7 +792,7 @@ impl HbnParams {
             (
                 Param::TransitionKernel,
                 self.transition_kernel,
-                TRANSITION_DIM,
+                self.transition_dim(),
                 TRANSITION_DIRECTION,
             ),
             (
@@ -763,7 +805,12 @@ impl HbnParams {
         .into_iter()
         .chain(self.select.kernels.iter().flat_map(|&k| {
             [
-                (Param::Kernel, k, TRANSITION_DIM, TRANSITION_DIRECTION),
+                (
+                    Param::Kernel,
+                    k,
+                    self.transition_dim(),
+                    TRANSITION_DIRECTION,
+                ),
                 (Param::Kernel, k, SENSOR_DIM, SENSOR_DIRECTION),
             ]
         })) {
@@ -895,6 +942,28 @@ impl HbnParams {
             (Param::BlrWindow, ParamValue::Real(v)) => self.blr_window = v,
             (Param::Validation, ParamValue::Real(v)) => self.validation = v,
             (Param::Validation, ParamValue::Int(v)) => self.validation = v as f64,
+            (Param::Memory, ParamValue::List(v)) => {
+                self.memory = v
+                    .into_iter()
+                    .map(|r| match r {
+                        ParamValue::Real(r) => Ok(r),
+                        ParamValue::Int(r) => Ok(r as f64),
+                        _ => Err(ConfigError::new(
+                            param,
+                            Problem::WrongType {
+                                expected: "a list of numbers (fractions of the input's range)",
+                            },
+                        )),
+                    })
+                    .collect::<Result<_, _>>()?;
+            }
+            (Param::Memory, ParamValue::Real(r)) => self.memory = vec![r],
+            (Param::Memory, ParamValue::Text(t)) if t.trim().eq_ignore_ascii_case("none") => {
+                self.memory.clear();
+            }
+            (Param::Memory, _) => {
+                return wrong("a list of numbers (fractions of the input's range), or none");
+            }
             (Param::Rate | Param::NoiseFloor | Param::BlrWindow | Param::Validation, _) => {
                 return wrong("a number");
             }
@@ -943,6 +1012,9 @@ impl HbnParams {
             Param::NoiseFloor => ParamValue::Real(self.noise_floor),
             Param::BlrWindow => ParamValue::Real(self.blr_window),
             Param::Validation => ParamValue::Real(self.validation),
+            Param::Memory => {
+                ParamValue::List(self.memory.iter().map(|&r| ParamValue::Real(r)).collect())
+            }
             Param::Blr => return None,
         })
     }
@@ -973,7 +1045,10 @@ mod tests {
     #[test]
     fn every_check_names_its_parameter() {
         type Spoil = fn(&mut HbnParams);
-        let bad: [(Param, Spoil); 12] = [
+        let bad: [(Param, Spoil); 15] = [
+            (Param::Memory, |p| p.memory = vec![0.0]),
+            (Param::Memory, |p| p.memory = vec![1.5]),
+            (Param::Memory, |p| p.memory = vec![0.1; 5]),
             (Param::Rate, |p| p.rate_hz = 0.0),
             (Param::Rate, |p| p.rate_hz = f64::NAN),
             (Param::MaxPoints, |p| p.max_points = 1),

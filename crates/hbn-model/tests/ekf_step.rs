@@ -63,9 +63,10 @@ fn variance(gp: &GpView<'_>, x: &[f64]) -> f64 {
     gp.predict(x, Want::EKF, &mut scratch).unwrap().variance
 }
 
-/// The HBN's noise-free prediction `z_k = g(z_{k-1})` for known inputs (module docs of ekf.rs).
-fn g(view: &HbnView<'_>, z: &Vector3<f64>, u1: f64, u2: f64) -> Vector3<f64> {
-    let xk = mean(&view.transition, &[z.x, z.y, u1, u2]);
+/// The HBN's noise-free prediction `z_k = g(z_{k-1})` for known inputs and plays (module
+/// docs of ekf.rs).
+fn g(view: &HbnView<'_>, z: &Vector3<f64>, u1: f64, u2: f64, plays: &[f64]) -> Vector3<f64> {
+    let xk = mean(&view.transition, &[&[z.x, z.y, u1, u2][..], plays].concat());
     let sk = mean(&view.sensor, &[z.x, z.z, xk]);
     Vector3::new(xk, z.x, sk)
 }
@@ -98,11 +99,22 @@ fn linearisation_matches_finite_differences_of_the_gps() {
     let st = state.unwrap();
     let view = f.model.view().unwrap();
     let (u1, u2) = (st.u_last, st.u_prev);
+    // The default model reads two play operators; the filter carries their values after the
+    // last input, as a run of the operators over the inputs so far gives them.
+    assert_eq!(view.plays.len(), 2);
+    let mut runs = vec![[0.0; hbn_core::MAX_PLAYS]; 150];
+    view.plays.run(&f.test.u[..150], &mut runs);
+    let plays = &runs[149][..2];
+    assert_eq!(&st.plays[..2], plays);
+    assert!(
+        plays.iter().any(|p| (p - u1).abs() > 1e-9),
+        "plays equal the input"
+    );
     let (next, out) = predict_only(&ekf, &mut scratch, st, f.test.u[150]);
     assert!(!out.flags.has(Flags::JACOBIAN_CLAMPED) && !out.flags.has(Flags::COVARIANCE_CLAMPED));
 
     // The mean is g(z).
-    let z_pred = g(&view, &st.z, u1, u2);
+    let z_pred = g(&view, &st.z, u1, u2, plays);
     for i in 0..3 {
         assert!(
             rel(next.z[i], z_pred[i]) < 1e-12,
@@ -121,7 +133,7 @@ fn linearisation_matches_finite_differences_of_the_gps() {
         let mut zm = st.z;
         zp[j] += h;
         zm[j] -= h;
-        let col = (g(&view, &zp, u1, u2) - g(&view, &zm, u1, u2)) / (2.0 * h);
+        let col = (g(&view, &zp, u1, u2, plays) - g(&view, &zm, u1, u2, plays)) / (2.0 * h);
         fd.set_column(j, &col);
     }
     let scale = fd.abs().max().max(1.0);
@@ -138,7 +150,7 @@ fn linearisation_matches_finite_differences_of_the_gps() {
     // Q: q_x from the transition GP's variance and noise, q_s from the sensor GP's variance,
     // entering through G = [1, 0, dH_S/dx_k].
     let c = ekf.config();
-    let a_in = [st.z.x, st.z.y, u1, u2];
+    let a_in = [&[st.z.x, st.z.y, u1, u2][..], plays].concat();
     let q_x = (view.transition.noise_variance() + variance(&view.transition, &a_in))
         .max(c.qx_model_floor)
         .max(c.q_floor);
@@ -612,7 +624,10 @@ fn increments_models_add_the_previous_sample_back() {
     );
     let mut scratch = vec![0.0; 4096];
     for (role, x) in [
-        (hbn_model::GpRole::Transition, vec![0.3, 0.25, 0.5, 0.45]),
+        (
+            hbn_model::GpRole::Transition,
+            vec![0.3, 0.25, 0.5, 0.45, 0.48, 0.4],
+        ),
         (hbn_model::GpRole::Sensor, vec![0.3, 0.4, 0.32]),
     ] {
         let raw = f.model.gp(role).view().unwrap();
@@ -696,21 +711,36 @@ fn a_state_pinned_at_its_bound_keeps_its_uncertainty() {
     let f = fixture();
     let (_, mut scratch, state) = warm(f, cfg(Mode::Ekf), 150);
     let st = state.unwrap();
-    // A box whose top lies well below the predicted state.
+    // A box whose top lies well below the predicted state: the highest state (stepping down
+    // from the estimate) from which the GP predicts a rise of at least 10% of the range.
     let sx = f.model.stats().1.span();
-    let top = st.z.x - 0.2 * sx;
+    let plain = Ekf::new(f.model.view().unwrap(), cfg(Mode::Ekf)).unwrap();
+    let pinned = |top: f64| {
+        let mut st = st;
+        st.z.x = top;
+        st.z.y = top;
+        st
+    };
+    let top = (2..40)
+        .map(|k| st.z.x - 0.05 * k as f64 * sx)
+        .find(|&top| {
+            let (e, _) = predict_only(&plain, &mut scratch, pinned(top), f.test.u[150]);
+            e.z.x > top + 0.1 * sx
+        })
+        .expect("no state from which the GP predicts a rise");
     let boxed = |mode| EkfConfig {
         x_bounds: (top - sx, top),
         ..cfg(mode)
     };
-    let mut st = st;
-    st.z.x = top;
-    st.z.y = top;
+    let st = pinned(top);
     let ekf = Ekf::new(f.model.view().unwrap(), boxed(Mode::Ekf)).unwrap();
     let ukf = Ekf::new(f.model.view().unwrap(), boxed(Mode::Ukf)).unwrap();
     let (e, e_out) = predict_only(&ekf, &mut scratch, st, f.test.u[150]);
     let (s, s_out) = predict_only(&ukf, &mut scratch, st, f.test.u[150]);
-    assert!(e_out.flags.has(Flags::STATE_CLAMPED) && s_out.flags.has(Flags::STATE_CLAMPED));
+    assert!(
+        e_out.flags.has(Flags::STATE_CLAMPED) && s_out.flags.has(Flags::STATE_CLAMPED),
+        "{e_out:?} {s_out:?} top {top} e {e:?} s {s:?}"
+    );
     let p_min = boxed(Mode::Ukf).p_min;
     assert!(
         s.p[(0, 0)] > 0.25 * e.p[(0, 0)] && s.p[(0, 0)] > 1e3 * p_min,

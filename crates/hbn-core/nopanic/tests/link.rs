@@ -5,7 +5,7 @@
 use hbn_core::blr::{LocalRegression, Neighbourhood, NeighbourhoodParts};
 use hbn_core::gp::{GpParts, GpView, Variance, Want};
 use hbn_core::kernel::{Kernel, KernelSpec};
-use hbn_core::{EkfConfig, Estimator, HbnView, InitPrior, Mode};
+use hbn_core::{EkfConfig, Estimator, HbnView, InitPrior, Mode, Plays};
 
 /// A 2-point GP on `d` inputs with an identity Cholesky factor.
 struct Gp {
@@ -112,18 +112,21 @@ fn config(mode: Mode) -> EkfConfig {
 
 #[test]
 fn step_links_without_panic_paths_and_stays_finite() {
-    let (tr, se) = (Gp::new(4), Gp::new(3));
+    // The sparse views carry two play operators (the transition then reads 6 inputs).
+    let (tr, tr_plays, se) = (Gp::new(4), Gp::new(6), Gp::new(3));
+    let plays = Plays::new(&[0.05, 0.3]).unwrap();
     let (tl, sl) = (Local::new(4), Local::new(3));
     static ZERO: [f64; 4] = [0.0; 4];
     let pairs = [[0.0, 0.1], [0.5, 0.4], [0.5, 0.6], [1.0, 0.9]];
     let init = InitPrior::new(&pairs, 2, 1e-6).unwrap();
     let views = [false, true].map(|sparse| HbnView {
-        transition: tr.view(sparse),
+        transition: if sparse { tr_plays.view(true) } else { tr.view(false) },
         sensor: se.view(sparse),
         transition_local: Some(tl.view(4, &ZERO)),
         sensor_local: Some(sl.view(3, &ZERO)),
         blr: LocalRegression::default(),
         init: Some(init),
+        plays: if sparse { plays } else { Plays::NONE },
     });
     for (view, mode) in views.iter().flat_map(|v| Mode::ALL.map(|m| (*v, m))) {
         let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
