@@ -544,3 +544,33 @@ fn model_selection_lists_print_their_table() {
     let text = e.expect("unknown kernel");
     assert!(text.contains("--kernel") && text.contains("rbf"), "{text}");
 }
+
+#[test]
+fn memory_flag_sets_the_play_operators_and_names_itself_when_wrong() {
+    let (_dir, log, m) = small_model();
+    let dir = tempfile::tempdir().unwrap();
+    let m2 = dir.path().join("m2.hbn").to_string_lossy().into_owned();
+    let inspect_memory = |model: &str| {
+        let (e, out) = hbn(&["inspect", model, "--json"]);
+        assert!(e.is_none(), "{e:?}");
+        let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+        assert_eq!(
+            v["memory"]["radii"].as_array().map(|a| a.len()),
+            v["memory"]["fractions"].as_array().map(|a| a.len())
+        );
+        v["memory"]["fractions"].clone()
+    };
+    // The default model reads the default play operators.
+    assert_eq!(inspect_memory(&m), serde_json::json!([0.05, 0.2]));
+    let (e, _) = train_small(&log, &m2, &["--memory", "none"]);
+    assert!(e.is_none(), "{e:?}");
+    assert_eq!(inspect_memory(&m2), serde_json::json!([]));
+    let (e, _) = train_small(&log, &m2, &["--memory", "0.1,0.3,0.5"]);
+    assert!(e.is_none(), "{e:?}");
+    assert_eq!(inspect_memory(&m2), serde_json::json!([0.1, 0.3, 0.5]));
+    for bad in ["0", "1.5", "0.1,x", "0.1,0.2,0.3,0.4,0.5"] {
+        let (e, _) = train_small(&log, &m2, &["--memory", bad]);
+        let text = e.unwrap_or_else(|| panic!("--memory {bad} accepted"));
+        assert!(text.contains("--memory"), "{bad}: {text}");
+    }
+}

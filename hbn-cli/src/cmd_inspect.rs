@@ -16,12 +16,23 @@ pub fn input_names(model: &HbnModel, role: GpRole) -> Vec<String> {
     let s = model.signals();
     let (u, x, y) = (&s.input.name, &s.state.name, &s.output.name);
     match role {
-        GpRole::Transition => vec![
-            format!("{x}[k-1]"),
-            format!("{x}[k-2]"),
-            format!("{u}[k-1]"),
-            format!("{u}[k-2]"),
-        ],
+        GpRole::Transition => {
+            let mut names = vec![
+                format!("{x}[k-1]"),
+                format!("{x}[k-2]"),
+                format!("{u}[k-1]"),
+                format!("{u}[k-2]"),
+            ];
+            // One play operator per `--memory` radius, after u[k-1].
+            names.extend(
+                model
+                    .params()
+                    .memory
+                    .iter()
+                    .map(|f| format!("play({u}, {f})[k-1]")),
+            );
+            names
+        }
         GpRole::Sensor => vec![format!("{x}[k-1]"), format!("{y}[k-1]"), format!("{x}[k]")],
     }
 }
@@ -112,6 +123,10 @@ pub fn model_json(model: &HbnModel) -> Value {
     json!({
         "signals": model.signals(),
         "rate_hz": model.rate_hz(),
+        "memory": {
+            "fractions": p.memory,
+            "radii": model.plays().map(|pl| pl.radii().to_vec()).unwrap_or_default(),
+        },
         "training_ranges": {"u": us, "x": xs, "y": ys},
         "transition": gp_json(
             model.transition(),

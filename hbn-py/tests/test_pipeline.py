@@ -141,7 +141,26 @@ BAD_PARAMS = [
     ("subset", "all"),
     ("seed", -1),
     ("normalize", "yes"),
+    ("memory", [0.0]),
+    ("memory", [1.5]),
+    ("memory", [0.1] * 5),
+    ("memory", "lots"),
 ]
+
+
+def test_memory_sets_the_play_operators():
+    d = hbn.simulate("preisach", 300, seed=1, noise_gain=1.0)
+    fast = dict(max_points=80, n_restarts=1, max_iter=30, validation=0.0)
+    default = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], **fast)
+    assert default.params["memory"] == hbn.default_params()["memory"] == [0.05, 0.2]
+    plain = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], memory=[], **fast)
+    assert plain.params["memory"] == []
+    one = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], memory=0.3, **fast)
+    assert one.params["memory"] == [0.3]
+    te = hbn.simulate("preisach", 200, seed=2, noise_gain=1.0)
+    a, _ = default.estimate(te["u"], te["y"])
+    b, _ = plain.estimate(te["u"], te["y"])
+    assert not np.array_equal(a, b)
 
 
 @pytest.mark.parametrize("keyword,value", BAD_PARAMS)

@@ -612,7 +612,10 @@ class HysteresisModel:
     fraction of each coordinate's range), ``validation`` (fraction of every run held out at a
     time to learn the filter's noise scales and default mode, by blocked cross-validation: 0.25
     holds out each quarter of every run in turn; 0 turns this filter-aware training off; see
-    :attr:`tuning`). They are the flags of ``hbn train``. A bad value
+    :attr:`tuning`), ``memory`` (the input's long memory: radii of play operators whose outputs
+    the transition GP reads besides ``u_{k-1}`` and ``u_{k-2}``, as fractions of the training
+    input's range, at most 4; ``[]`` for the thesis' four inputs; default ``[0.05, 0.2]``, see
+    ``docs/memory.md``). They are the flags of ``hbn train``. A bad value
     raises :class:`ConfigError` whose ``keyword`` names it.
 
     Model selection: ``kernel`` and ``n_inducing`` also take a list (``kernel=["matern52",
