@@ -1,5 +1,6 @@
 //! One estimator step, variances included, in both modes: sparse GPs with 64 and 128 inducing
-//! points (the default kind) and exact GPs with 500 and 150 support points.
+//! points and exact GPs with 500 and 150 support points, all with the default play operators
+//! (`memory`), and the m = 64 model without them (`sparse_m64_no_memory`).
 //!
 //! `cargo bench --bench ekf`. The numpy comparison is `python3 benches/numpy_filter.py`.
 
@@ -22,16 +23,19 @@ fn bench_step(c: &mut Criterion) {
     let runs = training_set(system, 1.0, 1, &cfg).unwrap();
     let seqs = sequences(&runs);
     let test = test_trajectory(system, 1.0, 9, &cfg).unwrap();
+    let memory = HbnParams::default().memory;
     let cases = [
-        ("sparse_m64", Some(64usize), 500usize),
-        ("sparse_m128", Some(128), 500),
-        ("exact_n500", None, 500),
-        ("exact_n150", None, 150),
+        ("sparse_m64", Some(64usize), 500usize, memory.clone()),
+        ("sparse_m64_no_memory", Some(64), 500, Vec::new()),
+        ("sparse_m128", Some(128), 500, memory.clone()),
+        ("exact_n500", None, 500, memory.clone()),
+        ("exact_n150", None, 150, memory),
     ];
-    for (label, n_inducing, max_points) in cases {
+    for (label, n_inducing, max_points, memory) in cases {
         let params = HbnParams {
             n_inducing,
             max_points,
+            memory,
             n_starts: 1,
             max_iters: 50,
             ..HbnParams::default()
