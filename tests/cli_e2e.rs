@@ -111,7 +111,14 @@ fn simulate_train_inspect_estimate_eval() {
         .lines()
         .find(|l| l.trim_start().starts_with("length scales"))
         .expect("length scales line");
-    for name in ["x[k-1] ", "x[k-2] ", "u[k-1] ", "u[k-2] "] {
+    for name in [
+        "x[k-1] ",
+        "x[k-2] ",
+        "u[k-1] ",
+        "u[k-2] ",
+        "play(u, 0.05)[k-1] ",
+        "play(u, 0.2)[k-1] ",
+    ] {
         assert!(ls_line.contains(name), "{ls_line}");
     }
     assert!(out.contains("(subset: farthest-point)"), "{out}");
@@ -132,9 +139,10 @@ fn simulate_train_inspect_estimate_eval() {
     assert_eq!(v["rate_hz"], 100.0);
     assert_eq!(v["signals"]["input"]["path"], "/input.data");
     assert_eq!(v["transition"]["support_points"], 250);
+    // The thesis' four inputs and the two default play operators.
     assert_eq!(
         v["transition"]["length_scales"].as_array().map(Vec::len),
-        Some(4)
+        Some(6)
     );
     assert_eq!(
         v["sensor"]["length_scales"].as_array().map(Vec::len),
@@ -142,7 +150,14 @@ fn simulate_train_inspect_estimate_eval() {
     );
     assert_eq!(
         v["transition"]["inputs"],
-        serde_json::json!(["x[k-1]", "x[k-2]", "u[k-1]", "u[k-2]"])
+        serde_json::json!([
+            "x[k-1]",
+            "x[k-2]",
+            "u[k-1]",
+            "u[k-2]",
+            "play(u, 0.05)[k-1]",
+            "play(u, 0.2)[k-1]"
+        ])
     );
     assert_eq!(
         v["sensor"]["length_scales_by_input"]["y[k-1]"],
