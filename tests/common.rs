@@ -66,6 +66,20 @@ pub fn train_model_kind(
     (HbnModel::fit(&sequences(&runs), &cfg.params).unwrap(), runs)
 }
 
+/// [`train_model`] with the parameters changed by `change` first.
+pub fn train_model_with(
+    system: SystemKind,
+    noise_gain: f64,
+    max_points: usize,
+    seed: u64,
+    change: impl FnOnce(&mut HbnParams),
+) -> (HbnModel, Vec<Trajectory>) {
+    let mut cfg = config(max_points, seed, 0);
+    change(&mut cfg.params);
+    let runs = training_set(system, noise_gain, seed, &cfg).unwrap();
+    (HbnModel::fit(&sequences(&runs), &cfg.params).unwrap(), runs)
+}
+
 /// A fresh test run of `steps` samples.
 pub fn test_run(system: SystemKind, noise_gain: f64, steps: usize, seed: u64) -> Trajectory {
     test_trajectory(system, noise_gain, seed, &config(0, seed, steps)).unwrap()

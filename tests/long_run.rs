@@ -83,7 +83,12 @@ const RECOVERY_LIMIT: usize = 100;
 /// docs/reliability.md).
 #[test]
 fn a_sensor_dropout_is_recovered_within_100_samples() {
-    let (model, _) = common::train_model(SystemKind::GeneralizedPi, 1.0, 100, 6);
+    // Without play operators: the generalised Prandtl-Ishlinskii system is a sum of plays, so
+    // with them the transition predicts x from u alone as well as the filter does with y
+    // (measured: RMS 0.0169 without y against 0.0172 with), and the sensor's part in the
+    // recovery, which this test checks, would not show.
+    let (model, _) =
+        common::train_model_with(SystemKind::GeneralizedPi, 1.0, 100, 6, |p| p.memory.clear());
     let test = common::test_run(SystemKind::GeneralizedPi, 1.0, 3_000, 6);
     let (start, len) = (1_500, 300);
     let end = start + len;

@@ -151,10 +151,14 @@ fn selection_returns_the_candidate_with_the_best_held_out_score() {
     let train: Vec<Trajectory> = (0..3u64)
         .flat_map(|r| training_set(SystemKind::Duhem, 1.0, 60 + r, &cfg).expect("simulate"))
         .collect();
+    // Without play operators: with them the transition is close enough to linear in its
+    // inputs that three inducing points score as well as the exact GP held out (measured:
+    // NLPD -2.484 against -2.467), and the case would not separate the candidates.
     let base = HbnParams {
         max_points: 120,
         n_starts: 1,
         seed: 2,
+        memory: Vec::new(),
         ..HbnParams::default()
     };
     // Three inducing points cannot follow a hysteresis loop: held out, the exact GP wins.

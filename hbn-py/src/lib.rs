@@ -619,6 +619,7 @@ fn estimate_dict(py: Python<'_>, est: Estimate) -> PyResult<Bound<'_, PyDict>> {
     d.set_item("flags", PyArray1::from_vec(py, est.flags))?;
     d.set_item("obs_min", PyArray1::from_vec(py, est.obs_min))?;
     d.set_item("obs_max", PyArray1::from_vec(py, est.obs_max))?;
+    d.set_item("obs_x", PyArray1::from_vec(py, est.obs_x))?;
     Ok(d)
 }
 
@@ -1126,6 +1127,8 @@ pub struct FilterStep {
     obs_min: f64,
     /// Largest eigenvalue of the observability Gramian.
     obs_max: f64,
+    /// Information on x alone in the observability Gramian (NaN for the first samples).
+    obs_x: f64,
 }
 
 impl From<FilterOutput> for FilterStep {
@@ -1142,6 +1145,7 @@ impl From<FilterOutput> for FilterStep {
             flags: o.flags.0,
             obs_min: o.obs_min,
             obs_max: o.obs_max,
+            obs_x: o.obs_x,
         }
     }
 }

@@ -25,7 +25,7 @@ def test_estimate_result_object(trained):
     x, x_std = est
     assert x is est.x and x_std is est.x_std
     n = len(test["u"])
-    for name in ("x", "x_std", "y_pred", "innovation", "nis", "q_x", "r", "flags", "obs_min", "obs_max"):
+    for name in ("x", "x_std", "y_pred", "innovation", "nis", "q_x", "r", "flags", "obs_min", "obs_max", "obs_x"):
         assert getattr(est, name).shape == (n,), name
     assert est.flags.dtype == np.uint32
     assert "initialised" in est.flag_names(0)

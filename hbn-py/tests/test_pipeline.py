@@ -87,7 +87,7 @@ def test_streaming_filter_equals_batch_bit_for_bit(trained):
         assert f.mode == mode and f.steps == 0
         for rnd in range(2):
             outs = [f.step(a, b) for a, b in zip(u, y)]
-            for name in ("x", "x_std", "y_pred", "innovation", "nis", "q_x", "r", "obs_min", "obs_max"):
+            for name in ("x", "x_std", "y_pred", "innovation", "nis", "q_x", "r", "obs_min", "obs_max", "obs_x"):
                 got = np.array([getattr(o, name) for o in outs])
                 np.testing.assert_array_equal(got, getattr(batch, name), err_msg=f"{mode} {name}")
             assert [o.flags for o in outs] == list(batch.flags)

@@ -1288,6 +1288,18 @@ fn sqrt(v: f64) -> f64 {
 /// linearisations (thesis Sec. 4.2): `sum_s Phi_s^T H^T R_s^{-1} H Phi_s` with
 /// `Phi_0 = I`, `Phi_{s+1} = F_s Phi_s`, `H = [0, 0, 1]`. `jacobians` and `r` are oldest first.
 pub fn observability_eigenvalues(jacobians: &[Matrix3<f64>], r: &[f64]) -> Option<(f64, f64)> {
+    let gram = observability_gramian(jacobians, r)?;
+    let (v, _) = crate::eigen::symmetric_eigen3(&gram)?;
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for x in v.iter() {
+        lo = lo.min(*x);
+        hi = hi.max(*x);
+    }
+    Some((lo.max(0.0), hi))
+}
+
+/// The observability Gramian of [`observability_eigenvalues`].
+fn observability_gramian(jacobians: &[Matrix3<f64>], r: &[f64]) -> Option<Matrix3<f64>> {
     if jacobians.is_empty() || jacobians.len() != r.len() {
         return None;
     }
@@ -1301,19 +1313,79 @@ pub fn observability_eigenvalues(jacobians: &[Matrix3<f64>], r: &[f64]) -> Optio
         let w = 1.0 / rk.max(f64::MIN_POSITIVE);
         gram += row.transpose() * row * w;
     }
-    let (v, _) = crate::eigen::symmetric_eigen3(&gram)?;
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for x in v.iter() {
-        lo = lo.min(*x);
-        hi = hi.max(*x);
+    Some(gram)
+}
+
+/// What the measurements of the window say about `x` itself: the information on the first
+/// state component with the other two (`x_{k-1}`, `s`) left free, the Schur complement
+/// `G_00 - g^T G_RR^+ g` of the Gramian `G` of [`observability_eigenvalues`] (`R` the other
+/// two components; `^+` a pseudo-inverse that drops eigenvalues below `1e-12` of the largest).
+/// Unlike the smallest eigenvalue, it stays large when a component that does not matter is
+/// unobservable: where the transition no longer reads `x_{k-2}` (its gradient `0`), `x_{k-1}`
+/// cannot be seen, but it does not affect anything either. `None` for an empty or mismatched
+/// window or a non-finite Gramian.
+pub fn state_information(jacobians: &[Matrix3<f64>], r: &[f64]) -> Option<f64> {
+    let g = observability_gramian(jacobians, r)?;
+    if !g.iter().all(|v| v.is_finite()) {
+        return None;
     }
-    Some((lo.max(0.0), hi))
+    // The 2x2 block of the other components, by its eigen-decomposition.
+    let (a, b, d) = (g.m22, g.m23, g.m33);
+    let half_tr = 0.5 * (a + d);
+    let disc = sqrt((0.5 * (a - d)) * (0.5 * (a - d)) + b * b);
+    let (l1, l2) = (half_tr + disc, half_tr - disc);
+    // Unit eigenvector of l1 (the other is orthogonal).
+    let (v1x, v1y) = if b.abs() > 0.0 {
+        let (x, y) = (l1 - d, b);
+        let n = sqrt(x * x + y * y);
+        (x / n, y / n)
+    } else if a >= d {
+        (1.0, 0.0)
+    } else {
+        (0.0, 1.0)
+    };
+    let (v2x, v2y) = (-v1y, v1x);
+    let scale = l1.abs().max(g.m11.abs());
+    let (gx, gy) = (g.m12, g.m13);
+    let mut explained = 0.0;
+    for (l, vx, vy) in [(l1, v1x, v1y), (l2, v2x, v2y)] {
+        if l > 1e-12 * scale {
+            let p = gx * vx + gy * vy;
+            explained += p * p / l;
+        }
+    }
+    let info = g.m11 - explained;
+    info.is_finite().then_some(info.max(0.0))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::rng::Rng;
+
+    #[test]
+    fn state_information_ignores_a_component_that_does_not_matter() {
+        // The transition reads x_{k-1} only (a2 = 0): x_{k-2} is unobservable and irrelevant.
+        let f = Matrix3::new(0.9, 0.0, 0.0, 1.0, 0.0, 0.0, 0.3, 0.0, 0.5);
+        let jac = [f; 4];
+        let r = [0.01; 4];
+        let (lo, hi) = observability_eigenvalues(&jac, &r).unwrap();
+        assert!(lo <= 1e-12 * hi, "{lo} {hi}");
+        let info = state_information(&jac, &r).unwrap();
+        assert!(info > 1e-3 * hi, "{info} vs {hi}");
+        // A sensor blind to x (c = f = 0 in every row): no information on x.
+        let blind = Matrix3::new(0.9, 0.1, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.5);
+        let info = state_information(&[blind; 4], &r).unwrap();
+        let (_, hi) = observability_eigenvalues(&[blind; 4], &r).unwrap();
+        assert!(info <= 1e-12 * hi, "{info} vs {hi}");
+        // A full-rank case: the Schur complement equals 1 / (G^-1)_00.
+        let full = Matrix3::new(0.8, 0.3, 0.0, 1.0, 0.0, 0.0, 0.4, 0.2, 0.6);
+        let jac = [full; 4];
+        let g = observability_gramian(&jac, &r).unwrap();
+        let want = 1.0 / g.try_inverse().unwrap()[(0, 0)];
+        let got = state_information(&jac, &r).unwrap();
+        assert!((got - want).abs() <= 1e-9 * want, "{got} vs {want}");
+    }
 
     /// The nearest-k set by (distance, index), found by sorting (what the allocation-free walk
     /// must equal): mean and variance of x.

@@ -46,7 +46,7 @@ pub mod eigen;
 pub use blr::{LocalRegression, Neighbourhood, NeighbourhoodParts, Posterior};
 pub use ekf::{
     EXTRAPOLATION_RATIO, Ekf, EkfConfig, EkfState, Estimator, Flags, HbnView, InitPrior,
-    MAX_REJECTED_RUN, Mode, StepOutput, observability_eigenvalues,
+    MAX_REJECTED_RUN, Mode, StepOutput, observability_eigenvalues, state_information,
 };
 pub use error::CoreError;
 pub use gp::{GpParts, GpView, Prediction, Variance, Want};

@@ -32,6 +32,8 @@ pub struct Estimate {
     pub obs_min: Vec<f64>,
     /// Largest eigenvalue of the Gramian.
     pub obs_max: Vec<f64>,
+    /// Information on `x` alone in the Gramian ([`hbn_core::state_information`]).
+    pub obs_x: Vec<f64>,
 }
 
 /// Summary of the observability diagnostic.
@@ -43,11 +45,16 @@ pub struct ObservabilitySummary {
     pub median: f64,
     /// Largest `lambda_max`.
     pub max: f64,
-    /// Fraction of samples whose `lambda_min / lambda_max` fell below [`NEAR_UNOBSERVABLE`].
+    /// Fraction of samples where the information on `x` alone
+    /// ([`hbn_core::state_information`]) fell below [`NEAR_UNOBSERVABLE`] of `lambda_max`: the
+    /// measurements do not pin down the state there. (A small `lambda_min` alone can be a
+    /// component that does not matter: `x_{k-1}` when the transition ignores `x_{k-2}`, as
+    /// it may with play operators.)
     pub near_unobservable: f64,
 }
 
-/// Ratio `lambda_min / lambda_max` below which a sample counts as near-unobservable.
+/// Ratio of the information on `x` to `lambda_max` below which a sample counts as
+/// near-unobservable.
 pub const NEAR_UNOBSERVABLE: f64 = 1e-8;
 
 impl Estimate {
@@ -64,6 +71,7 @@ impl Estimate {
             flags: Vec::with_capacity(n),
             obs_min: Vec::with_capacity(n),
             obs_max: Vec::with_capacity(n),
+            obs_x: Vec::with_capacity(n),
         }
     }
 
@@ -79,6 +87,7 @@ impl Estimate {
         self.flags.push(o.flags.0);
         self.obs_min.push(o.obs_min);
         self.obs_max.push(o.obs_max);
+        self.obs_x.push(o.obs_x);
     }
 
     /// Number of samples.
@@ -124,7 +133,7 @@ impl Estimate {
             .filter(|v| v.is_finite())
             .fold(0.0, f64::max);
         let near = self
-            .obs_min
+            .obs_x
             .iter()
             .zip(&self.obs_max)
             .filter(|(a, b)| a.is_finite() && b.is_finite())

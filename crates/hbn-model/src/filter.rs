@@ -5,7 +5,7 @@
 
 use std::sync::Arc;
 
-use hbn_core::{Ekf, EkfState, Mode, StepOutput, observability_eigenvalues};
+use hbn_core::{Ekf, EkfState, Mode, StepOutput, observability_eigenvalues, state_information};
 use nalgebra::Matrix3;
 use self_cell::self_cell;
 
@@ -23,6 +23,9 @@ pub struct FilterOutput {
     pub obs_min: f64,
     /// Largest eigenvalue of that Gramian (NaN for the first samples).
     pub obs_max: f64,
+    /// Information on `x` alone in that Gramian, the other state components left free
+    /// ([`hbn_core::state_information`]; NaN for the first samples).
+    pub obs_x: f64,
 }
 
 impl std::ops::Deref for FilterOutput {
@@ -69,15 +72,19 @@ impl Tracker {
         self.jacobians[WINDOW - 1] = step.jacobian;
         self.r[WINDOW - 1] = step.r;
         self.seen = (self.seen + 1).min(WINDOW);
-        let (obs_min, obs_max) = if self.seen == WINDOW {
-            observability_eigenvalues(&self.jacobians, &self.r).unwrap_or((f64::NAN, f64::NAN))
+        let (obs_min, obs_max, obs_x) = if self.seen == WINDOW {
+            let (lo, hi) =
+                observability_eigenvalues(&self.jacobians, &self.r).unwrap_or((f64::NAN, f64::NAN));
+            let x = state_information(&self.jacobians, &self.r).unwrap_or(f64::NAN);
+            (lo, hi, x)
         } else {
-            (f64::NAN, f64::NAN)
+            (f64::NAN, f64::NAN, f64::NAN)
         };
         FilterOutput {
             step,
             obs_min,
             obs_max,
+            obs_x,
         }
     }
 

@@ -53,6 +53,7 @@ fn streaming_equals_batch_bit_for_bit() {
                 ("q_x", &stream.q_x, &batch.q_x),
                 ("r", &stream.r, &batch.r),
                 ("obs_min", &stream.obs_min, &batch.obs_min),
+                ("obs_x", &stream.obs_x, &batch.obs_x),
                 ("obs_max", &stream.obs_max, &batch.obs_max),
             ] {
                 assert_eq!(bits(a), bits(b), "{mode} pass {pass}: {name}");

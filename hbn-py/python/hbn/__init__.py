@@ -494,7 +494,8 @@ class Estimate:
     (predicted measurement before the update), ``innovation``, ``nis`` (normalised innovation
     squared), ``q_x`` (process noise variance used), ``r`` (measurement noise variance used),
     ``flags`` (guard bits, ``uint32``; see :meth:`flag_names`), ``obs_min`` / ``obs_max``
-    (eigenvalues of the observability Gramian, NaN for the first samples), ``mode``, and ``t``
+    (eigenvalues of the observability Gramian, NaN for the first samples), ``obs_x`` (the
+    Gramian's information on ``x`` alone, the other state components left free), ``mode``, and ``t``
     (seconds from the first grid sample; only for :meth:`HysteresisModel.estimate_log`).
 
     Unpacks as ``x, x_std = model.estimate(u, y)``.
@@ -521,6 +522,7 @@ class Estimate:
         "flags",
         "obs_min",
         "obs_max",
+        "obs_x",
         "mode",
         "t",
     )
@@ -538,6 +540,7 @@ class Estimate:
         self.flags: np.ndarray = fields["flags"]
         self.obs_min: np.ndarray = fields["obs_min"]
         self.obs_max: np.ndarray = fields["obs_max"]
+        self.obs_x: np.ndarray = fields["obs_x"]
         self.mode: str = mode
         self.t: Optional[np.ndarray] = t
 
@@ -892,7 +895,7 @@ class Filter:
     initialises like :meth:`HysteresisModel.estimate` (the prior of ``x_0`` from the first
     measurement) and gives the same numbers, bit for bit. :meth:`step` returns a
     :class:`FilterOutput` (``x``, ``x_std``, ``y_pred``, ``innovation``, ``innovation_var``,
-    ``nis``, ``q_x``, ``r``, ``flags``, ``obs_min``, ``obs_max``, ``flag_names()``).
+    ``nis``, ``q_x``, ``r``, ``flags``, ``obs_min``, ``obs_max``, ``obs_x``, ``flag_names()``).
 
     >>> import hbn
     >>> tr = hbn.simulate("duhem", 200, seed=1)

@@ -137,6 +137,7 @@ class Estimate:
     flags: npt.NDArray[np.uint32]
     obs_min: FloatArray
     obs_max: FloatArray
+    obs_x: FloatArray
     mode: str
     t: Optional[FloatArray]
     def __init__(

@@ -85,6 +85,7 @@ class FilterOutput:
     flags: int
     obs_min: float
     obs_max: float
+    obs_x: float
     def flag_names(self) -> List[str]: ...
 
 class FilterCore:
