@@ -263,8 +263,13 @@ class NumpyEkf:
     def __init__(self, model: Dict[str, Any]) -> None:
         self.tr = NumpyGP(model["transition"])
         self.se = NumpyGP(model["sensor"])
-        if self.tr.d != 4 or self.se.d != 3:
-            raise ValueError("not an HBN model (transition needs 4 inputs, sensor 3)")
+        # Play operators of the input (docs/memory.md): their radii, in the input's units
+        # (absent in model files from before them).
+        self.radii = np.asarray(model.get("play_radii", []), dtype=float)
+        if self.tr.d != 4 + len(self.radii) or self.se.d != 3:
+            raise ValueError(
+                "not an HBN model (transition needs 4 inputs plus one per play, sensor 3)"
+            )
         self.cfg = ekf_config(model)
         self.state: Optional[Dict[str, Any]] = None
 
@@ -284,6 +289,7 @@ class NumpyEkf:
             "p": p,
             "u_last": u0,
             "u_prev": u0,
+            "plays": np.full(len(self.radii), u0),
             "rejected_run": 0,
         }
         return c["x0_mean"], c["std_scale"] * math.sqrt(p[0, 0])
@@ -299,7 +305,9 @@ class NumpyEkf:
         x1, x2, s1 = z[0], z[1], z[2]
         jm = c["jac_max"]
         r = max(c["r_floor"], c["r_scale"] * max(self.se.noise_var_raw, c["r_model_floor"]))
-        t = self._linearise(self.tr, np.array([x1, x2, st["u_last"], st["u_prev"]]))
+        t = self._linearise(
+            self.tr, np.concatenate([[x1, x2, st["u_last"], st["u_prev"]], st["plays"]])
+        )
         if t is not None:
             xk = _clamp(t[0], c["x_bounds"])
             s = self._linearise(self.se, np.array([x1, s1, xk]))
@@ -336,6 +344,8 @@ class NumpyEkf:
         q[2, 2] += q_s
         p = _bound_cov(fm @ p @ fm.T + q, c["p_min"], c["p_max"])
         st["u_prev"], st["u_last"] = st["u_last"], u_k
+        # The plays follow u_k at their radius: p = max(u - r, min(u + r, p)).
+        st["plays"] = np.maximum(u_k - self.radii, np.minimum(u_k + self.radii, st["plays"]))
         # ---- update (Joseph form, H = [0, 0, 1]) ----
         if math.isfinite(y_k):
             s_var = p[2, 2] + r

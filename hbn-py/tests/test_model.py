@@ -54,7 +54,8 @@ def test_save_load_round_trip(trained, tmp_path):
     assert back.rate == model.rate == 100.0
     assert back.signals["input"]["name"] == "u"
     assert back.params["max_points"] == 250
-    assert back.transition.n_features_in_ == 4 and back.sensor.n_features_in_ == 3
+    # The thesis' four transition inputs and the two default play operators.
+    assert back.transition.n_features_in_ == 6 and back.sensor.n_features_in_ == 3
     assert back.ekf_config()["x0_mean"] == pytest.approx(back.summary and model.ekf_config()["x0_mean"])
 
 
