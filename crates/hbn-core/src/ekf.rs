@@ -40,7 +40,7 @@ use crate::CoreError;
 use crate::blr::{LocalRegression, Neighbourhood};
 use crate::gp::{GpView, Want};
 use crate::kernel::{MAX_DIM, clamp_to};
-use crate::play::{PlayState, Plays};
+use crate::play::{PlayState, Plays, transition_input};
 use nalgebra::{Matrix3, Vector3};
 
 /// Guard flags of one step (a bit set).
@@ -965,14 +965,7 @@ impl<'m> Ekf<'m> {
     /// The transition's input at states `x_{k-1} = x1`, `x_{k-2} = x2`: the inputs and plays
     /// come from the state (all [`MAX_DIM`] values; the GP reads its first `dim`).
     fn transition_input(&self, st: &EkfState, x1: f64, x2: f64) -> [f64; MAX_DIM] {
-        let mut input = [0.0; MAX_DIM];
-        for (slot, v) in input
-            .iter_mut()
-            .zip([x1, x2, st.u_last, st.u_prev].into_iter().chain(st.plays))
-        {
-            *slot = v;
-        }
-        input
+        transition_input(x1, x2, st.u_last, st.u_prev, &st.plays)
     }
 
     /// The GP mean of one relation at `input` (no variance, no gradient), `None` on failure.

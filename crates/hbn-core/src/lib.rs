@@ -51,4 +51,4 @@ pub use ekf::{
 pub use error::CoreError;
 pub use gp::{GpParts, GpView, Prediction, Variance, Want};
 pub use kernel::{Kernel, KernelSpec, MAX_DIM, Metric, Profile};
-pub use play::{MAX_PLAYS, PlayState, Plays};
+pub use play::{MAX_PLAYS, PlayState, Plays, transition_input};

@@ -108,6 +108,23 @@ impl Plays {
     }
 }
 
+/// The transition's input `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}, plays after u_{k-1}]`, with
+/// every play slot filled: a GP with `4 + plays.len()` inputs reads the first that many (the
+/// filter, the open-loop simulation, the training rows and the explorer all build it here).
+pub fn transition_input(
+    x1: f64,
+    x2: f64,
+    u1: f64,
+    u2: f64,
+    plays: &PlayState,
+) -> [f64; crate::MAX_DIM] {
+    let mut input = [0.0; crate::MAX_DIM];
+    for (slot, v) in input.iter_mut().zip([x1, x2, u1, u2].iter().chain(plays)) {
+        *slot = *v;
+    }
+    input
+}
+
 /// `p` clamped to `[lo, hi]` (`max(lo, min(hi, p))`, without `f64::clamp`'s panic).
 fn clamp_play(p: f64, lo: f64, hi: f64) -> f64 {
     let p = if p > hi { hi } else { p };

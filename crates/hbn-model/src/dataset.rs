@@ -14,7 +14,7 @@
 //! [`SENSOR_DIRECTION`].
 
 use crate::error::{DataError, Signal};
-use hbn_core::Plays;
+use hbn_core::{MAX_PLAYS, Plays, transition_input};
 
 /// Inputs of the transition GP without play operators (with them: one more per play).
 pub const TRANSITION_DIM: usize = 4;
@@ -157,14 +157,18 @@ pub fn build_dataset(trajectories: &[Sequence<'_>], plays: &Plays) -> Result<Dat
     };
     for (i, t) in trajectories.iter().enumerate() {
         t.validate(i)?;
-        let mut play = plays.start(t.u[0]);
-        plays.advance(&mut play, t.u[0]);
+        // `after[k]`: the plays after `u_0..=u_k`, as the filter carries them.
+        let mut after = vec![[0.0; MAX_PLAYS]; t.u.len()];
+        plays.run(t.u, &mut after);
         for k in 2..t.u.len() {
-            // `play` is after `u_{k-2}`; advance it to after `u_{k-1}`.
-            plays.advance(&mut play, t.u[k - 1]);
-            tr.inputs
-                .extend([t.x[k - 1], t.x[k - 2], t.u[k - 1], t.u[k - 2]]);
-            tr.inputs.extend(play.iter().take(plays.len()));
+            let input = transition_input(
+                t.x[k - 1],
+                t.x[k - 2],
+                t.u[k - 1],
+                t.u[k - 2],
+                &after[k - 1],
+            );
+            tr.inputs.extend(input.iter().take(tr.dim));
             tr.targets.push(t.x[k]);
             se.inputs.extend([t.x[k - 1], t.y[k - 1], t.x[k]]);
             se.targets.push(t.y[k]);

@@ -182,9 +182,15 @@ impl HbnModel {
                 x.push(cfg.x0_mean);
                 continue;
             }
-            let mut input = vec![x[k - 1], x[k - 2], u[k - 1], u[k - 2]];
-            input.extend(play_states[k - 1].iter().take(plays.len()));
-            let next = match view.predict(&input, Want::default(), &mut scratch) {
+            let input = hbn_core::transition_input(
+                x[k - 1],
+                x[k - 2],
+                u[k - 1],
+                u[k - 2],
+                &play_states[k - 1],
+            );
+            let input = input.get(..view.dim()).unwrap_or(&input);
+            let next = match view.predict(input, Want::default(), &mut scratch) {
                 Ok(p) => p.mean.clamp(cfg.x_bounds.0, cfg.x_bounds.1),
                 Err(_) => x[k - 1],
             };

@@ -69,7 +69,7 @@
 //! ```
 
 use hbn_core::rng::Rng;
-use hbn_core::{GpView, MAX_DIM, PlayState, Plays, Want};
+use hbn_core::{GpView, MAX_DIM, PlayState, Plays, Want, transition_input};
 use hbn_gp::{GaussianProcess, Hyperparameters};
 
 use crate::dataset::{Sequence, TRANSITION_DIM, TRANSITION_DIRECTION, Table, build_dataset};
@@ -903,16 +903,6 @@ struct Predictor<'a> {
     mean_input: Option<usize>,
     /// Inputs the GP reads (4 plus the plays).
     dim: usize,
-}
-
-/// A transition input `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}, plays after u_{k-1}]` (every play
-/// slot; [`Predictor`] reads the ones its GP has).
-fn transition_input(x1: f64, x2: f64, u1: f64, u2: f64, play: &PlayState) -> [f64; MAX_DIM] {
-    let mut input = [0.0; MAX_DIM];
-    for (slot, v) in input.iter_mut().zip([x1, x2, u1, u2].iter().chain(play)) {
-        *slot = *v;
-    }
-    input
 }
 
 impl<'a> Predictor<'a> {
