@@ -44,7 +44,7 @@ use faer::linalg::matmul::matmul;
 use faer::linalg::triangular_inverse::invert_lower_triangular;
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::{Accum, Mat, Par};
-use hbn_core::kernel::{MAX_DIM, Prepared, Profile, profile_and_slope_with};
+use hbn_core::kernel::{MAX_DIM, Prepared, Profile, profile_and_slope_with, profiles_and_slopes};
 use hbn_core::{Kernel, Metric};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -276,21 +276,34 @@ impl<'a> SparseBound<'a> {
         let m = self.n_inducing();
         let sf2 = kernel.signal_variance();
         let mut u = [0.0; MAX_DIM];
+        // Per column: the squared distances, then the profile for all m at once (the core's
+        // vectorised `profiles_and_slopes`), then the scale and direction factors.
+        let mut r2 = vec![0.0; m];
+        let mut slope = vec![0.0; m];
         for (col, j) in (start..end).enumerate() {
             kernel.feature_vector(&self.data.x[j * d..j * d + d], &mut u);
             let u = &u[..d];
             ux[col * d..col * d + d].copy_from_slice(u);
             let gj = self.data.directions[j];
-            let kcol = kmn.col_as_slice_mut(col);
-            let mut ccol = cmn.as_deref_mut().map(|c| c.col_as_slice_mut(col));
-            for (a, (za, k_out)) in uz.chunks_exact(d).zip(kcol.iter_mut()).enumerate().take(m) {
-                let r2: f64 = za.iter().zip(u).map(|(p, q)| (p - q) * (p - q)).sum();
-                let (f, df) = profile_and_slope(spec.profile, r2);
-                let dir = spec.direction_factor(self.z_dirs[a], gj);
-                *k_out = sf2 * f * dir;
-                if let Some(c) = ccol.as_deref_mut() {
-                    c[a] = sf2 * df * dir;
+            for (r2_a, za) in r2.iter_mut().zip(uz.chunks_exact(d)) {
+                *r2_a = za.iter().zip(u).map(|(p, q)| (p - q) * (p - q)).sum();
+            }
+            let kcol = &mut kmn.col_as_slice_mut(col)[..m];
+            profiles_and_slopes(spec.profile, &r2, kcol, &mut slope);
+            if spec.direction.is_some() {
+                for ((k, c), za_dir) in kcol.iter_mut().zip(slope.iter_mut()).zip(&self.z_dirs) {
+                    let dir = spec.direction_factor(*za_dir, gj);
+                    *k *= sf2 * dir;
+                    *c *= sf2 * dir;
                 }
+            } else {
+                for (k, c) in kcol.iter_mut().zip(slope.iter_mut()) {
+                    *k *= sf2;
+                    *c *= sf2;
+                }
+            }
+            if let Some(c) = cmn.as_deref_mut() {
+                c.col_as_slice_mut(col)[..m].copy_from_slice(&slope);
             }
         }
     }
