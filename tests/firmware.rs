@@ -4,10 +4,12 @@
 //! example, run both on the test log, and compare with `hbn estimate`'s CSV:
 //!
 //! - f64: equal bit for bit (x, x_std and flags);
-//! - f32: max |dx| at most [`F32_BOUND`] (2%) of the range of `hbn estimate`'s x, for the
-//!   exact model (default play operators) and the sparse one without play operators; the
-//!   sparse model with the default play operators is checked in f64 and its f32 figure only
-//!   printed (measured 4.3%: an open item of docs/firmware.md).
+//! - f32: max |dx| at most [`F32_BOUND`] (2%) of the range of `hbn estimate`'s x for the
+//!   exact model (default play operators); the two sparse models (with and without play
+//!   operators) are checked in f64 and their f32 figures only printed. Their estimates are
+//!   ill-conditioned in the model's reals: multiplying every real by `1 +- 1e-8` (less than
+//!   f32's rounding) moved x by 2.6% of its range, `1e-10` by 0.03% (session 12's probe,
+//!   docs/firmware.md), so no f32 table of them can promise 2%; they measured 0.65% to 4.3%.
 //!
 //! Also the export's error messages, and that a failed export leaves nothing behind.
 
@@ -166,7 +168,7 @@ fn exported_models_reproduce_hbn_estimate_in_c_and_rust() {
     ]);
     // (name, training flags, whether the f32 bound applies)
     let kinds: [(&str, &[&str], bool); 3] = [
-        ("sparse", &["--inducing", "32", "--memory", "none"], true),
+        ("sparse", &["--inducing", "32", "--memory", "none"], false),
         ("sparse-memory", &["--inducing", "32"], false),
         (
             "exact",
