@@ -393,6 +393,10 @@ impl<'a> Neighbourhood<'a> {
             *lo_j = a;
             *span_j = b.saturating_sub(a).min(1) + 1; // 1 or 2 cells per axis
         }
+        let mut inv_half_window = [0.0; BLR_MAX_DIM];
+        for (inv, hw) in inv_half_window.iter_mut().zip(self.half_window).take(d) {
+            *inv = 1.0 / hw;
+        }
         let mut dist = [f64::INFINITY; BLR_MAX_NEIGHBOURS];
         let cap = out.len().min(BLR_MAX_NEIGHBOURS);
         let mut count = 0usize;
@@ -429,17 +433,17 @@ impl<'a> Neighbourhood<'a> {
                 let Some(row) = self.inputs.get(i * d..i * d + d) else {
                     break;
                 };
+                // Scaled offsets by multiplication and without an early exit: the scan is
+                // most of an EKF+BLR step (perf), and a division per input was its cost.
                 let mut r2 = 0.0;
-                let mut inside = true;
-                for ((x, zj), hw) in row.iter().zip(z).zip(self.half_window) {
-                    let t = (x - zj) / hw;
-                    if !(-1.0..=1.0).contains(&t) {
-                        inside = false;
-                        break;
-                    }
+                let mut widest = 0.0f64;
+                for ((x, zj), inv) in row.iter().zip(z).zip(&inv_half_window) {
+                    let t = (x - zj) * inv;
                     r2 += t * t;
+                    widest = widest.max(t.abs());
                 }
-                if !inside {
+                // Outside the window on some axis (or a NaN offset, which `max` would skip).
+                if widest > 1.0 || r2.is_nan() {
                     continue;
                 }
                 let iu = i as u32;

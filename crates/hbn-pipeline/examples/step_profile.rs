@@ -1,5 +1,6 @@
 //! Profiling harness (not shipped): fits the bench's sparse m = 64 model, then runs the EKF step
-//! for a fixed number of samples so `perf record -D` can attach after the fit.
+//! for a fixed number of samples so `perf record -D` can attach after the fit:
+//! `perf record -D 7000 target/release/examples/step_profile [ekf|ekf-blr]`.
 use hbn_core::{Estimator, Mode};
 use hbn_model::{HbnModel, HbnParams};
 use hbn_pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
@@ -27,7 +28,11 @@ fn main() {
     let model = HbnModel::fit(&seqs, &params).unwrap();
     let view = model.view().unwrap();
     let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
-    let mut est = Estimator::new(view, model.ekf_config(Mode::Ekf), &mut scratch).unwrap();
+    let mode = match std::env::args().nth(1).as_deref() {
+        Some("ekf-blr") => Mode::EkfBlr,
+        _ => Mode::Ekf,
+    };
+    let mut est = Estimator::new(view, model.ekf_config(mode), &mut scratch).unwrap();
     eprintln!("fitted");
     let t = std::time::Instant::now();
     let n = 4_000_000;
