@@ -44,7 +44,9 @@ use faer::linalg::matmul::matmul;
 use faer::linalg::triangular_inverse::invert_lower_triangular;
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::{Accum, Mat, Par};
-use hbn_core::kernel::{MAX_DIM, Prepared, Profile, profile_and_slope_with, profiles_and_slopes};
+use hbn_core::kernel::{
+    MAX_DIM, Prepared, Profile, profile_and_slope_with, profiles_and_slopes_with,
+};
 use hbn_core::{Kernel, Metric};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -280,16 +282,22 @@ impl<'a> SparseBound<'a> {
         // vectorised `profiles_and_slopes`), then the scale and direction factors.
         let mut r2 = vec![0.0; m];
         let mut slope = vec![0.0; m];
+        // The inducing features by input (`d x m`), so the distances vectorise over Z.
+        let uz_by_input = by_input(uz, d, m);
         for (col, j) in (start..end).enumerate() {
             kernel.feature_vector(&self.data.x[j * d..j * d + d], &mut u);
             let u = &u[..d];
             ux[col * d..col * d + d].copy_from_slice(u);
             let gj = self.data.directions[j];
-            for (r2_a, za) in r2.iter_mut().zip(uz.chunks_exact(d)) {
-                *r2_a = za.iter().zip(u).map(|(p, q)| (p - q) * (p - q)).sum();
+            r2.fill(0.0);
+            for (zi, ui) in uz_by_input.chunks_exact(m).zip(u) {
+                for (r2_a, z) in r2.iter_mut().zip(zi) {
+                    let t = z - ui;
+                    *r2_a += t * t;
+                }
             }
             let kcol = &mut kmn.col_as_slice_mut(col)[..m];
-            profiles_and_slopes(spec.profile, &r2, kcol, &mut slope);
+            profiles_and_slopes_with(spec.profile, &r2, kcol, &mut slope, f64::sqrt);
             if spec.direction.is_some() {
                 for ((k, c), za_dir) in kcol.iter_mut().zip(slope.iter_mut()).zip(&self.z_dirs) {
                     let dir = spec.direction_factor(*za_dir, gj);
@@ -572,6 +580,7 @@ impl<'a> SparseBound<'a> {
 
         // Pass 2: dF/dK_mn column by column, chained into theta (and the inducing features).
         let want_z = self.optimize_z;
+        let uz_by_input = by_input(&core.uz, d, m);
         let parts: Vec<(Vec<f64>, Vec<f64>, f64)> = (0..self.n_blocks())
             .into_par_iter()
             .map(|b| {
@@ -603,6 +612,8 @@ impl<'a> SparseBound<'a> {
                 let mut acc = vec![0.0; n_k];
                 let mut gz = vec![0.0; if want_z { m * d } else { 0 }];
                 let mut tmp = vec![0.0; n_k];
+                let mut gw = vec![0.0; m];
+                let mut column_scratch = vec![0.0; 2 * m];
                 let mut rss = 0.0;
                 for col in 0..rows {
                     let (kcol, ccol, gcol) = (
@@ -618,6 +629,31 @@ impl<'a> SparseBound<'a> {
                         let j = start + col;
                         kernel.prepare(&self.data.x[j * d..j * d + d], self.data.directions[j])
                     });
+                    if px.is_none() {
+                        // Unwarped (the default): sums over Z, vectorised.
+                        for ((gw_a, g), b) in gw.iter_mut().zip(gcol).zip(beta.iter()) {
+                            *gw_a = g + b * yc;
+                        }
+                        add_column_theta_grad(
+                            &spec,
+                            &gw,
+                            kcol,
+                            ccol,
+                            &uz_by_input,
+                            xu,
+                            &mut acc,
+                            &mut column_scratch,
+                        );
+                        if want_z {
+                            for (a, za) in core.uz.chunks_exact(d).enumerate().take(m) {
+                                let gc = 2.0 * gw[a] * ccol[a];
+                                for j in 0..d {
+                                    gz[a * d + j] += gc * (za[j] - xu[j]);
+                                }
+                            }
+                        }
+                        continue;
+                    }
                     for a in 0..m {
                         let gw = gcol[a] + beta[a] * yc;
                         let (k, c) = (kcol[a], ccol[a]);
@@ -722,6 +758,67 @@ impl Objective for SparseBound<'_> {
     }
 }
 
+/// `m` points of `d` features (`m x d`, row-major) by input instead (`d x m`), so that sums
+/// over the points are contiguous loops that vectorise.
+fn by_input(points: &[f64], d: usize, m: usize) -> Vec<f64> {
+    let mut out = vec![0.0; d * m];
+    for (a, p) in points.chunks_exact(d.max(1)).enumerate().take(m) {
+        for (i, v) in p.iter().enumerate() {
+            out[i * m + a] = *v;
+        }
+    }
+    out
+}
+
+/// `acc += sum_a w_a dk(z_a, x)/dtheta` for one sample `x` (features `xu`) against every
+/// inducing point of an *unwarped* kernel: [`add_pair_theta_grad`] summed over `a` first, in
+/// contiguous loops over the points (`uz_by_input` from [`by_input`]).
+/// `scratch` holds at least `2 m` values.
+#[allow(clippy::too_many_arguments)]
+fn add_column_theta_grad(
+    spec: &hbn_core::KernelSpec,
+    w: &[f64],
+    k: &[f64],
+    c: &[f64],
+    uz_by_input: &[f64],
+    xu: &[f64],
+    acc: &mut [f64],
+    scratch: &mut [f64],
+) {
+    let m = w.len();
+    acc[0] += hbn_core::gp::dot(w, k);
+    let (wc, sq) = scratch.split_at_mut(m);
+    for ((wc, w), c) in wc.iter_mut().zip(w).zip(c) {
+        *wc = w * c;
+    }
+    let sq = &mut sq[..m];
+    match spec.metric {
+        Metric::Ard => {
+            for (i, (zi, xi)) in uz_by_input.chunks_exact(m).zip(xu).enumerate() {
+                for (s, z) in sq.iter_mut().zip(zi) {
+                    *s = (z - xi) * (z - xi);
+                }
+                acc[1 + i] -= 2.0 * hbn_core::gp::dot(wc, sq);
+            }
+        }
+        Metric::Isotropic | Metric::Mahalanobis => {
+            let r2 = sq;
+            r2.fill(0.0);
+            for (zi, xi) in uz_by_input.chunks_exact(m).zip(xu) {
+                for (r, z) in r2.iter_mut().zip(zi) {
+                    *r += (z - xi) * (z - xi);
+                }
+            }
+            let scale = if spec.metric == Metric::Isotropic {
+                -2.0
+            } else {
+                -1.0
+            };
+            acc[1] += scale * hbn_core::gp::dot(wc, r2);
+        }
+    }
+}
+
 /// Greedy conditional-variance selection of at most `m` inducing points among the rows of
 /// `x_std` (`n x d`), under `kernel`: a pivoted Cholesky that picks, each time, the row with the
 /// largest residual variance `k(x, x) - Q(x, x)`, lowest index first on ties. Stops early when
@@ -751,7 +848,9 @@ pub fn greedy_variance_selection(
         .map(|&row| sf2 * spec.direction_factor(directions[row], directions[row]))
         .collect();
     let target = m.min(pool_size);
-    let mut rows_e: Vec<Vec<f64>> = Vec::with_capacity(target);
+    // The Cholesky columns chosen so far, by candidate: row `i` holds `e_0(i), .., e_t(i)`, so
+    // each candidate's inner product with the pivot's row is one contiguous dot product.
+    let mut e_rows = vec![0.0; pool_size * target];
     let mut chosen = Vec::with_capacity(target);
     let tol = 1e-10 * sf2;
     while chosen.len() < target {
@@ -772,6 +871,8 @@ pub fn greedy_variance_selection(
         let sqrt_r = best_r.sqrt();
         let fb = &feats[best * d..best * d + d];
         let gb = directions[pool[best]];
+        let t = chosen.len();
+        let e_best = e_rows[best * target..best * target + t].to_vec();
         let e: Vec<f64> = (0..pool_size)
             .into_par_iter()
             .map(|i| {
@@ -779,15 +880,15 @@ pub fn greedy_variance_selection(
                 let r2: f64 = fb.iter().zip(fi).map(|(p, q)| (p - q) * (p - q)).sum();
                 let (f, _) = profile_and_slope(spec.profile, r2);
                 let k = sf2 * f * spec.direction_factor(gb, directions[pool[i]]);
-                let s: f64 = rows_e.iter().map(|ej| ej[best] * ej[i]).sum();
+                let s = hbn_core::gp::dot(&e_best, &e_rows[i * target..i * target + t]);
                 (k - s) / sqrt_r
             })
             .collect();
-        for (r, ei) in residual.iter_mut().zip(&e) {
+        for (i, (r, ei)) in residual.iter_mut().zip(&e).enumerate() {
             *r -= ei * ei;
+            e_rows[i * target + t] = *ei;
         }
         residual[best] = f64::NEG_INFINITY;
-        rows_e.push(e);
         chosen.push(pool[best]);
     }
     chosen
