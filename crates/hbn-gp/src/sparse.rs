@@ -39,7 +39,9 @@ use crate::likelihood::{
 };
 use crate::model::{GaussianProcess, SparseFactors, StartReport, TrainingReport};
 use crate::params::{GpParams, SparseParams};
-use crate::train::{FitProgress, Standardised, multi_start, run_lbfgs, starting_point};
+use crate::train::{
+    COST_TOLERANCE_PER_SAMPLE, FitProgress, Standardised, multi_start, run_lbfgs, starting_point,
+};
 use faer::linalg::matmul::matmul;
 use faer::linalg::triangular_inverse::invert_lower_triangular;
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
@@ -1007,12 +1009,14 @@ pub(crate) fn fit_sparse(
         } else {
             bound_on(all, &z_std, &z_dirs, sp, params)
         };
+        let search_rows = if use_subset { sp.search_samples } else { n };
         let mut p = multi_start(
             &search,
             &theta0,
             noise0,
             &tail,
             params,
+            COST_TOLERANCE_PER_SAMPLE * search_rows as f64,
             &mut report,
             observe,
         )?;
@@ -1030,7 +1034,12 @@ pub(crate) fn fit_sparse(
         let full = bound_on(all, &z_std, &z_dirs, sp, params);
         if sp.refine_iters > 0 && (use_subset || reselect) {
             let initial_lml = full.evaluate(&p).ok().map(|e| e.lml);
-            let run = run_lbfgs(&full, p.clone(), sp.refine_iters);
+            let run = run_lbfgs(
+                &full,
+                p.clone(),
+                sp.refine_iters,
+                COST_TOLERANCE_PER_SAMPLE * n as f64,
+            );
             report.refinement = Some(match run {
                 Ok((q, lml, iterations, _termination)) => {
                     p = q;

@@ -202,7 +202,16 @@ pub fn fit_observed(
         ..Default::default()
     };
     let (theta, noise) = if params.optimize {
-        let p = multi_start(&lik, &theta0, noise0, &[], params, &mut report, observe)?;
+        let p = multi_start(
+            &lik,
+            &theta0,
+            noise0,
+            &[],
+            params,
+            COST_TOLERANCE,
+            &mut report,
+            observe,
+        )?;
         report.add_stats(lik.stats());
         let n_k = spec.n_params();
         (p[..n_k].to_vec(), lik.noise_of(p[n_k]))
@@ -337,12 +346,22 @@ pub(crate) fn starting_point(
 /// random in `theta` and the noise; `tail`, e.g. inducing inputs, is appended unchanged) and
 /// returns the best optimised vector. Every start is recorded in `report` (the caller adds
 /// the objective's counters with [`TrainingReport::add_stats`]).
+/// Smallest per-iteration improvement of the exact GP's log marginal likelihood (nats) before
+/// a start ends.
+pub(crate) const COST_TOLERANCE: f64 = 1e-8;
+/// The sparse bound's counterpart, per sample: its value grows with the sample count, and an
+/// absolute `1e-8` on a 10,000-sample search subset kept every start iterating to
+/// `max_iters` for changes far below what moves a hyperparameter.
+pub(crate) const COST_TOLERANCE_PER_SAMPLE: f64 = 1e-8;
+
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn multi_start<O: Objective>(
     objective: &O,
     theta0: &[f64],
     noise0: f64,
     tail: &[f64],
     params: &GpParams,
+    cost_tolerance: f64,
     report: &mut TrainingReport,
     observe: &mut dyn FnMut(FitProgress),
 ) -> Result<Vec<f64>, GpError> {
@@ -361,7 +380,7 @@ pub(crate) fn multi_start<O: Objective>(
         }
         p0.extend_from_slice(tail);
         let initial_lml = objective.evaluate(&p0).ok().map(|e| e.lml);
-        let (lml, termination) = match run_lbfgs(objective, p0, params.max_iters) {
+        let (lml, termination) = match run_lbfgs(objective, p0, params.max_iters, cost_tolerance) {
             Ok((p, lml, iters, termination)) => {
                 report.starts.push(StartReport {
                     initial_lml,
@@ -424,15 +443,19 @@ fn randomize(p: &mut [f64], spec: &hbn_core::KernelSpec, rng: &mut Rng) {
 
 /// One L-BFGS start: best parameters, their log marginal likelihood, iterations, and why it
 /// stopped.
+/// `cost_tolerance` ends the start once an iteration improves the objective by less (in
+/// nats; [`COST_TOLERANCE`] for the exact GP, [`COST_TOLERANCE_PER_SAMPLE`] times the sample
+/// count for the sparse bound).
 pub(crate) fn run_lbfgs<O: Objective>(
     lik: &O,
     p0: Vec<f64>,
     max_iters: u64,
+    cost_tolerance: f64,
 ) -> Result<(Vec<f64>, f64, u64, Termination), StartFailure> {
     let linesearch = MoreThuenteLineSearch::new();
     let solver = LBFGS::new(linesearch, 10)
         .with_tolerance_grad(1e-5)
-        .and_then(|s| s.with_tolerance_cost(1e-8))
+        .and_then(|s| s.with_tolerance_cost(cost_tolerance))
         .map_err(|e| StartFailure::of(&e))?;
     let res = Executor::new(NegLml(lik), solver)
         .configure(|state| state.param(p0).max_iters(max_iters))
