@@ -1009,6 +1009,16 @@ pub(crate) fn fit_sparse(
         } else {
             bound_on(all, &z_std, &z_dirs, sp, params)
         };
+        // The per-sample tolerance for the hyperparameters; learning Z (`m d` more
+        // parameters, each iteration gaining little) keeps the exact GP's absolute one: with
+        // the per-sample one, a learned-Z fit stopped below the fixed-Z fit it started from.
+        let tolerance = |rows: usize| {
+            if sp.optimize_inducing {
+                crate::train::COST_TOLERANCE
+            } else {
+                COST_TOLERANCE_PER_SAMPLE * rows as f64
+            }
+        };
         let search_rows = if use_subset { sp.search_samples } else { n };
         let mut p = multi_start(
             &search,
@@ -1016,7 +1026,7 @@ pub(crate) fn fit_sparse(
             noise0,
             &tail,
             params,
-            COST_TOLERANCE_PER_SAMPLE * search_rows as f64,
+            tolerance(search_rows),
             &mut report,
             observe,
         )?;
@@ -1034,12 +1044,7 @@ pub(crate) fn fit_sparse(
         let full = bound_on(all, &z_std, &z_dirs, sp, params);
         if sp.refine_iters > 0 && (use_subset || reselect) {
             let initial_lml = full.evaluate(&p).ok().map(|e| e.lml);
-            let run = run_lbfgs(
-                &full,
-                p.clone(),
-                sp.refine_iters,
-                COST_TOLERANCE_PER_SAMPLE * n as f64,
-            );
+            let run = run_lbfgs(&full, p.clone(), sp.refine_iters, tolerance(n));
             report.refinement = Some(match run {
                 Ok((q, lml, iterations, _termination)) => {
                     p = q;
