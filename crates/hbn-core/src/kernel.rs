@@ -233,7 +233,7 @@ fn check_len(got: usize, expected: usize) -> Result<(), CoreError> {
 /// Profile value `f(r2)` and its derivative `df/dr2`.
 #[inline(always)]
 pub fn profile_and_slope(profile: Profile, r2: f64) -> (f64, f64) {
-    profile_and_slope_with(profile, r2, exp_nonpositive, libm::sqrt)
+    profile_and_slope_with(profile, r2, libm::sqrt)
 }
 
 /// [`profile_and_slope`] for many squared distances at once: `f[i]` and `df[i]` from `r2[i]`,
@@ -330,27 +330,13 @@ pub fn exp_nonpositive(x: f64) -> f64 {
     e_r * scale
 }
 
-/// [`profile_and_slope`] with the caller's `exp` and `sqrt`: training code on a host passes
-/// the platform's (faster) ones; the `no_std` core uses `libm`'s, identical on every target.
+/// [`profile_and_slope`] with the caller's `sqrt` (training on a host passes `f64::sqrt`):
+/// the one-pair case of [`profiles_and_slopes_with`], which holds the formulas.
 #[inline(always)]
-pub fn profile_and_slope_with(
-    profile: Profile,
-    r2: f64,
-    exp: impl Fn(f64) -> f64,
-    sqrt: impl Fn(f64) -> f64,
-) -> (f64, f64) {
-    match profile {
-        Profile::SquaredExponential => {
-            let f = exp(-0.5 * r2);
-            (f, -0.5 * f)
-        }
-        Profile::Matern52 => {
-            let r = sqrt(r2.max(0.0));
-            let e = exp(-SQRT5 * r);
-            let f = (1.0 + SQRT5 * r + (5.0 / 3.0) * r2) * e;
-            (f, -(5.0 / 6.0) * (1.0 + SQRT5 * r) * e)
-        }
-    }
+pub fn profile_and_slope_with(profile: Profile, r2: f64, sqrt: impl Fn(f64) -> f64) -> (f64, f64) {
+    let (mut f, mut df) = ([0.0], [0.0]);
+    profiles_and_slopes_with(profile, &[r2], &mut f, &mut df, sqrt);
+    (f[0], df[0])
 }
 
 /// A training point prepared for hyperparameter gradients: the warped input and the

@@ -397,13 +397,19 @@ pub(crate) fn add_pair_theta_grad(
         }
         Metric::Isotropic | Metric::Mahalanobis => {
             let r2: f64 = ui.iter().zip(uj).map(|(a, b)| (a - b) * (a - b)).sum();
-            let scale = if spec.metric == Metric::Isotropic {
-                -2.0
-            } else {
-                -1.0
-            };
-            acc[1] += scale * wc * r2;
+            acc[1] += scale_slope(spec.metric) * wc * r2;
         }
+    }
+}
+
+/// `d r2 / d theta_1 = scale_slope * r2` for the single-scale metrics: `r2 = |u - u'|^2` with
+/// `u = p / l` (isotropic, `theta_1 = ln l`) or `u = W p / sqrt(c)` (Mahalanobis,
+/// `theta_1 = ln c`).
+pub(crate) fn scale_slope(metric: Metric) -> f64 {
+    if metric == Metric::Isotropic {
+        -2.0
+    } else {
+        -1.0
     }
 }
 

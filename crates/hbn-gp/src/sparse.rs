@@ -35,7 +35,7 @@ use crate::GpError;
 use crate::factor::factor_with_jitter;
 use crate::likelihood::{
     EvalMemo, EvalStats, Evaluation, LikelihoodData, Objective, add_pair_theta_grad, noise_of,
-    soft_bound_penalty,
+    scale_slope, soft_bound_penalty,
 };
 use crate::model::{GaussianProcess, SparseFactors, StartReport, TrainingReport};
 use crate::params::{GpParams, SparseParams};
@@ -58,11 +58,11 @@ pub const BLOCK_ROWS: usize = 1024;
 /// Smallest candidate pool of the greedy inducing-point selection.
 pub const INIT_POOL_MIN: usize = 8192;
 
-/// The kernel profile with the platform's `exp` and `sqrt` (training runs on a host; `libm`'s
-/// portable versions are about twice as slow and the kernel sums are half the training time).
+/// The kernel profile with the platform's `sqrt` (training runs on a host; `libm`'s is one
+/// scalar instruction in inline assembly that the compiler cannot vectorise).
 #[inline(always)]
 fn profile_and_slope(profile: Profile, r2: f64) -> (f64, f64) {
-    profile_and_slope_with(profile, r2, f64::exp, f64::sqrt)
+    profile_and_slope_with(profile, r2, f64::sqrt)
 }
 
 /// The collapsed bound as an optimisation problem. The optimised vector is the kernel's
@@ -105,6 +105,8 @@ struct Core {
     relative_jitter: f64,
     /// Inducing features `m x d`.
     uz: Vec<f64>,
+    /// The same by input (`d x m`, [`by_input`]), for the kernel blocks.
+    uz_by_input: Vec<f64>,
     kmm: Mat<f64>,
     cmm: Mat<f64>,
     p: Mat<f64>,
@@ -263,12 +265,13 @@ impl<'a> SparseBound<'a> {
     }
 
     /// Kernel values `k(Z, x_j)` (column `j - start` of `kmn`), their `dk/dr2` (if asked) and
-    /// the rows' features, for the rows `start..end`.
+    /// the rows' features, for the rows `start..end`. `uz_by_input` holds the inducing features
+    /// by input (`d x m`, [`by_input`]), so the distances vectorise over Z.
     #[allow(clippy::too_many_arguments)]
     fn cross_block(
         &self,
         kernel: &Kernel<'_>,
-        uz: &[f64],
+        uz_by_input: &[f64],
         start: usize,
         end: usize,
         kmn: &mut Mat<f64>,
@@ -284,8 +287,6 @@ impl<'a> SparseBound<'a> {
         // vectorised `profiles_and_slopes`), then the scale and direction factors.
         let mut r2 = vec![0.0; m];
         let mut slope = vec![0.0; m];
-        // The inducing features by input (`d x m`), so the distances vectorise over Z.
-        let uz_by_input = by_input(uz, d, m);
         for (col, j) in (start..end).enumerate() {
             kernel.feature_vector(&self.data.x[j * d..j * d + d], &mut u);
             let u = &u[..d];
@@ -365,6 +366,7 @@ impl<'a> SparseBound<'a> {
         // (= L^{-1} P L^{-T}), A y, y^T y and sum k_jj. Forming A first (rather than P, then
         // two triangular solves) keeps the rounding error of Q at cond(L), not cond(K_mm).
         let l_factor = factor.llt.L();
+        let uz_by_input = by_input(&uz, d, m);
         let sums: Vec<BlockSums> = (0..self.n_blocks())
             .into_par_iter()
             .map(|b| {
@@ -372,7 +374,7 @@ impl<'a> SparseBound<'a> {
                 let rows = end - start;
                 let mut kmn = Mat::zeros(m, rows);
                 let mut ux = vec![0.0; rows * d];
-                self.cross_block(kernel, &uz, start, end, &mut kmn, None, &mut ux);
+                self.cross_block(kernel, &uz_by_input, start, end, &mut kmn, None, &mut ux);
                 solve_lower_triangular_in_place(l_factor, kmn.as_mut(), Par::Seq);
                 let a = kmn;
                 let mut q = Mat::zeros(m, m);
@@ -451,6 +453,7 @@ impl<'a> SparseBound<'a> {
             jitter: jitter.max(factor_b.jitter),
             relative_jitter: factor.relative_jitter().max(factor_b.relative_jitter()),
             uz,
+            uz_by_input,
             kmm,
             cmm,
             p,
@@ -499,7 +502,15 @@ impl<'a> SparseBound<'a> {
                 let rows = end - start;
                 let mut kmn = Mat::zeros(m, rows);
                 let mut ux = vec![0.0; rows * d];
-                self.cross_block(kernel, &core.uz, start, end, &mut kmn, None, &mut ux);
+                self.cross_block(
+                    kernel,
+                    &core.uz_by_input,
+                    start,
+                    end,
+                    &mut kmn,
+                    None,
+                    &mut ux,
+                );
                 let mut ck = Mat::zeros(m, rows);
                 matmul(
                     ck.as_mut(),
@@ -582,7 +593,6 @@ impl<'a> SparseBound<'a> {
 
         // Pass 2: dF/dK_mn column by column, chained into theta (and the inducing features).
         let want_z = self.optimize_z;
-        let uz_by_input = by_input(&core.uz, d, m);
         let parts: Vec<(Vec<f64>, Vec<f64>, f64)> = (0..self.n_blocks())
             .into_par_iter()
             .map(|b| {
@@ -593,7 +603,7 @@ impl<'a> SparseBound<'a> {
                 let mut ux = vec![0.0; rows * d];
                 self.cross_block(
                     &kernel,
-                    &core.uz,
+                    &core.uz_by_input,
                     start,
                     end,
                     &mut kmn,
@@ -641,7 +651,7 @@ impl<'a> SparseBound<'a> {
                             &gw,
                             kcol,
                             ccol,
-                            &uz_by_input,
+                            &core.uz_by_input,
                             xu,
                             &mut acc,
                             &mut column_scratch,
@@ -811,12 +821,7 @@ fn add_column_theta_grad(
                     *r += (z - xi) * (z - xi);
                 }
             }
-            let scale = if spec.metric == Metric::Isotropic {
-                -2.0
-            } else {
-                -1.0
-            };
-            acc[1] += scale * hbn_core::gp::dot(wc, r2);
+            acc[1] += scale_slope(spec.metric) * hbn_core::gp::dot(wc, r2);
         }
     }
 }
