@@ -11,14 +11,19 @@
 //! of rows, computed in parallel and added in block order, so the result is bit-identical
 //! whatever the number of threads; no `n x m` matrix is ever held whole.
 //!
-//! **Gradient.** With `Sigma = (K_mm + P / s2)^{-1} = C^T C` (`C = L_B^{-1} L^{-1}`),
-//! `beta = Sigma v / s2` (the prediction weights) and `W = K_mm^{-1} - Sigma - beta beta^T`,
-//! the bound's sensitivities are
-//! - `dF/dK_mm = W / 2 - K_mm^{-1} P K_mm^{-1} / (2 s2)`,
-//! - `dF/dK_mn[:, j] = (W k_j + beta y_j) / s2` (one column per sample, a second blocked pass),
+//! **Gradient.** In the whitened basis `A = L^{-1} K_mn` (`Q = A A^T`), with
+//! `gamma = B^{-1} A y / s2` (the prediction weights are `beta = L^{-T} gamma`) and the
+//! residuals `r = y - A^T gamma`, the bound's sensitivities are
+//! - `dF/dK_mn = L^{-T} ((I - B^{-1}) A + gamma r^T) / s2` (one column per sample, a second
+//!   blocked pass),
+//! - `dF/dK_mm = -L^{-T} ((I - B^{-1}) Q / s2 + gamma gamma^T) L^{-1} / 2`,
 //! - `dF/dk_jj = -1 / (2 s2)`,
-//! - `dF/ds2 = (tr(Sigma P) - n s2 + |y - K_nm beta|^2 + sum k_jj - tr(K_mm^{-1} P)) / (2 s2^2)`,
+//! - `dF/ds2 = (tr(B^{-1} Q) - n s2 + |r|^2 + sum k_jj - tr Q) / (2 s2^2)`,
+//! - `dF/d ln s_f^2 = (|gamma|^2 - (tr(B^{-1} Q) + sum k_jj - tr Q) / s2) / 2` in closed form
+//!   (the signal variance scales every kernel value),
 //!
+//! with `I - B^{-1} = B^{-1} Q / s2` formed as a product: no factor is a difference of large
+//! terms, which `K_mm^{-1} - Sigma` would be when `K_mm` is ill-conditioned;
 //! and the chain rule through each kernel entry gives every hyperparameter and, optionally,
 //! every inducing input. `docs/sparse.md` derives them; the tests check them against finite
 //! differences, and the bound and predictions against the exact GP (with `Z = X`) and an
@@ -44,7 +49,9 @@ use crate::train::{
 };
 use faer::linalg::matmul::matmul;
 use faer::linalg::triangular_inverse::invert_lower_triangular;
-use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
+use faer::linalg::triangular_solve::{
+    solve_lower_triangular_in_place, solve_upper_triangular_in_place,
+};
 use faer::{Accum, Mat, Par};
 use hbn_core::kernel::{
     MAX_DIM, Prepared, Profile, profile_and_slope_with, profiles_and_slopes_with,
@@ -109,7 +116,6 @@ struct Core {
     uz_by_input: Vec<f64>,
     kmm: Mat<f64>,
     cmm: Mat<f64>,
-    p: Mat<f64>,
     tk: f64,
     tr_q: f64,
     linv: Mat<f64>,
@@ -117,6 +123,12 @@ struct Core {
     /// `L_B^{-1}`.
     lb_inv: Mat<f64>,
     beta: Vec<f64>,
+    /// `Q = A A^T`.
+    q: Mat<f64>,
+    /// `L` (`L L^T = K_mm`, lower).
+    l: Mat<f64>,
+    /// `c = L_B^{-1} A y / s2`.
+    c_vec: Vec<f64>,
 }
 
 /// Sums of one block of samples.
@@ -422,9 +434,7 @@ impl<'a> SparseBound<'a> {
                 q[(j, i)] = s;
             }
         }
-        // P = L Q L^T and v = L A y, for the gradient.
         let l_full = Mat::from_fn(m, m, |i, j| if j <= i { l_factor[(i, j)] } else { 0.0 });
-        let p = &l_full * &q * l_full.transpose();
 
         let tr_q: f64 = (0..m).map(|i| q[(i, i)]).sum();
         let mut bmat = Mat::from_fn(m, m, |i, j| q[(i, j)] / s2 + if i == j { 1.0 } else { 0.0 });
@@ -456,13 +466,15 @@ impl<'a> SparseBound<'a> {
             uz_by_input,
             kmm,
             cmm,
-            p,
             tk,
             tr_q,
             linv,
             c_factor,
             lb_inv,
             beta,
+            q,
+            c_vec,
+            l: l_full,
         })
     }
 
@@ -569,18 +581,19 @@ impl<'a> SparseBound<'a> {
         let n = self.data.y.len();
         let warped = spec.warp_units > 0;
 
-        // Sensitivities (see the module docs).
-        let kinv = core.linv.transpose() * &core.linv;
-        let sigma = core.c_factor.transpose() * &core.c_factor;
-        let beta = &core.beta;
-        let w = Mat::from_fn(m, m, |i, j| {
-            kinv[(i, j)] - sigma[(i, j)] - beta[i] * beta[j]
-        });
-        let kpk = &kinv * &core.p * &kinv;
-        let g_kmm = Mat::from_fn(m, m, |i, j| 0.5 * w[(i, j)] - 0.5 * kpk[(i, j)] / s2);
+        // Sensitivities (see the module docs), in the whitened basis: `one_minus` is
+        // I - B^{-1} = B^{-1} Q / s2, formed as a product (no difference of large terms), and
+        // dF/dK_mm = -1/2 L^{-T} ((I - B^{-1}) Q / s2 + gamma gamma^T) L^{-1}.
+        let binv = core.lb_inv.transpose() * &core.lb_inv;
+        let q_s2 = Mat::from_fn(m, m, |i, j| core.q[(i, j)] / s2);
+        let one_minus = symmetrised(&(&binv * &q_s2));
+        let gamma = mat_t_vec(&core.lb_inv, &core.c_vec);
+        let s_k = symmetrised(&(&one_minus * &q_s2));
+        let s_k = Mat::from_fn(m, m, |i, j| s_k[(i, j)] + gamma[i] * gamma[j]);
+        let g_kmm = core.linv.transpose() * &s_k * &core.linv * (-0.5);
+        // tr(Sigma P) = tr(B^{-1} Q).
         let tr_sigma_p: f64 = (0..m)
-            .flat_map(|i| (0..m).map(move |j| (i, j)))
-            .map(|(i, j)| sigma[(i, j)] * core.p[(i, j)])
+            .map(|i| (0..m).map(|j| binv[(i, j)] * core.q[(j, i)]).sum::<f64>())
             .sum();
 
         let prep_z: Vec<Prepared> = if warped {
@@ -610,45 +623,56 @@ impl<'a> SparseBound<'a> {
                     Some(&mut cmn),
                     &mut ux,
                 );
-                // G = (W K_mn + beta y^T) / s2
+                // G = L^{-T} ((I - B^{-1}) A + gamma r^T) / s2 with A = L^{-1} K_mn and the
+                // residuals r = y - A^T gamma: every factor is of moderate size (forming
+                // W K_mn + beta y^T instead subtracts large terms).
+                let mut a = kmn.clone();
+                solve_lower_triangular_in_place(core.l.as_ref(), a.as_mut(), Par::Seq);
+                let y = &self.data.y[start..end];
                 let mut g = Mat::zeros(m, rows);
                 matmul(
                     g.as_mut(),
                     Accum::Replace,
-                    w.as_ref(),
-                    kmn.as_ref(),
-                    1.0 / s2,
+                    one_minus.as_ref(),
+                    a.as_ref(),
+                    1.0,
                     Par::Seq,
                 );
-                let y = &self.data.y[start..end];
+                let mut rss = 0.0;
+                for col in 0..rows {
+                    let mean: f64 = a
+                        .col_as_slice(col)
+                        .iter()
+                        .zip(&gamma)
+                        .map(|(x, t)| x * t)
+                        .sum();
+                    let r = y[col] - mean;
+                    rss += r * r;
+                    for (gv, t) in g.col_as_slice_mut(col).iter_mut().zip(&gamma) {
+                        *gv = (*gv + t * r) / s2;
+                    }
+                }
+                solve_upper_triangular_in_place(core.l.transpose(), g.as_mut(), Par::Seq);
                 let mut acc = vec![0.0; n_k];
                 let mut gz = vec![0.0; if want_z { m * d } else { 0 }];
                 let mut tmp = vec![0.0; n_k];
-                let mut gw = vec![0.0; m];
                 let mut column_scratch = vec![0.0; 2 * m];
-                let mut rss = 0.0;
                 for col in 0..rows {
                     let (kcol, ccol, gcol) = (
                         kmn.col_as_slice(col),
                         cmn.col_as_slice(col),
                         g.col_as_slice(col),
                     );
-                    let mean: f64 = kcol.iter().zip(beta).map(|(k, b)| k * b).sum();
-                    rss += (y[col] - mean).powi(2);
                     let xu = &ux[col * d..col * d + d];
-                    let yc = y[col] / s2;
                     let px = warped.then(|| {
                         let j = start + col;
                         kernel.prepare(&self.data.x[j * d..j * d + d], self.data.directions[j])
                     });
                     if px.is_none() {
                         // Unwarped (the default): sums over Z, vectorised.
-                        for ((gw_a, g), b) in gw.iter_mut().zip(gcol).zip(beta.iter()) {
-                            *gw_a = g + b * yc;
-                        }
                         add_column_theta_grad(
                             &spec,
-                            &gw,
+                            gcol,
                             kcol,
                             ccol,
                             &core.uz_by_input,
@@ -658,7 +682,7 @@ impl<'a> SparseBound<'a> {
                         );
                         if want_z {
                             for (a, za) in core.uz.chunks_exact(d).enumerate().take(m) {
-                                let gc = 2.0 * gw[a] * ccol[a];
+                                let gc = 2.0 * gcol[a] * ccol[a];
                                 for j in 0..d {
                                     gz[a * d + j] += gc * (za[j] - xu[j]);
                                 }
@@ -667,7 +691,7 @@ impl<'a> SparseBound<'a> {
                         continue;
                     }
                     for a in 0..m {
-                        let gw = gcol[a] + beta[a] * yc;
+                        let gw = gcol[a];
                         let (k, c) = (kcol[a], ccol[a]);
                         let za = &core.uz[a * d..a * d + d];
                         if let Some(px) = &px {
@@ -727,8 +751,15 @@ impl<'a> SparseBound<'a> {
             }
         }
         let d_s2 = (tr_sigma_p - n as f64 * s2 + rss + core.tk - core.tr_q) / (2.0 * s2 * s2);
-        // sum_j k_jj is proportional to s_f^2.
-        grad_theta[0] -= 0.5 * core.tk / s2;
+        // The signal variance scales K_mm, K_mn and every k_jj alike (A by s_f, Q by s_f^2),
+        // which gives its derivative in closed form: the sum over the entries above adds
+        // terms of order n / s2 that cancel to a few units. Jitter on K_mm's diagonal does
+        // not scale, hence the last term.
+        let gamma_sq: f64 = gamma.iter().map(|g| g * g).sum();
+        let tr_g_kmm: f64 = (0..m).map(|i| g_kmm[(i, i)]).sum();
+        grad_theta[0] = -0.5 * tr_sigma_p / s2 + 0.5 * gamma_sq
+            - 0.5 * (core.tk - core.tr_q) / s2
+            - core.jitter * tr_g_kmm;
 
         let mut grad = grad_theta;
         grad.push(d_s2 * (s2 - self.noise_floor));
@@ -772,6 +803,10 @@ impl Objective for SparseBound<'_> {
 
 /// `m` points of `d` features (`m x d`, row-major) by input instead (`d x m`), so that sums
 /// over the points are contiguous loops that vectorise.
+fn symmetrised(a: &Mat<f64>) -> Mat<f64> {
+    Mat::from_fn(a.nrows(), a.ncols(), |i, j| 0.5 * (a[(i, j)] + a[(j, i)]))
+}
+
 fn by_input(points: &[f64], d: usize, m: usize) -> Vec<f64> {
     let mut out = vec![0.0; d * m];
     for (a, p) in points.chunks_exact(d.max(1)).enumerate().take(m) {
