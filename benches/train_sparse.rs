@@ -2,7 +2,9 @@
 //! `m` inducing points on every sample of simulated logs.
 //!
 //! `cargo bench --bench train_sparse -- [SAMPLES] [M]` (defaults 100000 and 128). Prints one
-//! line per run: samples, m, seconds for both GPs, and the training report's figures.
+//! line per run: samples, m, seconds for both GPs, and the training report's figures, after
+//! a timeline: when each GP's search starts ended (the refinement on every sample, the
+//! held-out refits and the filter tuning follow).
 
 use hbn::model::{HbnModel, HbnParams, Sequence};
 use hbn::sim::{InputKind, SimConfig, SystemKind, generate_input, simulate};
@@ -48,8 +50,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         n_inducing: Some(m),
         ..HbnParams::default()
     };
+    let checked = params.check()?;
     let t0 = Instant::now();
-    let model = HbnModel::fit(&seqs, &params)?;
+    let model = HbnModel::fit_checked(&seqs, &checked, &mut |role, progress| {
+        println!(
+            "  {:6.2} s: {role} GP, search start {} of {} ended",
+            t0.elapsed().as_secs_f64(),
+            progress.start + 1,
+            progress.n_starts
+        );
+    })?;
     let secs = t0.elapsed().as_secs_f64();
     for (name, gp) in [
         ("transition", model.transition()),

@@ -51,6 +51,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         model.sensor().noise_variance(),
         model.sensor().loo_error_variance()
     );
+    for (name, gp) in [
+        ("transition", model.transition()),
+        ("sensor", model.sensor()),
+    ] {
+        let r = gp.report();
+        println!(
+            "{name}: theta {:?} noise {:e} final lml {:?} starts {:?} refinement {:?}",
+            gp.theta(),
+            gp.noise_variance(),
+            r.starts.iter().map(|s| s.final_lml).collect::<Vec<_>>(),
+            r.starts.iter().map(|s| s.iterations).collect::<Vec<_>>(),
+            r.refinement.as_ref().map(|s| (s.final_lml, s.iterations))
+        );
+    }
     let est = model.estimate(&test.u, &test.y, Mode::Ekf)?;
     let stride: usize = std::env::var("STRIDE")
         .ok()
