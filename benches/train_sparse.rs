@@ -67,8 +67,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     ] {
         let r = gp.report();
         println!(
-            "{name}: {} samples, m = {}, {:.2} s, {} evaluations, search on {:?}, refinement {:?}",
-            r.n_samples, r.n_support, r.seconds, r.evaluations, r.search_samples, r.refinement
+            "{name}: {} samples, m = {}, {} evaluations, search on {:?}, refinement {:?}, theta {:?}",
+            r.n_samples,
+            r.n_support,
+            r.evaluations,
+            r.search_samples,
+            r.refinement,
+            gp.theta()
         );
     }
     println!(

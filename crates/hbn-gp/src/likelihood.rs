@@ -320,7 +320,7 @@ impl<'a> Likelihood<'a> {
         let trace_w: f64 = (0..n).map(|i| alpha[i] * alpha[i] - kinv[(i, i)]).sum();
         grad.push(0.5 * trace_w * p[n_k].exp());
         // Soft bounds on every log-parameter (warp shifts a are not logs but share the bound).
-        let penalty = soft_bound_penalty(p, &mut grad);
+        let penalty = soft_bound_penalty(p, &mut grad, LOG_BOUND);
         let ev = Evaluation {
             lml: solved.lml - penalty,
             grad,
@@ -362,8 +362,17 @@ pub fn param_of_noise(noise_floor: f64, noise: f64) -> f64 {
 }
 
 /// Adds the smooth soft-bound penalty on log-parameters `p` to `grad`; returns the penalty.
-pub(crate) fn soft_bound_penalty(p: &[f64], grad: &mut [f64]) -> f64 {
+/// Every parameter is kept inside `[-LOG_BOUND, LOG_BOUND]`; the first (`ln s_f^2`) also below
+/// `signal_log_max` when that is lower.
+pub(crate) fn soft_bound_penalty(p: &[f64], grad: &mut [f64], signal_log_max: f64) -> f64 {
     let mut penalty = 0.0;
+    if let (Some(&v), Some(g)) = (p.first(), grad.first_mut()) {
+        let excess = v - signal_log_max;
+        if signal_log_max < LOG_BOUND && excess > 0.0 {
+            penalty += PENALTY * excess * excess;
+            *g -= 2.0 * PENALTY * excess;
+        }
+    }
     for (g, &v) in grad.iter_mut().zip(p) {
         let excess = v.abs() - LOG_BOUND;
         if excess > 0.0 {

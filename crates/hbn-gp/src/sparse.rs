@@ -39,8 +39,8 @@
 use crate::GpError;
 use crate::factor::factor_with_jitter;
 use crate::likelihood::{
-    EvalMemo, EvalStats, Evaluation, LikelihoodData, Objective, add_pair_theta_grad, noise_of,
-    scale_slope, soft_bound_penalty,
+    EvalMemo, EvalStats, Evaluation, LOG_BOUND, LikelihoodData, Objective, add_pair_theta_grad,
+    noise_of, scale_slope, soft_bound_penalty,
 };
 use crate::model::{GaussianProcess, SparseFactors, StartReport, TrainingReport};
 use crate::params::{GpParams, SparseParams};
@@ -84,6 +84,8 @@ pub struct SparseBound<'a> {
     optimize_z: bool,
     noise_floor: f64,
     max_jitter_retries: usize,
+    /// Upper soft bound of `ln s_f^2` ([`SparseBound::with_max_signal_variance`]).
+    signal_log_max: f64,
     memo: EvalMemo,
 }
 
@@ -247,8 +249,17 @@ impl<'a> SparseBound<'a> {
             optimize_z,
             noise_floor,
             max_jitter_retries,
+            signal_log_max: LOG_BOUND,
             memo: EvalMemo::default(),
         }
+    }
+
+    /// Keeps the signal variance below `max` (standardised units) with the same smooth
+    /// penalty as every log-parameter's `[-LOG_BOUND, LOG_BOUND]` box
+    /// ([`SparseParams::max_signal_variance`](crate::SparseParams::max_signal_variance)).
+    pub fn with_max_signal_variance(mut self, max: f64) -> Self {
+        self.signal_log_max = max.ln().min(LOG_BOUND);
+        self
     }
 
     /// Number of inducing points.
@@ -763,7 +774,7 @@ impl<'a> SparseBound<'a> {
 
         let mut grad = grad_theta;
         grad.push(d_s2 * (s2 - self.noise_floor));
-        let penalty = soft_bound_penalty(&p[..=n_k], &mut grad);
+        let penalty = soft_bound_penalty(&p[..=n_k], &mut grad, self.signal_log_max);
         if want_z {
             // Features to inputs: dF/dz_c = sum_r dF/du_r du_r/dz_c.
             let mut u = [0.0; MAX_DIM];
@@ -1004,6 +1015,7 @@ pub(crate) fn fit_sparse(
             params.noise_floor,
             params.max_jitter_retries,
         )
+        .with_max_signal_variance(sp.max_signal_variance.unwrap_or(f64::INFINITY))
     }
     let mut report = TrainingReport {
         n_samples: n,

@@ -267,6 +267,45 @@ fn gradients_stay_accurate_with_many_samples_and_an_ill_conditioned_k_mm() {
     }
 }
 
+/// On noise-free data the bound over many samples pulls the signal variance toward the box
+/// edge (a near-polynomial fit); `max_signal_variance` holds it at the value asked (in the
+/// targets' variance), and the fit stays accurate.
+#[test]
+fn max_signal_variance_holds_on_noise_free_data() {
+    let n = 4000;
+    let mut rng = Rng::new(11);
+    let x: Vec<f64> = (0..n).map(|_| rng.uniform_in(-2.0, 2.0)).collect();
+    let y: Vec<f64> = x.iter().map(|v| v * v * v - v).collect();
+    let fit_with = |max: Option<f64>| {
+        let mut params = GpParams::new(KernelSpec::se_ard(1));
+        params.n_starts = 1;
+        params.sparse = Some(SparseParams {
+            max_signal_variance: max,
+            ..SparseParams::new(16)
+        });
+        fit(&params, &x, &y).unwrap()
+    };
+    let free = fit_with(None);
+    let bounded = fit_with(Some(100.0));
+    assert!(
+        free.theta()[0] > 100f64.ln() + 1.0,
+        "free: {:?}",
+        free.theta()
+    );
+    assert!(
+        bounded.theta()[0] < 100f64.ln() + 0.01,
+        "bounded: {:?}",
+        bounded.theta()
+    );
+    // Still an accurate fit inside the data.
+    for i in 0..41 {
+        let xv = -1.9 + 0.095 * i as f64;
+        let m = bounded.predict(&[xv], Want::default()).unwrap().mean;
+        let truth = xv * xv * xv - xv;
+        assert!((m - truth).abs() < 1e-2, "at {xv}: {m} vs {truth}");
+    }
+}
+
 /// The bound never exceeds the exact log marginal likelihood, and grows toward it as
 /// inducing points are added.
 #[test]
@@ -531,6 +570,19 @@ fn bad_input_gives_typed_errors() {
             ..
         })
     ));
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        params.sparse = Some(SparseParams {
+            max_signal_variance: Some(bad),
+            ..SparseParams::new(3)
+        });
+        assert!(matches!(
+            fit(&params, &x, &y),
+            Err(GpError::InvalidParameter {
+                name: "max_signal_variance",
+                ..
+            })
+        ));
+    }
     // An absurd number of inducing points is capped by the data, not an allocation failure.
     params.sparse = Some(SparseParams::new(usize::MAX));
     params.n_starts = 1;
