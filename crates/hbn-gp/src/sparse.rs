@@ -110,6 +110,8 @@ pub struct SparsePosterior {
 struct Core {
     bound: f64,
     jitter: f64,
+    /// The jitter on `K_mm`'s diagonal alone (part of `kmm`, with no `theta` dependence).
+    kmm_jitter: f64,
     /// The larger relative jitter of the two factorisations (`K_mm`, `B`).
     relative_jitter: f64,
     /// Inducing features `m x d`.
@@ -472,6 +474,7 @@ impl<'a> SparseBound<'a> {
         Ok(Core {
             bound,
             jitter: jitter.max(factor_b.jitter),
+            kmm_jitter: jitter,
             relative_jitter: factor.relative_jitter().max(factor_b.relative_jitter()),
             uz,
             uz_by_input,
@@ -744,7 +747,7 @@ impl<'a> SparseBound<'a> {
                 let gw = g_kmm[(a, b)];
                 let (za, zb) = (&core.uz[a * d..a * d + d], &core.uz[b * d..b * d + d]);
                 // K_mm includes the jitter on its diagonal, which has no theta dependence.
-                let k = core.kmm[(a, b)] - if a == b { core.jitter } else { 0.0 };
+                let k = core.kmm[(a, b)] - if a == b { core.kmm_jitter } else { 0.0 };
                 if warped {
                     kernel.grad_theta(&prep_z[a], &prep_z[b], &mut tmp);
                     for (s, t) in grad_theta.iter_mut().zip(&tmp) {
@@ -764,13 +767,10 @@ impl<'a> SparseBound<'a> {
         let d_s2 = (tr_sigma_p - n as f64 * s2 + rss + core.tk - core.tr_q) / (2.0 * s2 * s2);
         // The signal variance scales K_mm, K_mn and every k_jj alike (A by s_f, Q by s_f^2),
         // which gives its derivative in closed form: the sum over the entries above adds
-        // terms of order n / s2 that cancel to a few units. Jitter on K_mm's diagonal does
-        // not scale, hence the last term.
+        // terms of order n / s2 that cancel to a few units. K_mm's jitter is relative to its
+        // mean diagonal, so it scales too.
         let gamma_sq: f64 = gamma.iter().map(|g| g * g).sum();
-        let tr_g_kmm: f64 = (0..m).map(|i| g_kmm[(i, i)]).sum();
-        grad_theta[0] = -0.5 * tr_sigma_p / s2 + 0.5 * gamma_sq
-            - 0.5 * (core.tk - core.tr_q) / s2
-            - core.jitter * tr_g_kmm;
+        grad_theta[0] = -0.5 * tr_sigma_p / s2 + 0.5 * gamma_sq - 0.5 * (core.tk - core.tr_q) / s2;
 
         let mut grad = grad_theta;
         grad.push(d_s2 * (s2 - self.noise_floor));

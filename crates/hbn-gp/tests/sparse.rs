@@ -267,6 +267,50 @@ fn gradients_stay_accurate_with_many_samples_and_an_ill_conditioned_k_mm() {
     }
 }
 
+/// With duplicated inducing inputs `K_mm` is singular and is factorised with jitter (relative
+/// to its mean diagonal, so it scales with the signal variance but not with the length
+/// scales): the gradient still agrees with finite differences of the bound as evaluated.
+#[test]
+fn gradients_match_finite_differences_with_jitter_on_k_mm() {
+    let (x, y) = data(300, 2, 5);
+    let spec = KernelSpec::se_ard(2);
+    let dirs = vec![0.0; 300];
+    let mut z: Vec<f64> = x[..16].to_vec();
+    z.extend_from_slice(&x[..4]); // two points repeated
+    let bound = SparseBound::new(
+        LikelihoodData {
+            spec,
+            whiten: &[],
+            x: &x,
+            directions: &dirs,
+            y: &y,
+        },
+        z,
+        vec![0.0; 10],
+        false,
+        1e-6,
+        8,
+    );
+    let p = vec![0.3, 0.2, -0.1, (0.01f64).ln()];
+    let ev = bound.evaluate(&p).unwrap();
+    assert!(ev.jitter > 0.0, "the repeated points need jitter");
+    let h = 1e-5;
+    for i in 0..p.len() {
+        let (mut a, mut b) = (p.clone(), p.clone());
+        a[i] += h;
+        b[i] -= h;
+        let (ea, eb) = (bound.evaluate(&a).unwrap(), bound.evaluate(&b).unwrap());
+        assert_eq!(ea.relative_jitter, ev.relative_jitter);
+        assert_eq!(eb.relative_jitter, ev.relative_jitter);
+        let fd = (ea.lml - eb.lml) / (2.0 * h);
+        assert!(
+            (fd - ev.grad[i]).abs() < 1e-4 * (1.0 + fd.abs()),
+            "parameter {i}: finite difference {fd} vs analytic {}",
+            ev.grad[i]
+        );
+    }
+}
+
 /// On noise-free data the bound over many samples pulls the signal variance toward the box
 /// edge (a near-polynomial fit); `max_signal_variance` holds it at the value asked (in the
 /// targets' variance), and the fit stays accurate.
