@@ -5,7 +5,8 @@
 //!
 //! `cargo run --release -p hbn-pipeline --example sparse_vs_exact -- OUT.json [systems] [gains]
 //! [seeds] [m,...]`; with `SPARSE_ONLY=1` in the environment the exact model is skipped (its
-//! figures do not change when only the sparse GP does).
+//! figures do not change when only the sparse GP does), and `INCREMENTS=none|transition|both`
+//! sets what both models learn ([`hbn_model::Increments`]).
 use hbn_model::HbnParams;
 use hbn_pipeline::experiment::{ExperimentConfig, run_case};
 use hbn_sim::SystemKind;
@@ -24,6 +25,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let gains = list(args.get(3), vec![0.0, 1.0, 10.0]);
     let seeds = list(args.get(4), vec![1, 2, 3]);
     let ms = list(args.get(5), vec![hbn_model::DEFAULT_INDUCING]);
+    let increments: hbn_model::Increments = match std::env::var("INCREMENTS") {
+        Ok(v) => v.parse()?,
+        Err(_) => hbn_model::Increments::default(),
+    };
     let mut rows = Vec::new();
     for &system in &systems {
         for &gain in &gains {
@@ -41,6 +46,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     let cfg = ExperimentConfig {
                         params: HbnParams {
                             n_inducing,
+                            increments,
                             ..HbnParams::default()
                         },
                         ..ExperimentConfig::default()
