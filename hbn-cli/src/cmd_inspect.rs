@@ -102,6 +102,7 @@ fn gp_json(gp: &GaussianProcess, kernel: KernelChoice, inputs: &[String], target
             "jitter_evaluations": r.jitter_evaluations,
             "max_jitter": r.max_jitter,
             "final_jitter": r.final_jitter,
+            "signal_variance_at_bound": r.signal_variance_at_bound,
         }
     })
 }

@@ -64,9 +64,21 @@ pub struct TrainingReport {
     pub final_jitter: f64,
     /// Wall-clock seconds.
     pub seconds: f64,
+    /// The optimised signal variance ended at its upper bound (the box's `1e5`, or a sparse
+    /// GP's [`crate::SparseParams::max_signal_variance`]), in the kernel's units.
+    #[serde(default)]
+    pub signal_variance_at_bound: Option<f64>,
 }
 
 impl TrainingReport {
+    /// Records `signal_variance_at_bound` when `ln_sf2` (optimised) is within 0.05 of
+    /// `signal_log_max`.
+    pub(crate) fn check_signal_bound(&mut self, ln_sf2: f64, signal_log_max: f64) {
+        if ln_sf2 > signal_log_max - 0.05 {
+            self.signal_variance_at_bound = Some(signal_log_max.exp());
+        }
+    }
+
     /// Adds an objective's evaluation counters.
     pub fn add_stats(&mut self, stats: crate::likelihood::EvalStats) {
         self.evaluations += stats.evaluations;
@@ -113,6 +125,13 @@ impl TrainingReport {
             w.push(format!(
                 "the final factor needed jitter {:e}",
                 self.final_jitter
+            ));
+        }
+        if let Some(bound) = self.signal_variance_at_bound {
+            w.push(format!(
+                "the signal variance ended at its upper bound ({bound:.3e} times the targets' \
+                 variance): the fit is close to a polynomial along a ridge of long length \
+                 scales and may extrapolate badly (noise-free data do this; see docs/sparse.md)"
             ));
         }
         let failed = self.starts.iter().filter(|s| s.error.is_some()).count();

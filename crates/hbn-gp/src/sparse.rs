@@ -1119,6 +1119,7 @@ pub(crate) fn fit_sparse(
         if sp.optimize_inducing {
             z_std = full.inducing_of(&p).to_vec();
         }
+        report.check_signal_bound(p[0], full.signal_log_max);
         (p[..n_k].to_vec(), noise_of(params.noise_floor, p[n_k]))
     } else {
         (theta0, noise0)

@@ -213,6 +213,7 @@ pub fn fit_observed(
             observe,
         )?;
         report.add_stats(lik.stats());
+        report.check_signal_bound(p[0], crate::likelihood::LOG_BOUND);
         let n_k = spec.n_params();
         (p[..n_k].to_vec(), lik.noise_of(p[n_k]))
     } else {

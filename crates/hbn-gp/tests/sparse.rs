@@ -341,6 +341,19 @@ fn max_signal_variance_holds_on_noise_free_data() {
         "bounded: {:?}",
         bounded.theta()
     );
+    // The report says so (and only then).
+    assert_eq!(
+        bounded.report().signal_variance_at_bound,
+        Some(100f64.ln().exp())
+    );
+    assert!(
+        bounded
+            .report()
+            .warnings()
+            .iter()
+            .any(|w| w.contains("signal variance ended at its upper bound"))
+    );
+    assert_eq!(free.report().signal_variance_at_bound, None);
     // Still an accurate fit inside the data.
     for i in 0..41 {
         let xv = -1.9 + 0.095 * i as f64;
