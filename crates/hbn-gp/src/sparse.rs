@@ -440,13 +440,7 @@ impl<'a> SparseBound<'a> {
             tk += s.tk;
         }
         drop(sums);
-        for i in 0..m {
-            for j in 0..i {
-                let s = 0.5 * (q[(i, j)] + q[(j, i)]);
-                q[(i, j)] = s;
-                q[(j, i)] = s;
-            }
-        }
+        let q = symmetrised(&q);
         let l_full = Mat::from_fn(m, m, |i, j| if j <= i { l_factor[(i, j)] } else { 0.0 });
 
         let tr_q: f64 = (0..m).map(|i| q[(i, i)]).sum();
@@ -814,6 +808,7 @@ impl Objective for SparseBound<'_> {
 
 /// `m` points of `d` features (`m x d`, row-major) by input instead (`d x m`), so that sums
 /// over the points are contiguous loops that vectorise.
+/// `(A + A^T) / 2`: a product that is symmetric in exact arithmetic, made so in rounding.
 fn symmetrised(a: &Mat<f64>) -> Mat<f64> {
     Mat::from_fn(a.nrows(), a.ncols(), |i, j| 0.5 * (a[(i, j)] + a[(j, i)]))
 }

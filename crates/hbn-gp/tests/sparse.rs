@@ -151,6 +151,29 @@ fn matches_numpy_titsias_formulae() {
     assert!(worst < 1e-8, "worst relative difference {worst:e}");
 }
 
+/// Asserts that `bound`'s analytic gradient at `p` agrees with central differences of step
+/// `h`: `|fd - analytic| < rel * (floor + |fd|)` for every parameter. The trial points must
+/// need the same relative jitter as `p` (a difference across a change of jitter measures the
+/// jitter, not the bound).
+fn assert_gradient_matches(bound: &SparseBound<'_>, p: &[f64], h: f64, rel: f64, floor: f64) {
+    let ev = bound.evaluate(p).unwrap();
+    assert_eq!(ev.grad.len(), bound.n_params());
+    for i in 0..p.len() {
+        let (mut a, mut b) = (p.to_vec(), p.to_vec());
+        a[i] += h;
+        b[i] -= h;
+        let (ea, eb) = (bound.evaluate(&a).unwrap(), bound.evaluate(&b).unwrap());
+        assert_eq!(ea.relative_jitter, ev.relative_jitter, "parameter {i}");
+        assert_eq!(eb.relative_jitter, ev.relative_jitter, "parameter {i}");
+        let fd = (ea.lml - eb.lml) / (2.0 * h);
+        assert!(
+            (fd - ev.grad[i]).abs() < rel * (floor + fd.abs()),
+            "parameter {i}: finite difference {fd} vs analytic {}",
+            ev.grad[i]
+        );
+    }
+}
+
 /// Every analytic derivative (hyperparameters, noise, inducing inputs) agrees with central
 /// finite differences, for every kernel family.
 #[test]
@@ -197,21 +220,7 @@ fn gradients_match_finite_differences() {
         }
         p.push((0.05f64).ln());
         p.extend_from_slice(&z);
-        let ev = bound.evaluate(&p).unwrap();
-        assert_eq!(ev.grad.len(), bound.n_params());
-        for i in 0..p.len() {
-            let h = 1e-5;
-            let (mut a, mut b) = (p.clone(), p.clone());
-            a[i] += h;
-            b[i] -= h;
-            let fd =
-                (bound.evaluate(&a).unwrap().lml - bound.evaluate(&b).unwrap().lml) / (2.0 * h);
-            assert!(
-                (fd - ev.grad[i]).abs() < 1e-5 * (1.0 + fd.abs()),
-                "{spec:?} parameter {i}: finite difference {fd} vs analytic {}",
-                ev.grad[i]
-            );
-        }
+        assert_gradient_matches(&bound, &p, 1e-5, 1e-5, 1.0);
     }
 }
 
@@ -252,19 +261,7 @@ fn gradients_stay_accurate_with_many_samples_and_an_ill_conditioned_k_mm() {
         1e-6,
         8,
     );
-    let ev = bound.evaluate(&p).unwrap();
-    let h = 1e-4;
-    for i in 0..p.len() {
-        let (mut a, mut b) = (p.clone(), p.clone());
-        a[i] += h;
-        b[i] -= h;
-        let fd = (bound.evaluate(&a).unwrap().lml - bound.evaluate(&b).unwrap().lml) / (2.0 * h);
-        assert!(
-            (fd - ev.grad[i]).abs() < 1e-3 * (10.0 + fd.abs()),
-            "parameter {i}: finite difference {fd} vs analytic {}",
-            ev.grad[i]
-        );
-    }
+    assert_gradient_matches(&bound, &p, 1e-4, 1e-3, 10.0);
 }
 
 /// With duplicated inducing inputs `K_mm` is singular and is factorised with jitter (relative
@@ -294,21 +291,7 @@ fn gradients_match_finite_differences_with_jitter_on_k_mm() {
     let p = vec![0.3, 0.2, -0.1, (0.01f64).ln()];
     let ev = bound.evaluate(&p).unwrap();
     assert!(ev.jitter > 0.0, "the repeated points need jitter");
-    let h = 1e-5;
-    for i in 0..p.len() {
-        let (mut a, mut b) = (p.clone(), p.clone());
-        a[i] += h;
-        b[i] -= h;
-        let (ea, eb) = (bound.evaluate(&a).unwrap(), bound.evaluate(&b).unwrap());
-        assert_eq!(ea.relative_jitter, ev.relative_jitter);
-        assert_eq!(eb.relative_jitter, ev.relative_jitter);
-        let fd = (ea.lml - eb.lml) / (2.0 * h);
-        assert!(
-            (fd - ev.grad[i]).abs() < 1e-4 * (1.0 + fd.abs()),
-            "parameter {i}: finite difference {fd} vs analytic {}",
-            ev.grad[i]
-        );
-    }
+    assert_gradient_matches(&bound, &p, 1e-5, 1e-4, 1.0);
 }
 
 /// On noise-free data the bound over many samples pulls the signal variance toward the box
