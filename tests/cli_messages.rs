@@ -574,3 +574,33 @@ fn memory_flag_sets_the_play_operators_and_names_itself_when_wrong() {
         assert!(text.contains("--memory"), "{bad}: {text}");
     }
 }
+
+#[test]
+fn mean_flag_sets_the_gps_prior_mean_and_inspect_shows_it() {
+    let (_dir, log, m) = small_model();
+    let dir = tempfile::tempdir().unwrap();
+    let m2 = dir.path().join("m2.hbn").to_string_lossy().into_owned();
+    let inspect = |model: &str| {
+        let (e, out) = hbn(&["inspect", model, "--json"]);
+        assert!(e.is_none(), "{e:?}");
+        serde_json::from_str::<serde_json::Value>(&out).unwrap()
+    };
+    let v = inspect(&m);
+    assert_eq!(v["transition"]["mean"], "constant");
+    assert_eq!(v["transition"]["linear_slopes"], serde_json::json!([]));
+    let (e, _) = train_small(&log, &m2, &["--mean", "linear"]);
+    assert!(e.is_none(), "{e:?}");
+    let v = inspect(&m2);
+    for gp in ["transition", "sensor"] {
+        assert_eq!(v[gp]["mean"], "linear", "{gp}");
+        let slopes = v[gp]["linear_slopes"].as_array().unwrap();
+        assert_eq!(
+            slopes.len(),
+            v[gp]["inputs"].as_array().unwrap().len(),
+            "{gp}"
+        );
+    }
+    let (e, text) = hbn(&["inspect", &m2]);
+    assert!(e.is_none(), "{e:?}");
+    assert!(text.contains("linear mean       slopes"), "{text}");
+}

@@ -167,8 +167,13 @@ fn exported_models_reproduce_hbn_estimate_in_c_and_rust() {
         &p("test.mcap"),
     ]);
     // (name, training flags, whether the f32 bound applies)
-    let kinds: [(&str, &[&str], bool); 3] = [
+    let kinds: [(&str, &[&str], bool); 4] = [
         ("sparse", &["--inducing", "32", "--memory", "none"], false),
+        (
+            "sparse-linear",
+            &["--inducing", "32", "--mean", "linear"],
+            false,
+        ),
         ("sparse-memory", &["--inducing", "32"], false),
         (
             "exact",

@@ -347,6 +347,7 @@ pub fn step(data: &[u8]) {
             input_scale: &o.scale,
             output_mean: o.out[0],
             output_scale: o.out[1],
+            linear: &[],
             features: &o.feats,
             directions: if o.spec.direction.is_some() { &o.dirs } else { &[] },
             alpha: &o.alpha,

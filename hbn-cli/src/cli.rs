@@ -6,7 +6,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use hbn_core::Mode;
 use hbn_gp::SubsetPolicy;
 use hbn_io::{SignalPath, TimeSource};
-use hbn_model::{HbnParams, KernelChoice};
+use hbn_model::{HbnParams, KernelChoice, MeanFunction};
 use hbn_pipeline::LogOptions;
 use hbn_sim::{SimConfig, SystemKind};
 
@@ -239,6 +239,11 @@ impl std::fmt::Display for Memory {
     }
 }
 
+/// `--mean`: the GPs' prior mean by name.
+fn parse_mean(s: &str) -> Result<MeanFunction, String> {
+    s.parse()
+}
+
 fn memory_text(m: &[f64]) -> String {
     if m.is_empty() {
         "none".to_owned()
@@ -437,6 +442,10 @@ pub struct TrainArgs {
     /// comma-separated (at most 4), or `none` for the thesis' four inputs. docs/memory.md.
     #[arg(long, value_parser = parse_memory, default_value_t = Memory(params().memory), value_name = "R[,..]|none")]
     pub memory: Memory,
+    /// Prior mean of both GPs: `constant`, or `linear` (the targets' least-squares plane on
+    /// the GP's inputs, with the kernel modelling the rest). docs/sparse.md.
+    #[arg(long, value_parser = parse_mean, default_value_t = params().gp_mean, value_name = "constant|linear")]
+    pub mean: MeanFunction,
     /// Log reading options.
     #[command(flatten)]
     pub read: ReadArgs,
@@ -765,6 +774,9 @@ pub struct ExperimentArgs {
     /// Play operators' radii as fractions of the input's range, or `none` (as `hbn train`).
     #[arg(long, value_parser = parse_memory, default_value_t = Memory(params().memory), value_name = "R[,..]|none")]
     pub memory: Memory,
+    /// Prior mean of both GPs, `constant` or `linear` (as `hbn train`).
+    #[arg(long, value_parser = parse_mean, default_value_t = params().gp_mean, value_name = "constant|linear")]
+    pub mean: MeanFunction,
     /// Write all rows as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,

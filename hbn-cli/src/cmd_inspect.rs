@@ -83,6 +83,8 @@ fn gp_json(gp: &GaussianProcess, kernel: KernelChoice, inputs: &[String], target
         "predicts": target,
         "inputs": inputs,
         "kernel": kernel.to_string(),
+        "mean": if gp.linear_mean().is_empty() { "constant" } else { "linear" },
+        "linear_slopes": gp.linear_mean(),
         "signal_variance": gp.signal_variance(),
         "length_scales": ls,
         "length_scales_by_input": named,
@@ -198,6 +200,12 @@ fn gp_text(model: &HbnModel, role: GpRole, kernel: KernelChoice) -> String {
         gp.n_support(),
         r.n_samples,
     );
+    if !gp.linear_mean().is_empty() {
+        s.push_str(&format!(
+            "\n  linear mean       slopes {}",
+            named_length_scales(gp.linear_mean(), &inputs)
+        ));
+    }
     if let Some(p) = r.subset_policy {
         s.push_str(&format!(" (subset: {})", subset_name(p)));
     }

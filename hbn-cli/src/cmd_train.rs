@@ -37,6 +37,7 @@ impl TrainArgs {
             blr_window: self.blr_window,
             validation: self.validation,
             memory: self.memory.0.clone(),
+            gp_mean: self.mean,
             ..d
         }
     }

@@ -61,6 +61,7 @@ fn param_keyword(p: Param) -> &'static str {
         Param::Blr => "blr",
         Param::Validation => "validation",
         Param::Memory => "memory",
+        Param::Mean => "mean",
     }
 }
 
@@ -642,7 +643,8 @@ impl GaussianProcessCore {
     #[allow(clippy::too_many_arguments)]
     #[pyo3(signature = (x, dim, y, kernel, lengthscales, signal_variance, noise_variance,
                         optimize, normalize, n_starts, max_iters, max_points, seed,
-                        n_inducing=None, inducing_points=None, optimize_inducing=false))]
+                        n_inducing=None, inducing_points=None, optimize_inducing=false,
+                        mean=None))]
     fn fit(
         py: Python<'_>,
         x: PyReadonlyArray1<'_, f64>,
@@ -661,10 +663,16 @@ impl GaussianProcessCore {
         n_inducing: Option<usize>,
         inducing_points: Option<PyReadonlyArray1<'_, f64>>,
         optimize_inducing: bool,
+        mean: Option<&str>,
     ) -> PyResult<Self> {
         let choice =
             KernelChoice::from_str(kernel).map_err(|e| raise(py, Fail::config("kernel", e)))?;
         let mut params = GpParams::new(choice.spec(dim, [0, 1]));
+        if let Some(mean) = mean {
+            params.mean = mean
+                .parse()
+                .map_err(|e: String| raise(py, Fail::config("mean", e)))?;
+        }
         params.optimize = optimize.unwrap_or(params.optimize);
         params.normalize = normalize.unwrap_or(params.normalize);
         params.n_starts = n_starts.unwrap_or(params.n_starts);

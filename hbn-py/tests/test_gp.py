@@ -212,3 +212,21 @@ def test_sparse_argument_errors():
         hbn.GaussianProcess(n_inducing=0).fit(X, X**2)
     with pytest.raises(ValueError, match="exact GP has no inducing"):
         _ = hbn.GaussianProcess().fit(X, X**2).inducing_points_
+
+
+@pytest.mark.parametrize("n_inducing", [None, 24])
+def test_linear_mean_follows_the_plane_outside_the_data(n_inducing):
+    rng = np.random.default_rng(3)
+    X = rng.uniform(-1, 1, size=(300, 2))
+    plane = lambda Z: 2.0 * Z[:, 0] - 3.0 * Z[:, 1] + 0.5
+    y = plane(X) + 0.1 * np.sin(4 * X[:, 0]) + 0.01 * rng.normal(size=300)
+    far = np.array([[6.0, -4.0]])
+    linear = hbn.GaussianProcess(mean="linear", n_inducing=n_inducing, n_restarts=1).fit(X, y)
+    constant = hbn.GaussianProcess(n_inducing=n_inducing, n_restarts=1).fit(X, y)
+    mean, grad = linear.predict(far, return_grad=True)
+    assert abs(mean[0] - plane(far)[0]) < 1.5
+    assert abs(grad[0, 1] + 3.0) < 0.1
+    assert abs(constant.predict(far)[0] - plane(far)[0]) > 10.0
+    with pytest.raises(hbn.ConfigError) as e:
+        hbn.GaussianProcess(mean="quadratic").fit(X, y)
+    assert e.value.keyword == "mean"

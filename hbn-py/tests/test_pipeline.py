@@ -145,6 +145,8 @@ BAD_PARAMS = [
     ("memory", [1.5]),
     ("memory", [0.1] * 5),
     ("memory", "lots"),
+    ("mean", "quadratic"),
+    ("mean", 1),
 ]
 
 
@@ -160,6 +162,19 @@ def test_memory_sets_the_play_operators():
     te = hbn.simulate("preisach", 200, seed=2, noise_gain=1.0)
     a, _ = default.estimate(te["u"], te["y"])
     b, _ = plain.estimate(te["u"], te["y"])
+    assert not np.array_equal(a, b)
+
+
+def test_mean_sets_the_gps_prior_mean():
+    d = hbn.simulate("preisach", 300, seed=1, noise_gain=1.0)
+    fast = dict(max_points=80, n_restarts=1, max_iter=30, validation=0.0, memory=[])
+    assert hbn.default_params()["mean"] == "constant"
+    constant = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], **fast)
+    linear = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], mean="linear", **fast)
+    assert constant.params["mean"] == "constant" and linear.params["mean"] == "linear"
+    te = hbn.simulate("preisach", 200, seed=2, noise_gain=1.0)
+    a, _ = constant.estimate(te["u"], te["y"])
+    b, _ = linear.estimate(te["u"], te["y"])
     assert not np.array_equal(a, b)
 
 

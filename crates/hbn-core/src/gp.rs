@@ -87,6 +87,7 @@ pub struct GpView<'a> {
     input_scale: &'a [f64],
     output_mean: f64,
     output_scale: f64,
+    linear: &'a [f64],
     features: &'a [f64],
     directions: &'a [f64],
     alpha: &'a [f64],
@@ -135,6 +136,10 @@ pub struct GpParts<'a> {
     pub output_mean: f64,
     /// Output scale (`> 0`) multiplying the standardised GP output.
     pub output_scale: f64,
+    /// Slopes of a linear prior mean in raw units, empty or `d` values: the mean becomes
+    /// `output_mean + sum_j linear_j (x_j - input_mean_j) + output_scale * GP(z)` and its
+    /// gradient gains `linear` (variances are unchanged). Empty for a GP with a constant mean.
+    pub linear: &'a [f64],
     /// Support points in feature space, `n x d`.
     pub features: &'a [f64],
     /// Direction signs of the support points (`n`), or empty without the direction factor.
@@ -173,6 +178,9 @@ impl<'a> GpView<'a> {
         expect(parts.input_mean.len(), d)?;
         expect(parts.input_scale.len(), d)?;
         expect(parts.features.len(), n * d)?;
+        if !parts.linear.is_empty() {
+            expect(parts.linear.len(), d)?;
+        }
         if !parts.alpha_lo.is_empty() {
             expect(parts.alpha_lo.len(), n)?;
         }
@@ -187,6 +195,7 @@ impl<'a> GpView<'a> {
         }
         let finite = |s: &[f64]| s.iter().all(|v| v.is_finite());
         if !(finite(parts.input_mean)
+            && finite(parts.linear)
             && finite(parts.features)
             && finite(parts.directions)
             && finite(parts.alpha)
@@ -222,6 +231,7 @@ impl<'a> GpView<'a> {
             input_scale: parts.input_scale,
             output_mean: parts.output_mean,
             output_scale: parts.output_scale,
+            linear: parts.linear,
             features: parts.features,
             directions: parts.directions,
             alpha: parts.alpha,
@@ -241,6 +251,7 @@ impl<'a> GpView<'a> {
             input_scale: self.input_scale,
             output_mean: self.output_mean,
             output_scale: self.output_scale,
+            linear: self.linear,
             features: self.features,
             directions: self.directions,
             alpha: self.alpha,
@@ -418,6 +429,14 @@ impl<'a> GpView<'a> {
                 self.input_scale,
                 &mut out.grad_mean,
             );
+        }
+        // `new` checked that `linear` is empty or has `d` slopes.
+        let centred = x_raw.iter().zip(self.input_mean);
+        for ((w, (x, m)), g) in self.linear.iter().zip(centred).zip(&mut out.grad_mean) {
+            out.mean += w * (x - m);
+            if want.grad_mean {
+                *g += w;
+            }
         }
         if let Some(j) = self.mean_input {
             // `with_mean_input` checked `j < dim`, so both exist.
@@ -873,6 +892,7 @@ mod tests {
             input_scale: &o.scale,
             output_mean: 0.0,
             output_scale: 1.0,
+            linear: &[],
             features: &o.feats,
             directions: if spec.direction.is_some() {
                 &o.dirs
@@ -999,6 +1019,58 @@ mod tests {
         }
     }
 
+    /// A linear prior mean adds `w . (x - input_mean)` to the mean and `w` to its gradient,
+    /// and leaves the variance alone; a slope count other than 0 or `d` is refused.
+    #[test]
+    fn linear_mean_adds_its_plane_and_slopes() {
+        let spec = KernelSpec::se_ard(3);
+        let dense = setup(spec);
+        let owned = dense.build(&W);
+        let plain = view(&owned, spec, &W, dense.noise);
+        let slopes = [0.7, -1.3, 0.25];
+        let tilted = GpView::new(GpParts {
+            linear: &slopes,
+            ..plain.parts()
+        })
+        .unwrap();
+        let mut scratch = [0.0; 32];
+        let x0 = [0.4, 0.1, 0.9];
+        let p = plain.predict(&x0, Want::ALL, &mut scratch).unwrap();
+        let q = tilted.predict(&x0, Want::ALL, &mut scratch).unwrap();
+        let plane: f64 = (0..3).map(|j| slopes[j] * (x0[j] - owned.mean[j])).sum();
+        assert!((q.mean - (p.mean + plane)).abs() < 1e-12);
+        assert_eq!(q.variance, p.variance);
+        for j in 0..3 {
+            assert!((q.grad_mean[j] - (p.grad_mean[j] + slopes[j])).abs() < 1e-12);
+            assert_eq!(q.grad_variance[j], p.grad_variance[j]);
+            let h = 1e-6;
+            let (mut a, mut b) = (x0, x0);
+            a[j] += h;
+            b[j] -= h;
+            let fd = (tilted.predict(&a, Want::MEAN, &mut scratch).unwrap().mean
+                - tilted.predict(&b, Want::MEAN, &mut scratch).unwrap().mean)
+                / (2.0 * h);
+            assert!((fd - q.grad_mean[j]).abs() < 1e-7 * (1.0 + fd.abs()));
+        }
+        assert!(matches!(
+            GpView::new(GpParts {
+                linear: &slopes[..2],
+                ..plain.parts()
+            }),
+            Err(CoreError::DimensionMismatch {
+                expected: 3,
+                got: 2
+            })
+        ));
+        assert!(matches!(
+            GpView::new(GpParts {
+                linear: &[0.0, f64::NAN, 0.0],
+                ..plain.parts()
+            }),
+            Err(CoreError::NonFinite)
+        ));
+    }
+
     #[test]
     fn bad_calls_return_errors() {
         let spec = KernelSpec::se_ard(3);
@@ -1123,6 +1195,7 @@ mod tests {
                 input_scale: &scale,
                 output_mean: 0.0,
                 output_scale: 1.0,
+                linear: &[],
                 features: &feats,
                 directions: if spec.direction.is_some() { &zg } else { &[] },
                 alpha: &beta,

@@ -28,8 +28,10 @@ use crate::play::Plays;
 /// First value of every layout: `"HBN1"` as little-endian bytes.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"HBN1");
 /// Format version written by [`encode`] and read by [`Tables::model`] (3 adds the play
-/// operators after the prior of `x_0`; tables of version 2 are read as having none).
-pub const VERSION: u32 = 3;
+/// operators after the prior of `x_0`; 4 adds each GP's linear mean, its slope count after
+/// the whitening length and its slopes after the output scalars; tables of version 2 are read
+/// as having no plays, of versions 2 and 3 as having constant means).
+pub const VERSION: u32 = 4;
 /// Oldest format version [`Tables::model`] reads.
 pub const OLDEST_VERSION: u32 = 2;
 /// Last value of every layout (catches a truncated or misaligned table).
@@ -205,17 +207,19 @@ fn encode_gp<S: TableSink>(gp: &GpView<'_>, sink: &mut S) -> Result<(), CoreErro
         None => NONE,
     });
     sink.int(count(p.kernel.whiten().len())?);
+    sink.int(count(p.linear.len())?);
     let factor = match p.variance {
         Variance::Exact { chol_packed } => chol_packed,
         Variance::Sparse { variance_factor } => variance_factor,
     };
     let scalars = [p.output_mean, p.output_scale, p.noise_var];
-    let arrays: [&[f64]; 7] = [
+    let arrays: [&[f64]; 8] = [
         p.kernel.theta(),
         p.kernel.whiten(),
         p.input_mean,
         p.input_scale,
         &scalars,
+        p.linear,
         p.features,
         p.directions,
     ];
@@ -337,7 +341,11 @@ pub fn scratch_len(layout: &[u32]) -> Result<usize, CoreError> {
         keys: &[],
         reals: &[],
     };
-    if r.int()? != MAGIC || !(OLDEST_VERSION..=VERSION).contains(&r.int()?) {
+    if r.int()? != MAGIC {
+        return Err(CoreError::InvalidSpec("not hbn model tables"));
+    }
+    let version = r.int()?;
+    if !(OLDEST_VERSION..=VERSION).contains(&version) {
         return Err(CoreError::InvalidSpec(
             "not hbn model tables of this format version",
         ));
@@ -345,12 +353,12 @@ pub fn scratch_len(layout: &[u32]) -> Result<usize, CoreError> {
     r.ints(4)?;
     let mut len = 0;
     // The two GPs' integers are adjacent: profile, metric, dim, warp units, direction (2),
-    // n, sparse, mean input, whitening length.
+    // n, sparse, mean input, whitening length, and (version 4) the linear mean's length.
     for _ in 0..2 {
         r.ints(6)?;
         let n = r.size()?;
         let sparse = r.int()? != 0;
-        r.ints(2)?;
+        r.ints(if version >= 4 { 3 } else { 2 })?;
         len = len.max(crate::gp::predict_scratch(n, sparse, crate::gp::Want::EKF));
     }
     Ok(len)
@@ -431,8 +439,8 @@ impl<'a> Tables<'a> {
             r_scale,
             std_scale,
         };
-        let transition = read_gp(&mut r)?;
-        let sensor = read_gp(&mut r)?;
+        let transition = read_gp(&mut r, version)?;
+        let sensor = read_gp(&mut r, version)?;
         let (transition_local, sensor_local) = if has_local {
             (Some(read_local(&mut r)?), Some(read_local(&mut r)?))
         } else {
@@ -481,7 +489,7 @@ impl<'a> Tables<'a> {
     }
 }
 
-fn read_gp<'a>(r: &mut Reader<'a>) -> Result<GpView<'a>, CoreError> {
+fn read_gp<'a>(r: &mut Reader<'a>, version: u32) -> Result<GpView<'a>, CoreError> {
     let profile = match r.int()? {
         0 => Profile::SquaredExponential,
         1 => Profile::Matern52,
@@ -512,6 +520,7 @@ fn read_gp<'a>(r: &mut Reader<'a>) -> Result<GpView<'a>, CoreError> {
     let sparse = r.int()? != 0;
     let mean_input = r.opt()?;
     let n_whiten = r.size()?;
+    let n_linear = if version >= 4 { r.size()? } else { 0 };
     let theta = r.reals(spec.n_params())?;
     let whiten = r.reals(n_whiten)?;
     let kernel = Kernel::new(spec, theta, whiten)?;
@@ -520,6 +529,7 @@ fn read_gp<'a>(r: &mut Reader<'a>) -> Result<GpView<'a>, CoreError> {
     let output_mean = r.real()?;
     let output_scale = r.real()?;
     let noise_var = r.real()?;
+    let linear = r.reals(n_linear)?;
     let features = r.reals(mul(n, dim)?)?;
     let directions = r.reals(if direction.is_some() { n } else { 0 })?;
     let alpha = r.reals(n)?;
@@ -540,6 +550,7 @@ fn read_gp<'a>(r: &mut Reader<'a>) -> Result<GpView<'a>, CoreError> {
         input_scale,
         output_mean,
         output_scale,
+        linear,
         features,
         directions,
         alpha,

@@ -35,7 +35,9 @@ pub use model::{
     GP_FORMAT, GP_FORMAT_OLDEST, GP_FORMAT_VERSION, GaussianProcess, SparseFactors, StartReport,
     TrainingReport,
 };
-pub use params::{GpParams, Hyperparameters, RawHyperparameters, SparseParams, SubsetPolicy};
+pub use params::{
+    GpParams, Hyperparameters, MeanFunction, RawHyperparameters, SparseParams, SubsetPolicy,
+};
 pub use train::{FitProgress, StartFailure, Termination, fit, fit_observed};
 
 /// Fewest support points a GP keeps (`GpParams::max_points` must be at least this).

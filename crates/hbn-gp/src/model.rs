@@ -11,8 +11,9 @@ use std::path::Path;
 pub const GP_FORMAT: &str = "hbn-gp";
 /// Current GP file format version (2 added the sparse GP; 3 leaves out the exact GP's
 /// Cholesky factor, recomputed on load; 4 stores a sparse GP's one folded variance factor
-/// instead of two; versions 1 to 3 still load).
-pub const GP_FORMAT_VERSION: u32 = 4;
+/// instead of two; 5 adds the slopes of a linear prior mean, which older builds would ignore;
+/// versions 1 to 4 still load).
+pub const GP_FORMAT_VERSION: u32 = 5;
 /// Oldest GP file format version this build reads.
 pub const GP_FORMAT_OLDEST: u32 = 1;
 
@@ -176,6 +177,10 @@ pub struct GaussianProcess {
     pub(crate) input_scale: Vec<f64>,
     pub(crate) output_mean: f64,
     pub(crate) output_scale: f64,
+    /// Slopes of the linear prior mean in raw units ([`crate::MeanFunction::Linear`]); empty
+    /// for a constant mean (and in files from before the option).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub(crate) linear: Vec<f64>,
     pub(crate) support_x: Vec<f64>,
     pub(crate) support_y: Vec<f64>,
     pub(crate) directions: Vec<f64>,
@@ -212,6 +217,7 @@ impl GaussianProcess {
             input_scale: &self.input_scale,
             output_mean: self.output_mean,
             output_scale: self.output_scale,
+            linear: &self.linear,
             features: &self.features,
             directions: &self.directions,
             alpha: &self.alpha,
@@ -287,9 +293,15 @@ impl GaussianProcess {
     pub fn input_standardisation(&self) -> (&[f64], &[f64]) {
         (&self.input_mean, &self.input_scale)
     }
-    /// Output mean and scale used for standardisation.
+    /// Output mean and scale used for standardisation. With a linear mean the scale is that
+    /// of the residual the kernel models, not of the raw targets.
     pub fn output_standardisation(&self) -> (f64, f64) {
         (self.output_mean, self.output_scale)
+    }
+    /// Slopes of the linear prior mean in raw units, one per input (the prediction's mean is
+    /// `output_mean + sum_j slope_j (x_j - input_mean_j) + GP`); empty for a constant mean.
+    pub fn linear_mean(&self) -> &[f64] {
+        &self.linear
     }
     /// Support inputs (exact GP) or inducing inputs (sparse GP), raw units, `n x dim`.
     pub fn support_inputs(&self) -> &[f64] {

@@ -15,6 +15,56 @@ pub enum SubsetPolicy {
     Random,
 }
 
+/// The GP's prior mean: what the kernel does not have to explain.
+///
+/// With [`MeanFunction::Linear`] the targets' least-squares linear fit on the inputs is
+/// subtracted before the GP is trained (in standardised units, with a tiny ridge), and added
+/// back in prediction, its slopes joining the mean gradient. A relation that is nearly linear,
+/// as `x_k` in `x_{k-1}` at a high sample rate, otherwise makes the likelihood nearly flat along a
+/// ridge of growing signal variance and length scales: the optimiser follows it towards the
+/// box edge and the fit extrapolates like a polynomial. The kernel then models only the
+/// nonlinear rest, whose scale sets the output standardisation. `docs/sparse.md` has the
+/// measurements.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MeanFunction {
+    /// The targets' mean (with `normalize`; zero without). Model files from before this
+    /// option read as this.
+    #[default]
+    Constant,
+    /// The targets' linear least-squares fit on the inputs.
+    Linear,
+}
+
+impl MeanFunction {
+    /// Every choice, in the order of their names.
+    pub const ALL: [MeanFunction; 2] = [MeanFunction::Constant, MeanFunction::Linear];
+
+    /// `constant` or `linear`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            MeanFunction::Constant => "constant",
+            MeanFunction::Linear => "linear",
+        }
+    }
+}
+
+impl std::fmt::Display for MeanFunction {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for MeanFunction {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        MeanFunction::ALL
+            .into_iter()
+            .find(|m| m.name().eq_ignore_ascii_case(s.trim()))
+            .ok_or_else(|| format!("unknown mean `{s}`; choose constant or linear"))
+    }
+}
+
 /// Hyperparameters to start from (standardised units, see [`hbn_core::kernel`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Hyperparameters {
@@ -116,7 +166,9 @@ pub struct GpParams {
     pub seed: u64,
     /// Standardise inputs (per column) and outputs before the kernel. On by default.
     pub normalize: bool,
-    /// Lower bound of the noise variance during optimisation (standardised units, `> 0`).
+    /// Lower bound of the noise variance during optimisation (`> 0`), relative to the
+    /// targets' variance (with `normalize`; raw units without). With a linear mean the kernel
+    /// models the residual, and the floor in its units is scaled to keep this meaning.
     pub noise_floor: f64,
     /// Most support points kept; more samples are reduced by `subset_policy`.
     pub max_points: usize,
@@ -128,6 +180,10 @@ pub struct GpParams {
     /// unused); `None` trains the exact GP.
     #[serde(default)]
     pub sparse: Option<SparseParams>,
+    /// The prior mean ([`MeanFunction`]); parameter sets from before this option read as
+    /// [`MeanFunction::Constant`].
+    #[serde(default)]
+    pub mean: MeanFunction,
 }
 
 impl GpParams {
@@ -147,6 +203,7 @@ impl GpParams {
             subset_policy: SubsetPolicy::FarthestPoint,
             max_jitter_retries: 8,
             sparse: None,
+            mean: MeanFunction::Constant,
         }
     }
 

@@ -955,10 +955,7 @@ pub(crate) fn fit_sparse(
     let spec = params.kernel;
     let d = spec.dim;
     let n = y.len();
-    let ys: Vec<f64> = y
-        .iter()
-        .map(|v| (v - data.output_mean) / data.output_scale)
-        .collect();
+    let ys = &data.std_y;
     let directions: Vec<f64> = x.chunks_exact(d).map(|r| spec.direction_of(r)).collect();
     let whiten = if spec.metric == Metric::Mahalanobis {
         crate::data::whitening(&data.std_x, d)
@@ -993,7 +990,7 @@ pub(crate) fn fit_sparse(
         whiten: &whiten,
         x: &data.std_x,
         directions: &directions,
-        y: &ys,
+        y: ys,
     };
     fn bound_on<'b>(
         data: LikelihoodData<'b>,
@@ -1149,6 +1146,7 @@ pub(crate) fn fit_sparse(
         input_scale: data.input_scale.clone(),
         output_mean: data.output_mean,
         output_scale: data.output_scale,
+        linear: data.linear.clone(),
         support_x,
         support_y: Vec::new(),
         directions: if spec.direction.is_some() {

@@ -5,7 +5,7 @@ use crate::GpError;
 use crate::data::{check_data, column_stats, select_subset, whitening};
 use crate::likelihood::{Likelihood, LikelihoodData, NegLml, Objective, param_of_noise};
 use crate::model::{GaussianProcess, StartReport, TrainingReport};
-use crate::params::GpParams;
+use crate::params::{GpParams, MeanFunction};
 use argmin::core::{Executor, State, TerminationReason, TerminationStatus};
 use argmin::solver::linesearch::MoreThuenteLineSearch;
 use argmin::solver::quasinewton::LBFGS;
@@ -139,6 +139,18 @@ pub fn fit_observed(
     let d = spec.dim;
     let n_all = check_data(x, y, d)?;
     let data = Standardised::new(params, x, y);
+    // The noise floor is relative to the targets' variance; a linear mean leaves the kernel a
+    // residual of smaller scale, in whose units the floor is larger.
+    let floored;
+    let params = if data.output_scale == data.targets_scale {
+        params
+    } else {
+        floored = GpParams {
+            noise_floor: params.noise_floor * (data.targets_scale / data.output_scale).powi(2),
+            ..params.clone()
+        };
+        &floored
+    };
     if let Some(sparse) = &params.sparse {
         return crate::sparse::fit_sparse(params, sparse, x, y, &data, t0, observe);
     }
@@ -148,6 +160,9 @@ pub fn fit_observed(
         output_mean,
         output_scale,
         std_x,
+        std_y,
+        linear,
+        ..
     } = data;
 
     // Subset.
@@ -168,10 +183,7 @@ pub fn fit_observed(
         .iter()
         .flat_map(|&i| std_x[i * d..i * d + d].iter().copied())
         .collect();
-    let ys: Vec<f64> = support_y
-        .iter()
-        .map(|v| (v - output_mean) / output_scale)
-        .collect();
+    let ys: Vec<f64> = keep.iter().map(|&i| std_y[i]).collect();
     let directions: Vec<f64> = support_x
         .chunks_exact(d)
         .map(|r| spec.direction_of(r))
@@ -248,6 +260,7 @@ pub fn fit_observed(
         input_scale,
         output_mean,
         output_scale,
+        linear,
         support_x,
         support_y,
         directions: if spec.direction.is_some() {
@@ -269,15 +282,31 @@ pub fn fit_observed(
     Ok(gp)
 }
 
-/// Standardised copies of the data (statistics of all samples).
+/// Standardised copies of the data (statistics of all samples), with the prior mean removed
+/// from the targets.
 pub(crate) struct Standardised {
     pub input_mean: Vec<f64>,
     pub input_scale: Vec<f64>,
     pub output_mean: f64,
+    /// Scale of the targets the kernel sees: the targets' standard deviation, or with a
+    /// linear mean the product of it and the standardised residual's.
     pub output_scale: f64,
+    /// The targets' standard deviation (1 without `normalize`).
+    pub targets_scale: f64,
     /// `n x d` standardised inputs.
     pub std_x: Vec<f64>,
+    /// `n` standardised targets with the prior mean removed: what the kernel models.
+    pub std_y: Vec<f64>,
+    /// Slopes of the linear mean in raw units (empty for a constant mean).
+    pub linear: Vec<f64>,
 }
+
+/// Ridge added to the standardised inputs' second-moment matrix of the linear mean, relative
+/// to its mean diagonal: keeps collinear inputs (`x_{k-1}` and `x_{k-2}`) solvable.
+const LINEAR_RIDGE: f64 = 1e-8;
+/// Smallest scale of the linear mean's residual, relative to the targets' (the kernel's noise
+/// floor grows as the inverse square of it).
+const MIN_RESIDUAL_SCALE: f64 = 1e-6;
 
 impl Standardised {
     pub fn new(params: &GpParams, x: &[f64], y: &[f64]) -> Self {
@@ -287,23 +316,89 @@ impl Standardised {
         } else {
             (vec![0.0; d], vec![1.0; d])
         };
-        let (output_mean, output_scale) = if params.normalize {
+        let (output_mean, targets_scale) = if params.normalize {
             let (m, s) = column_stats(y, 1);
             (m[0], s[0])
         } else {
             (0.0, 1.0)
         };
-        let std_x = x
+        let std_x: Vec<f64> = x
             .chunks_exact(d)
             .flat_map(|row| (0..d).map(|j| (row[j] - input_mean[j]) / input_scale[j]))
             .collect();
+        let mut std_y: Vec<f64> = y
+            .iter()
+            .map(|v| (v - output_mean) / targets_scale)
+            .collect();
+        let (output_scale, linear) = match params.mean {
+            MeanFunction::Constant => (targets_scale, Vec::new()),
+            MeanFunction::Linear => {
+                let beta = least_squares(&std_x, &std_y, d);
+                for (t, row) in std_y.iter_mut().zip(std_x.chunks_exact(d)) {
+                    *t -= row.iter().zip(&beta).map(|(a, b)| a * b).sum::<f64>();
+                }
+                // Floored so that an exactly linear relation keeps a finite noise floor.
+                let rest_scale = if params.normalize {
+                    column_stats(&std_y, 1).1[0].max(MIN_RESIDUAL_SCALE)
+                } else {
+                    1.0
+                };
+                for t in &mut std_y {
+                    *t /= rest_scale;
+                }
+                let slopes = beta
+                    .iter()
+                    .zip(&input_scale)
+                    .map(|(b, s)| b * targets_scale / s)
+                    .collect();
+                (targets_scale * rest_scale, slopes)
+            }
+        };
         Self {
             input_mean,
             input_scale,
             output_mean,
             output_scale,
+            targets_scale,
             std_x,
+            std_y,
+            linear,
         }
+    }
+}
+
+/// `beta` minimising `|y - X beta|^2 + ridge |beta|^2` for row-major `x` (`n x d`), by the
+/// Cholesky factor of the `d x d` normal equations (`d <= MAX_DIM`). Zero when the system is
+/// not positive definite even with the ridge (a constant input column is already zero after
+/// standardisation and gets slope zero).
+fn least_squares(x: &[f64], y: &[f64], d: usize) -> Vec<f64> {
+    let n = y.len().max(1) as f64;
+    let mut a = faer::Mat::<f64>::zeros(d, d);
+    let mut b = faer::Mat::<f64>::zeros(d, 1);
+    for (row, t) in x.chunks_exact(d).zip(y) {
+        for i in 0..d {
+            b[(i, 0)] += row[i] * t / n;
+            for j in 0..=i {
+                a[(i, j)] += row[i] * row[j] / n;
+            }
+        }
+    }
+    let mean_diag = (0..d).map(|i| a[(i, i)]).sum::<f64>() / d.max(1) as f64;
+    for i in 0..d {
+        a[(i, i)] += LINEAR_RIDGE * mean_diag.max(f64::MIN_POSITIVE);
+    }
+    match a.as_ref().llt(faer::Side::Lower) {
+        Ok(llt) => {
+            use faer::linalg::solvers::Solve;
+            let beta = llt.solve(&b);
+            let beta: Vec<f64> = (0..d).map(|i| beta[(i, 0)]).collect();
+            if beta.iter().all(|v| v.is_finite()) {
+                beta
+            } else {
+                vec![0.0; d]
+            }
+        }
+        Err(_) => vec![0.0; d],
     }
 }
 

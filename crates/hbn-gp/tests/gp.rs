@@ -4,7 +4,10 @@
 use hbn_core::rng::Rng;
 use hbn_core::{KernelSpec, Metric, Profile, Want};
 use hbn_gp::likelihood::{Likelihood, LikelihoodData};
-use hbn_gp::{GaussianProcess, GpError, GpParams, Hyperparameters, SubsetPolicy, fit};
+use hbn_gp::{
+    GaussianProcess, GpError, GpParams, Hyperparameters, MeanFunction, SparseParams, SubsetPolicy,
+    fit,
+};
 
 fn fixture(name: &str) -> String {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -396,5 +399,65 @@ fn termination_is_reported_per_start() {
         assert_eq!(seen.len(), 2);
         assert_eq!(seen[0].0, 0);
         assert_eq!(seen[0].1, want, "max_iters {max_iters}");
+    }
+}
+
+/// A linear prior mean: on a plane plus a small wiggle, the fitted slopes are the plane's, the
+/// kernel sees only the wiggle (its output scale is the wiggle's, not the plane's), and far
+/// outside the data the prediction follows the plane, where a constant-mean GP falls back to
+/// the targets' mean. Exact and sparse alike; a constant mean has no slopes.
+#[test]
+fn linear_mean_follows_the_plane_outside_the_data() {
+    let mut rng = Rng::new(5);
+    let n = 400;
+    let x: Vec<f64> = (0..2 * n).map(|_| rng.uniform_in(-1.0, 1.0)).collect();
+    let plane = |r: &[f64]| 2.0 * r[0] - 3.0 * r[1] + 0.5;
+    let y: Vec<f64> = x
+        .chunks_exact(2)
+        .map(|r| plane(r) + 0.1 * (4.0 * r[0]).sin() + 0.01 * rng.normal())
+        .collect();
+    let far = [6.0, -4.0];
+    for sparse in [None, Some(SparseParams::new(32))] {
+        let base = GpParams {
+            sparse: sparse.clone(),
+            n_starts: 1,
+            ..GpParams::new(KernelSpec::se_ard(2))
+        };
+        let constant = fit(&base, &x, &y).unwrap();
+        assert!(constant.linear_mean().is_empty());
+        let linear = fit(
+            &GpParams {
+                mean: MeanFunction::Linear,
+                ..base
+            },
+            &x,
+            &y,
+        )
+        .unwrap();
+        let slopes = linear.linear_mean();
+        assert!(
+            (slopes[0] - 2.0).abs() < 0.1 && (slopes[1] + 3.0).abs() < 0.05,
+            "{slopes:?}"
+        );
+        let (_, scale) = linear.output_standardisation();
+        assert!(
+            scale < 0.15,
+            "the kernel models the wiggle only: scale {scale}"
+        );
+        let p = linear.predict(&far, Want::EKF).unwrap();
+        assert!(
+            (p.mean - plane(&far)).abs() < 1.5,
+            "{} vs {}",
+            p.mean,
+            plane(&far)
+        );
+        assert!((p.grad_mean[0] - slopes[0]).abs() < 1e-6);
+        let q = constant.predict(&far, Want::EKF).unwrap();
+        assert!((q.mean - plane(&far)).abs() > 10.0, "{}", q.mean);
+        // Inside the data both fit.
+        for r in x.chunks_exact(2).take(20) {
+            let m = linear.predict(r, Want::MEAN).unwrap().mean;
+            assert!((m - plane(r) - 0.1 * (4.0 * r[0]).sin()).abs() < 0.03);
+        }
     }
 }

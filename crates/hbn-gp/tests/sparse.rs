@@ -6,7 +6,9 @@ use hbn_core::rng::Rng;
 use hbn_core::{KernelSpec, Metric, Profile, Want};
 use hbn_gp::likelihood::LikelihoodData;
 use hbn_gp::sparse::{SparseBound, greedy_variance_selection};
-use hbn_gp::{GaussianProcess, GpError, GpParams, Hyperparameters, SparseParams, fit};
+use hbn_gp::{
+    GaussianProcess, GpError, GpParams, Hyperparameters, MeanFunction, SparseParams, fit,
+};
 
 fn fixture(name: &str) -> String {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -82,9 +84,23 @@ fn equals_the_exact_gp_when_z_is_x() {
         .into_iter()
         .collect();
     let mut worst: f64 = 0.0;
-    for spec in kernels(3) {
-        let exact = fit(&fixed(spec, 0.05), &x, &y).unwrap();
-        let mut params = fixed(spec, 0.05);
+    for (spec, mean) in kernels(3)
+        .into_iter()
+        .flat_map(|s| MeanFunction::ALL.map(|m| (s, m)))
+    {
+        let exact = fit(
+            &GpParams {
+                mean,
+                ..fixed(spec, 0.05)
+            },
+            &x,
+            &y,
+        )
+        .unwrap();
+        let mut params = GpParams {
+            mean,
+            ..fixed(spec, 0.05)
+        };
         params.sparse = Some(SparseParams {
             inducing_inputs: Some(x.clone()),
             ..SparseParams::new(40)
@@ -511,6 +527,24 @@ fn persistence_round_trips_and_old_files_load() {
     let back = GaussianProcess::from_json(&text, "mem").unwrap();
     assert_eq!(gp, back);
     assert!(back.is_sparse());
+    // A linear mean's slopes are written and read back.
+    let tilted = fit(
+        &GpParams {
+            mean: MeanFunction::Linear,
+            ..params.clone()
+        },
+        &x,
+        &y,
+    )
+    .unwrap();
+    assert_eq!(tilted.linear_mean().len(), 2);
+    let back = GaussianProcess::from_json(&tilted.to_json().unwrap(), "mem").unwrap();
+    assert_eq!(tilted, back);
+    let at = [0.3, -0.7];
+    assert_eq!(
+        back.predict(&at, Want::ALL).unwrap(),
+        tilted.predict(&at, Want::ALL).unwrap()
+    );
     // A version-1 (exact-only) file, as written before the sparse GP existed.
     let exact = fit(&fixed(KernelSpec::se_ard(2), 0.05), &x[..60], &y[..30]).unwrap();
     let mut v: serde_json::Value = serde_json::from_str(&exact.to_json().unwrap()).unwrap();

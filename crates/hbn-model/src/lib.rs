@@ -51,6 +51,8 @@ pub use dataset::{Dataset, MIN_SAMPLES, Sequence, Table, build_dataset};
 pub use error::{DataError, ModelError, ModelFileProblem, Signal};
 pub use estimate::{Estimate, NEAR_UNOBSERVABLE, OBSERVABILITY_WINDOW, ObservabilitySummary};
 pub use filter::{Filter, FilterOutput};
+/// The GPs' prior mean ([`HbnParams::gp_mean`]).
+pub use hbn_gp::MeanFunction;
 pub use local::LocalData;
 pub use model::{
     GpRole, HbnModel, INIT_NEIGHBOURS, MODEL_FORMAT, MODEL_FORMAT_OLDEST, MODEL_FORMAT_VERSION,

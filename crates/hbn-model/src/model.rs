@@ -18,8 +18,9 @@ use std::time::Instant;
 pub const MODEL_FORMAT: &str = "hbn-model";
 /// Current model file format version (2 leaves out the exact GPs' Cholesky factors, which
 /// are recomputed on load: a default model file went from 6.4 MB to under 1 MB; 3 stores a
-/// sparse GP's one folded variance factor instead of two, folded on load from older files).
-pub const MODEL_FORMAT_VERSION: u32 = 3;
+/// sparse GP's one folded variance factor instead of two, folded on load from older files;
+/// 4 adds the GPs' linear prior mean, which older builds would ignore and so mispredict).
+pub const MODEL_FORMAT_VERSION: u32 = 4;
 /// Oldest model file format version this build reads (version 1 files carry the factors).
 pub const MODEL_FORMAT_OLDEST: u32 = 1;
 

@@ -9,7 +9,7 @@
 
 use crate::dataset::{SENSOR_DIM, SENSOR_DIRECTION, TRANSITION_DIM, TRANSITION_DIRECTION};
 use hbn_core::{KernelSpec, LocalRegression, Metric, Profile};
-use hbn_gp::{GpParams, SparseParams, SubsetPolicy};
+use hbn_gp::{GpParams, MeanFunction, SparseParams, SubsetPolicy};
 use serde::{Deserialize, Serialize};
 use std::str::FromStr;
 
@@ -292,6 +292,11 @@ pub struct HbnParams {
     /// this option read as [`Increments::None`].
     #[serde(default)]
     pub increments: Increments,
+    /// Prior mean of both GPs ([`MeanFunction`]): constant, or a linear fit on the inputs
+    /// that the kernel models the rest of. Model files written before this option read as
+    /// [`MeanFunction::Constant`].
+    #[serde(default)]
+    pub gp_mean: MeanFunction,
     /// Play operators that give the transition GP the input's long memory
     /// ([`hbn_core::play`]): their radii as fractions of the training input's range
     /// (`max u - min u`), each in `(0, 1]`, at most [`hbn_core::MAX_PLAYS`]. Empty: the
@@ -378,6 +383,7 @@ impl Default for HbnParams {
             blr: LocalRegression::default(),
             validation: 0.25,
             increments: Increments::None,
+            gp_mean: MeanFunction::Constant,
             memory: DEFAULT_MEMORY.to_vec(),
             select: Selection::default(),
             signals: Signals::default(),
@@ -422,11 +428,13 @@ pub enum Param {
     Validation,
     /// [`HbnParams::memory`] (a list of radii, possibly empty).
     Memory,
+    /// [`HbnParams::gp_mean`] (`constant` or `linear`).
+    Mean,
 }
 
 impl Param {
     /// Every parameter, in the order front ends list them.
-    pub const ALL: [Param; 16] = [
+    pub const ALL: [Param; 17] = [
         Param::Rate,
         Param::Kernel,
         Param::TransitionKernel,
@@ -443,6 +451,7 @@ impl Param {
         Param::Blr,
         Param::Validation,
         Param::Memory,
+        Param::Mean,
     ];
 
     /// The Rust name (the field of [`HbnParams`]; `kernel` for the shorthand).
@@ -464,6 +473,7 @@ impl Param {
             Param::Blr => "blr",
             Param::Validation => "validation",
             Param::Memory => "memory",
+            Param::Mean => "gp_mean",
         }
     }
 }
@@ -617,6 +627,7 @@ impl CheckedHbnParams {
         g.seed = p.seed;
         g.normalize = p.normalize;
         g.noise_floor = p.noise_floor;
+        g.mean = p.gp_mean;
         g
     }
 }
@@ -964,6 +975,18 @@ impl HbnParams {
             (Param::Memory, _) => {
                 return wrong("a list of numbers (fractions of the input's range), or none");
             }
+            (Param::Mean, ParamValue::Text(t)) => {
+                self.gp_mean = t.parse().map_err(|_| {
+                    ConfigError::new(
+                        param,
+                        Problem::Unknown {
+                            given: t,
+                            choices: "constant, linear",
+                        },
+                    )
+                })?;
+            }
+            (Param::Mean, _) => return wrong("a prior mean name"),
             (Param::Rate | Param::NoiseFloor | Param::BlrWindow | Param::Validation, _) => {
                 return wrong("a number");
             }
@@ -1015,6 +1038,7 @@ impl HbnParams {
             Param::Memory => {
                 ParamValue::List(self.memory.iter().map(|&r| ParamValue::Real(r)).collect())
             }
+            Param::Mean => ParamValue::Text(self.gp_mean.name().to_owned()),
             Param::Blr => return None,
         })
     }

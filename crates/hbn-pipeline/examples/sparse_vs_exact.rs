@@ -6,7 +6,8 @@
 //! `cargo run --release -p hbn-pipeline --example sparse_vs_exact -- OUT.json [systems] [gains]
 //! [seeds] [m,...]`; with `SPARSE_ONLY=1` in the environment the exact model is skipped (its
 //! figures do not change when only the sparse GP does), and `INCREMENTS=none|transition|both`
-//! sets what both models learn ([`hbn_model::Increments`]).
+//! sets what both models learn ([`hbn_model::Increments`]), `MEAN=constant|linear` their
+//! GPs' prior mean ([`hbn_model::MeanFunction`]).
 use hbn_model::HbnParams;
 use hbn_pipeline::experiment::{ExperimentConfig, run_case};
 use hbn_sim::SystemKind;
@@ -29,6 +30,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Ok(v) => v.parse()?,
         Err(_) => hbn_model::Increments::default(),
     };
+    let gp_mean: hbn_model::MeanFunction = match std::env::var("MEAN") {
+        Ok(v) => v.parse()?,
+        Err(_) => hbn_model::MeanFunction::default(),
+    };
     let mut rows = Vec::new();
     for &system in &systems {
         for &gain in &gains {
@@ -47,6 +52,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         params: HbnParams {
                             n_inducing,
                             increments,
+                            gp_mean,
                             ..HbnParams::default()
                         },
                         ..ExperimentConfig::default()

@@ -230,6 +230,12 @@ class GaussianProcess:
         Fixed starting inducing inputs (raw units) for the sparse GP, instead of the selection.
     optimize_inducing : bool, default False
         Learn the inducing inputs together with the hyperparameters (sparse GP only).
+    mean : {"constant", "linear"}, optional
+        The prior mean. ``"linear"`` subtracts the targets' least-squares plane on the inputs
+        before the kernel sees them and adds it back in prediction (its slopes join the mean
+        gradient), so a nearly linear relation does not push the kernel to huge length scales
+        and signal variances, and predictions far from the data follow the plane. The default
+        ``"constant"`` is the targets' mean.
 
     Settings left at ``None`` take the library defaults, :func:`default_gp_params`.
 
@@ -268,8 +274,10 @@ class GaussianProcess:
         n_inducing: Optional[int] = None,
         inducing_points: Optional[Any] = None,
         optimize_inducing: bool = False,
+        mean: Optional[str] = None,
     ) -> None:
         self.kernel = kernel
+        self.mean = mean
         self.n_inducing = n_inducing
         self.inducing_points = inducing_points
         self.optimize_inducing = optimize_inducing
@@ -351,6 +359,7 @@ class GaussianProcess:
             m,
             Z,
             bool(self.optimize_inducing),
+            None if self.mean is None else str(self.mean),
         )
         return self
 
@@ -618,7 +627,8 @@ class HysteresisModel:
     :attr:`tuning`), ``memory`` (the input's long memory: radii of play operators whose outputs
     the transition GP reads besides ``u_{k-1}`` and ``u_{k-2}``, as fractions of the training
     input's range, at most 4; ``[]`` for the thesis' four inputs; default ``[0.05, 0.2]``, see
-    ``docs/memory.md``). They are the flags of ``hbn train``. A bad value
+    ``docs/memory.md``), ``mean`` (the GPs' prior mean, ``"constant"`` or ``"linear"``; see
+    :class:`GaussianProcess`). They are the flags of ``hbn train``. A bad value
     raises :class:`ConfigError` whose ``keyword`` names it.
 
     Model selection: ``kernel`` and ``n_inducing`` also take a list (``kernel=["matern52",

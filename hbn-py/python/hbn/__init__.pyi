@@ -69,6 +69,7 @@ class GaussianProcess:
     max_iter: Optional[int]
     max_points: Optional[int]
     seed: Optional[int]
+    mean: Optional[str]
     def __init__(
         self,
         kernel: str = "se-ard",
@@ -84,6 +85,7 @@ class GaussianProcess:
         n_inducing: Optional[int] = None,
         inducing_points: Optional[ArrayLike] = None,
         optimize_inducing: bool = False,
+        mean: Optional[str] = None,
     ) -> None: ...
     def fit(self, X: ArrayLike, y: ArrayLike) -> GaussianProcess: ...
     @overload

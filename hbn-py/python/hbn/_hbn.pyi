@@ -37,6 +37,7 @@ class GaussianProcessCore:
         n_inducing: Optional[int] = None,
         inducing_points: Optional[npt.NDArray[np.float64]] = None,
         optimize_inducing: bool = False,
+        mean: Optional[str] = None,
     ) -> GaussianProcessCore: ...
     def predict(
         self, x: npt.NDArray[np.float64], variance: bool, grad: bool

@@ -47,6 +47,7 @@ impl Gp {
             input_scale: &self.scale,
             output_mean: 0.0,
             output_scale: 1.0,
+            linear: &[],
             features: &self.feats,
             directions: &[],
             alpha: &self.alpha,
