@@ -4,7 +4,8 @@
 //! `cargo bench --bench train_sparse -- [SAMPLES] [M]` (defaults 100000 and 128). Prints one
 //! line per run: samples, m, seconds for both GPs, and the training report's figures, after
 //! a timeline: when each GP's search starts ended (the refinement on every sample, the
-//! held-out refits and the filter tuning follow).
+//! held-out refits and the filter tuning follow). `MEAN=linear` in the environment gives both
+//! GPs a linear prior mean ([`hbn::model::MeanFunction`]).
 
 use hbn::model::{HbnModel, HbnParams, Sequence};
 use hbn::sim::{InputKind, SimConfig, SystemKind, generate_input, simulate};
@@ -46,8 +47,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             y: &t.y,
         })
         .collect();
+    let gp_mean = match std::env::var("MEAN") {
+        Ok(v) => v.parse()?,
+        Err(_) => hbn::model::MeanFunction::default(),
+    };
     let params = HbnParams {
         n_inducing: Some(m),
+        gp_mean,
         ..HbnParams::default()
     };
     let checked = params.check()?;

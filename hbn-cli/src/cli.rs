@@ -239,6 +239,29 @@ impl std::fmt::Display for Memory {
     }
 }
 
+/// `--max-signal-variance`: a bound, or `none`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cap(pub Option<f64>);
+
+impl std::fmt::Display for Cap {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.0 {
+            Some(v) => write!(f, "{v}"),
+            None => f.write_str("none"),
+        }
+    }
+}
+
+fn parse_cap(s: &str) -> Result<Cap, String> {
+    if s.trim().eq_ignore_ascii_case("none") {
+        return Ok(Cap(None));
+    }
+    s.trim()
+        .parse::<f64>()
+        .map(|v| Cap(Some(v)))
+        .map_err(|_| format!("expected a number or `none`, got `{s}`"))
+}
+
 /// `--mean`: the GPs' prior mean by name.
 fn parse_mean(s: &str) -> Result<MeanFunction, String> {
     s.parse()
@@ -446,6 +469,11 @@ pub struct TrainArgs {
     /// the GP's inputs, with the kernel modelling the rest). docs/sparse.md.
     #[arg(long, value_parser = parse_mean, default_value_t = params().gp_mean, value_name = "constant|linear")]
     pub mean: MeanFunction,
+    /// Largest signal variance of both GPs, as a multiple of the variance of what each kernel
+    /// models, or `none` for only the 1e5 box: keeps a near-linear fit from extrapolating like
+    /// a polynomial. docs/sparse.md.
+    #[arg(long, value_parser = parse_cap, default_value_t = Cap(params().max_signal_variance), value_name = "V|none")]
+    pub max_signal_variance: Cap,
     /// Log reading options.
     #[command(flatten)]
     pub read: ReadArgs,

@@ -38,6 +38,7 @@ impl TrainArgs {
             validation: self.validation,
             memory: self.memory.0.clone(),
             gp_mean: self.mean,
+            max_signal_variance: self.max_signal_variance.0,
             ..d
         }
     }

@@ -29,6 +29,7 @@ pub fn flag(setting: Setting) -> &'static str {
             Param::Validation => "--validation",
             Param::Memory => "--memory",
             Param::Mean => "--mean",
+            Param::MaxSignalVariance => "--max-signal-variance",
         },
         Setting::Log(o) => match o {
             LogOption::Rate => "--rate",

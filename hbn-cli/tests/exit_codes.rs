@@ -457,6 +457,16 @@ fn every_parameter_check_names_its_flag() {
         (train(&["--kernel", "rbf"]), "--kernel", 2),
         (train(&["--subset", "all"]), "--subset", 2),
         (train(&["--mean", "quadratic"]), "--mean", 2),
+        (
+            train(&["--max-signal-variance", "0"]),
+            "--max-signal-variance",
+            1,
+        ),
+        (
+            train(&["--max-signal-variance", "lots"]),
+            "--max-signal-variance",
+            2,
+        ),
         (train(&["--time-source", "gps"]), "--time-source", 2),
     ] {
         let out = hbn(dir, &args);

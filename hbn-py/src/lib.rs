@@ -62,6 +62,7 @@ fn param_keyword(p: Param) -> &'static str {
         Param::Validation => "validation",
         Param::Memory => "memory",
         Param::Mean => "mean",
+        Param::MaxSignalVariance => "max_signal_variance",
     }
 }
 

@@ -147,6 +147,8 @@ BAD_PARAMS = [
     ("memory", "lots"),
     ("mean", "quadratic"),
     ("mean", 1),
+    ("max_signal_variance", 0.0),
+    ("max_signal_variance", "lots"),
 ]
 
 

@@ -104,6 +104,8 @@ impl EvalMemo {
 pub struct Likelihood<'a> {
     data: LikelihoodData<'a>,
     noise_floor: f64,
+    /// Upper soft bound of `ln s_f^2` ([`Likelihood::with_max_signal_variance`]).
+    pub(crate) signal_log_max: f64,
     max_jitter_retries: usize,
     memo: EvalMemo,
 }
@@ -134,9 +136,17 @@ impl<'a> Likelihood<'a> {
         Self {
             data,
             noise_floor,
+            signal_log_max: LOG_BOUND,
             max_jitter_retries,
             memo: EvalMemo::default(),
         }
+    }
+
+    /// Keeps `s_f^2` below `max` (kernel units) by the box's smooth penalty
+    /// ([`GpParams::max_signal_variance`](crate::GpParams::max_signal_variance)).
+    pub fn with_max_signal_variance(mut self, max: f64) -> Self {
+        self.signal_log_max = max.ln().min(LOG_BOUND);
+        self
     }
 
     /// Number of optimised parameters.
@@ -320,7 +330,7 @@ impl<'a> Likelihood<'a> {
         let trace_w: f64 = (0..n).map(|i| alpha[i] * alpha[i] - kinv[(i, i)]).sum();
         grad.push(0.5 * trace_w * p[n_k].exp());
         // Soft bounds on every log-parameter (warp shifts a are not logs but share the bound).
-        let penalty = soft_bound_penalty(p, &mut grad, LOG_BOUND);
+        let penalty = soft_bound_penalty(p, &mut grad, self.signal_log_max);
         let ev = Evaluation {
             lml: solved.lml - penalty,
             grad,

@@ -66,7 +66,7 @@ pub struct TrainingReport {
     /// Wall-clock seconds.
     pub seconds: f64,
     /// The optimised signal variance ended at its upper bound (the box's `1e5`, or a sparse
-    /// GP's [`crate::SparseParams::max_signal_variance`]), in the kernel's units.
+    /// GP's [`crate::GpParams::max_signal_variance`]), in the kernel's units.
     #[serde(default)]
     pub signal_variance_at_bound: Option<f64>,
 }

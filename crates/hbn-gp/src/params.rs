@@ -108,15 +108,6 @@ pub struct SparseParams {
     /// Iterations of the refinement on every sample (0 skips it).
     #[serde(default = "default_refine_iters")]
     pub refine_iters: u64,
-    /// Largest signal variance `s_f^2` the optimiser may reach, in the units the kernel sees
-    /// (the targets' variance when `normalize`), kept by the same smooth penalty as the
-    /// `[1e-5, 1e5]` box of every log-parameter. `None` (the default): only the box. Near-linear relations make the bound nearly flat along a ridge of growing `s_f^2`
-    /// and length scales; on noise-free data the optimiser follows it to the box edge, a
-    /// near-polynomial fit that extrapolates wildly. A bound of 100 cut the EKF's nRMSE to
-    /// 0.86x (geometric mean, 18 cells, one seed) but made the 100k-sample fit 1.5x slower;
-    /// `docs/sparse.md` has the measurements.
-    #[serde(default)]
-    pub max_signal_variance: Option<f64>,
 }
 
 fn default_search_samples() -> usize {
@@ -141,7 +132,6 @@ impl SparseParams {
             optimize_inducing: false,
             search_samples: Self::DEFAULT_SEARCH_SAMPLES,
             refine_iters: Self::DEFAULT_REFINE_ITERS,
-            max_signal_variance: None,
         }
     }
 }
@@ -184,6 +174,16 @@ pub struct GpParams {
     /// [`MeanFunction::Constant`].
     #[serde(default)]
     pub mean: MeanFunction,
+    /// Largest signal variance `s_f^2` the optimiser may reach, in the units the kernel sees
+    /// (the variance of what it models: the targets', or with a linear mean the residual's,
+    /// when `normalize`), kept by the same smooth penalty as the `[1e-5, 1e5]` box of every
+    /// log-parameter; exact and sparse GPs alike. `None`: only the box. Near-linear and
+    /// near-polynomial relations make the likelihood nearly flat along a ridge of growing
+    /// `s_f^2` and length scales; on noise-free data the optimiser follows it to the box edge,
+    /// a fit that extrapolates like a polynomial and can carry a filter away from the data.
+    /// `docs/sparse.md` has the measurements.
+    #[serde(default)]
+    pub max_signal_variance: Option<f64>,
 }
 
 impl GpParams {
@@ -204,6 +204,7 @@ impl GpParams {
             max_jitter_retries: 8,
             sparse: None,
             mean: MeanFunction::Constant,
+            max_signal_variance: None,
         }
     }
 
@@ -232,17 +233,17 @@ impl GpParams {
                 ),
             );
         }
+        if let Some(v) = self.max_signal_variance
+            && !(v.is_finite() && v > 0.0)
+        {
+            return bad(
+                "max_signal_variance",
+                format!("must be finite and > 0, got {v}"),
+            );
+        }
         if let Some(sp) = &self.sparse {
             if sp.n_inducing == 0 {
                 return bad("n_inducing", "must be >= 1".into());
-            }
-            if let Some(v) = sp.max_signal_variance
-                && !(v.is_finite() && v > 0.0)
-            {
-                return bad(
-                    "max_signal_variance",
-                    format!("must be finite and > 0, got {v}"),
-                );
             }
             if sp.search_samples < 2 {
                 return bad(

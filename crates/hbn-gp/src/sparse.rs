@@ -258,7 +258,7 @@ impl<'a> SparseBound<'a> {
 
     /// Keeps the signal variance below `max` (standardised units) with the same smooth
     /// penalty as every log-parameter's `[-LOG_BOUND, LOG_BOUND]` box
-    /// ([`SparseParams::max_signal_variance`](crate::SparseParams::max_signal_variance)).
+    /// ([`GpParams::max_signal_variance`](crate::GpParams::max_signal_variance)).
     pub fn with_max_signal_variance(mut self, max: f64) -> Self {
         self.signal_log_max = max.ln().min(LOG_BOUND);
         self
@@ -1007,7 +1007,7 @@ pub(crate) fn fit_sparse(
             params.noise_floor,
             params.max_jitter_retries,
         )
-        .with_max_signal_variance(sp.max_signal_variance.unwrap_or(f64::INFINITY))
+        .with_max_signal_variance(params.max_signal_variance.unwrap_or(f64::INFINITY))
     }
     let mut report = TrainingReport {
         n_samples: n,

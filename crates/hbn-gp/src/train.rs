@@ -204,7 +204,8 @@ pub fn fit_observed(
         },
         params.noise_floor,
         params.max_jitter_retries,
-    );
+    )
+    .with_max_signal_variance(params.max_signal_variance.unwrap_or(f64::INFINITY));
 
     let (theta0, noise0) = starting_point(params, &input_scale, output_scale)?;
     let mut report = TrainingReport {
@@ -225,7 +226,7 @@ pub fn fit_observed(
             observe,
         )?;
         report.add_stats(lik.stats());
-        report.check_signal_bound(p[0], crate::likelihood::LOG_BOUND);
+        report.check_signal_bound(p[0], lik.signal_log_max);
         let n_k = spec.n_params();
         (p[..n_k].to_vec(), lik.noise_of(p[n_k]))
     } else {

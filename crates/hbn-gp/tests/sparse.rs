@@ -312,20 +312,27 @@ fn gradients_match_finite_differences_with_jitter_on_k_mm() {
 
 /// On noise-free data the bound over many samples pulls the signal variance toward the box
 /// edge (a near-polynomial fit); `max_signal_variance` holds it at the value asked (in the
-/// targets' variance), and the fit stays accurate.
+/// targets' variance), and the fit stays accurate. The sparse GP here; the exact GP below.
 #[test]
 fn max_signal_variance_holds_on_noise_free_data() {
-    let n = 4000;
+    max_signal_variance_holds(Some(SparseParams::new(16)), 4000);
+}
+
+/// [`max_signal_variance_holds_on_noise_free_data`] for the exact GP.
+#[test]
+fn max_signal_variance_holds_for_the_exact_gp() {
+    max_signal_variance_holds(None, 300);
+}
+
+fn max_signal_variance_holds(sparse: Option<SparseParams>, n: usize) {
     let mut rng = Rng::new(11);
     let x: Vec<f64> = (0..n).map(|_| rng.uniform_in(-2.0, 2.0)).collect();
     let y: Vec<f64> = x.iter().map(|v| v * v * v - v).collect();
     let fit_with = |max: Option<f64>| {
         let mut params = GpParams::new(KernelSpec::se_ard(1));
         params.n_starts = 1;
-        params.sparse = Some(SparseParams {
-            max_signal_variance: max,
-            ..SparseParams::new(16)
-        });
+        params.max_signal_variance = max;
+        params.sparse = sparse.clone();
         fit(&params, &x, &y).unwrap()
     };
     let free = fit_with(None);
@@ -645,10 +652,8 @@ fn bad_input_gives_typed_errors() {
         })
     ));
     for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
-        params.sparse = Some(SparseParams {
-            max_signal_variance: Some(bad),
-            ..SparseParams::new(3)
-        });
+        params.sparse = Some(SparseParams::new(3));
+        params.max_signal_variance = Some(bad);
         assert!(matches!(
             fit(&params, &x, &y),
             Err(GpError::InvalidParameter {
@@ -657,6 +662,7 @@ fn bad_input_gives_typed_errors() {
             })
         ));
     }
+    params.max_signal_variance = None;
     // An absurd number of inducing points is capped by the data, not an allocation failure.
     params.sparse = Some(SparseParams::new(usize::MAX));
     params.n_starts = 1;

@@ -297,6 +297,12 @@ pub struct HbnParams {
     /// [`MeanFunction::Constant`].
     #[serde(default)]
     pub gp_mean: MeanFunction,
+    /// Largest signal variance of both GPs, relative to the variance of what each kernel
+    /// models (the targets', or with a linear mean the residual's), or `None` for only the
+    /// `1e5` box ([`hbn_gp::GpParams::max_signal_variance`]). Model files written before this
+    /// option read as `None`.
+    #[serde(default)]
+    pub max_signal_variance: Option<f64>,
     /// Play operators that give the transition GP the input's long memory
     /// ([`hbn_core::play`]): their radii as fractions of the training input's range
     /// (`max u - min u`), each in `(0, 1]`, at most [`hbn_core::MAX_PLAYS`]. Empty: the
@@ -384,6 +390,7 @@ impl Default for HbnParams {
             validation: 0.25,
             increments: Increments::None,
             gp_mean: MeanFunction::Constant,
+            max_signal_variance: None,
             memory: DEFAULT_MEMORY.to_vec(),
             select: Selection::default(),
             signals: Signals::default(),
@@ -430,11 +437,13 @@ pub enum Param {
     Memory,
     /// [`HbnParams::gp_mean`] (`constant` or `linear`).
     Mean,
+    /// [`HbnParams::max_signal_variance`] (a number, or `none`).
+    MaxSignalVariance,
 }
 
 impl Param {
     /// Every parameter, in the order front ends list them.
-    pub const ALL: [Param; 17] = [
+    pub const ALL: [Param; 18] = [
         Param::Rate,
         Param::Kernel,
         Param::TransitionKernel,
@@ -452,6 +461,7 @@ impl Param {
         Param::Validation,
         Param::Memory,
         Param::Mean,
+        Param::MaxSignalVariance,
     ];
 
     /// The Rust name (the field of [`HbnParams`]; `kernel` for the shorthand).
@@ -474,6 +484,7 @@ impl Param {
             Param::Validation => "validation",
             Param::Memory => "memory",
             Param::Mean => "gp_mean",
+            Param::MaxSignalVariance => "max_signal_variance",
         }
     }
 }
@@ -628,6 +639,7 @@ impl CheckedHbnParams {
         g.normalize = p.normalize;
         g.noise_floor = p.noise_floor;
         g.mean = p.gp_mean;
+        g.max_signal_variance = p.max_signal_variance;
         g
     }
 }
@@ -771,6 +783,9 @@ impl HbnParams {
         at_least(Param::Starts, self.n_starts as u64, 1)?;
         at_least(Param::MaxIters, self.max_iters, 1)?;
         positive(Param::NoiseFloor, self.noise_floor)?;
+        if let Some(v) = self.max_signal_variance {
+            positive(Param::MaxSignalVariance, v)?;
+        }
         if !(self.blr_window.is_finite() && self.blr_window > 0.0 && self.blr_window <= 0.5) {
             return Err(ConfigError::new(
                 Param::BlrWindow,
@@ -987,6 +1002,16 @@ impl HbnParams {
                 })?;
             }
             (Param::Mean, _) => return wrong("a prior mean name"),
+            (Param::MaxSignalVariance, ParamValue::Real(v)) => self.max_signal_variance = Some(v),
+            (Param::MaxSignalVariance, ParamValue::Int(v)) => {
+                self.max_signal_variance = Some(v as f64);
+            }
+            (Param::MaxSignalVariance, ParamValue::Text(t))
+                if t.trim().eq_ignore_ascii_case("none") =>
+            {
+                self.max_signal_variance = None;
+            }
+            (Param::MaxSignalVariance, _) => return wrong("a number, or none"),
             (Param::Rate | Param::NoiseFloor | Param::BlrWindow | Param::Validation, _) => {
                 return wrong("a number");
             }
@@ -1039,6 +1064,10 @@ impl HbnParams {
                 ParamValue::List(self.memory.iter().map(|&r| ParamValue::Real(r)).collect())
             }
             Param::Mean => ParamValue::Text(self.gp_mean.name().to_owned()),
+            Param::MaxSignalVariance => match self.max_signal_variance {
+                Some(v) => ParamValue::Real(v),
+                None => ParamValue::Text("none".to_owned()),
+            },
             Param::Blr => return None,
         })
     }
@@ -1069,7 +1098,7 @@ mod tests {
     #[test]
     fn every_check_names_its_parameter() {
         type Spoil = fn(&mut HbnParams);
-        let bad: [(Param, Spoil); 15] = [
+        let bad: [(Param, Spoil); 17] = [
             (Param::Memory, |p| p.memory = vec![0.0]),
             (Param::Memory, |p| p.memory = vec![1.5]),
             (Param::Memory, |p| p.memory = vec![0.1; 5]),
@@ -1082,6 +1111,12 @@ mod tests {
             (Param::Starts, |p| p.n_starts = 0),
             (Param::MaxIters, |p| p.max_iters = 0),
             (Param::NoiseFloor, |p| p.noise_floor = 0.0),
+            (Param::MaxSignalVariance, |p| {
+                p.max_signal_variance = Some(0.0)
+            }),
+            (Param::MaxSignalVariance, |p| {
+                p.max_signal_variance = Some(f64::INFINITY)
+            }),
             (Param::BlrWindow, |p| p.blr_window = 0.6),
             (Param::BlrWindow, |p| p.blr_window = 0.0),
             (Param::Blr, |p| p.blr.nu0 = 1.0),

@@ -1,4 +1,5 @@
-//! Diagnostic for one experiment case: `probe SYSTEM GAIN SEED`.
+//! Diagnostic for one experiment case: `probe SYSTEM GAIN SEED`; `INDUCING=m`, `MEAN=linear`,
+//! `KERNEL=name` and `STRIDE=k` in the environment change the model and the printout.
 use hbn_core::Mode;
 use hbn_model::{HbnModel, HbnParams};
 use hbn_pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
@@ -36,6 +37,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     if let Ok(m) = std::env::var("INDUCING") {
         params.n_inducing = m.parse().ok();
+    }
+    if let Ok(m) = std::env::var("MEAN") {
+        params.gp_mean = m.parse()?;
     }
     if let Ok(k) = std::env::var("KERNEL") {
         params.transition_kernel = k.parse()?;

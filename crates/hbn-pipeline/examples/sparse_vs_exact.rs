@@ -7,7 +7,8 @@
 //! [seeds] [m,...]`; with `SPARSE_ONLY=1` in the environment the exact model is skipped (its
 //! figures do not change when only the sparse GP does), and `INCREMENTS=none|transition|both`
 //! sets what both models learn ([`hbn_model::Increments`]), `MEAN=constant|linear` their
-//! GPs' prior mean ([`hbn_model::MeanFunction`]).
+//! GPs' prior mean ([`hbn_model::MeanFunction`]), `MAX_SIGNAL_VARIANCE=v` their bound
+//! ([`HbnParams::max_signal_variance`]).
 use hbn_model::HbnParams;
 use hbn_pipeline::experiment::{ExperimentConfig, run_case};
 use hbn_sim::SystemKind;
@@ -34,6 +35,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Ok(v) => v.parse()?,
         Err(_) => hbn_model::MeanFunction::default(),
     };
+    let max_signal_variance: Option<f64> = match std::env::var("MAX_SIGNAL_VARIANCE") {
+        Ok(v) => Some(v.parse()?),
+        Err(_) => None,
+    };
     let mut rows = Vec::new();
     for &system in &systems {
         for &gain in &gains {
@@ -53,6 +58,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             n_inducing,
                             increments,
                             gp_mean,
+                            max_signal_variance,
                             ..HbnParams::default()
                         },
                         ..ExperimentConfig::default()

@@ -628,7 +628,9 @@ class HysteresisModel:
     the transition GP reads besides ``u_{k-1}`` and ``u_{k-2}``, as fractions of the training
     input's range, at most 4; ``[]`` for the thesis' four inputs; default ``[0.05, 0.2]``, see
     ``docs/memory.md``), ``mean`` (the GPs' prior mean, ``"constant"`` or ``"linear"``; see
-    :class:`GaussianProcess`). They are the flags of ``hbn train``. A bad value
+    :class:`GaussianProcess`), ``max_signal_variance`` (largest GP signal variance, as a multiple
+    of the variance each kernel models, or ``"none"`` for only the ``1e5`` box). They are
+    the flags of ``hbn train``. A bad value
     raises :class:`ConfigError` whose ``keyword`` names it.
 
     Model selection: ``kernel`` and ``n_inducing`` also take a list (``kernel=["matern52",
