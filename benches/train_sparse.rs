@@ -4,8 +4,9 @@
 //! `cargo bench --bench train_sparse -- [SAMPLES] [M]` (defaults 100000 and 128). Prints one
 //! line per run: samples, m, seconds for both GPs, and the training report's figures, after
 //! a timeline: when each GP's search starts ended (the refinement on every sample, the
-//! held-out refits and the filter tuning follow). `MEAN=linear` in the environment gives both
-//! GPs a linear prior mean ([`hbn::model::MeanFunction`]).
+//! held-out refits and the filter tuning follow). `LINEAR_MEAN=none|transition|both` and
+//! `MAX_SIGNAL_VARIANCE=v` in the environment set [`HbnParams::linear_mean`] and
+//! [`HbnParams::max_signal_variance`].
 
 use hbn::model::{HbnModel, HbnParams, Sequence};
 use hbn::sim::{InputKind, SimConfig, SystemKind, generate_input, simulate};
@@ -47,13 +48,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             y: &t.y,
         })
         .collect();
-    let gp_mean = match std::env::var("MEAN") {
+    let linear_mean = match std::env::var("LINEAR_MEAN") {
         Ok(v) => v.parse()?,
-        Err(_) => hbn::model::MeanFunction::default(),
+        Err(_) => hbn::model::LinearMean::default(),
+    };
+    let max_signal_variance = match std::env::var("MAX_SIGNAL_VARIANCE") {
+        Ok(v) => Some(v.parse()?),
+        Err(_) => None,
     };
     let params = HbnParams {
         n_inducing: Some(m),
-        gp_mean,
+        linear_mean,
+        max_signal_variance,
         ..HbnParams::default()
     };
     let checked = params.check()?;

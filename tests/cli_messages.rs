@@ -576,7 +576,7 @@ fn memory_flag_sets_the_play_operators_and_names_itself_when_wrong() {
 }
 
 #[test]
-fn mean_flag_sets_the_gps_prior_mean_and_inspect_shows_it() {
+fn linear_mean_flag_sets_the_gps_prior_means_and_inspect_shows_them() {
     let (_dir, log, m) = small_model();
     let dir = tempfile::tempdir().unwrap();
     let m2 = dir.path().join("m2.hbn").to_string_lossy().into_owned();
@@ -586,19 +586,24 @@ fn mean_flag_sets_the_gps_prior_mean_and_inspect_shows_it() {
         serde_json::from_str::<serde_json::Value>(&out).unwrap()
     };
     let v = inspect(&m);
-    assert_eq!(v["transition"]["mean"], "constant");
-    assert_eq!(v["transition"]["linear_slopes"], serde_json::json!([]));
-    let (e, _) = train_small(&log, &m2, &["--mean", "linear"]);
-    assert!(e.is_none(), "{e:?}");
-    let v = inspect(&m2);
     for gp in ["transition", "sensor"] {
-        assert_eq!(v[gp]["mean"], "linear", "{gp}");
-        let slopes = v[gp]["linear_slopes"].as_array().unwrap();
-        assert_eq!(
-            slopes.len(),
-            v[gp]["inputs"].as_array().unwrap().len(),
-            "{gp}"
-        );
+        assert_eq!(v[gp]["mean"], "constant", "{gp}");
+        assert_eq!(v[gp]["linear_slopes"], serde_json::json!([]), "{gp}");
+    }
+    for (choice, linear) in [("transition", [true, false]), ("both", [true, true])] {
+        let (e, _) = train_small(&log, &m2, &["--linear-mean", choice]);
+        assert!(e.is_none(), "{e:?}");
+        let v = inspect(&m2);
+        for (gp, want) in ["transition", "sensor"].into_iter().zip(linear) {
+            let slopes = v[gp]["linear_slopes"].as_array().unwrap();
+            if want {
+                assert_eq!(v[gp]["mean"], "linear", "{choice} {gp}");
+                assert_eq!(slopes.len(), v[gp]["inputs"].as_array().unwrap().len());
+            } else {
+                assert_eq!(v[gp]["mean"], "constant", "{choice} {gp}");
+                assert!(slopes.is_empty());
+            }
+        }
     }
     let (e, text) = hbn(&["inspect", &m2]);
     assert!(e.is_none(), "{e:?}");

@@ -171,7 +171,7 @@ fn exported_models_reproduce_hbn_estimate_in_c_and_rust() {
         ("sparse", &["--inducing", "32", "--memory", "none"], false),
         (
             "sparse-linear",
-            &["--inducing", "32", "--mean", "linear"],
+            &["--inducing", "32", "--linear-mean", "both"],
             false,
         ),
         ("sparse-memory", &["--inducing", "32"], false),

@@ -6,7 +6,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use hbn_core::Mode;
 use hbn_gp::SubsetPolicy;
 use hbn_io::{SignalPath, TimeSource};
-use hbn_model::{HbnParams, KernelChoice, MeanFunction};
+use hbn_model::{HbnParams, KernelChoice, LinearMean};
 use hbn_pipeline::LogOptions;
 use hbn_sim::{SimConfig, SystemKind};
 
@@ -262,8 +262,8 @@ fn parse_cap(s: &str) -> Result<Cap, String> {
         .map_err(|_| format!("expected a number or `none`, got `{s}`"))
 }
 
-/// `--mean`: the GPs' prior mean by name.
-fn parse_mean(s: &str) -> Result<MeanFunction, String> {
+/// `--linear-mean`: which GPs have a linear prior mean.
+fn parse_linear_mean(s: &str) -> Result<LinearMean, String> {
     s.parse()
 }
 
@@ -465,10 +465,11 @@ pub struct TrainArgs {
     /// comma-separated (at most 4), or `none` for the thesis' four inputs. docs/memory.md.
     #[arg(long, value_parser = parse_memory, default_value_t = Memory(params().memory), value_name = "R[,..]|none")]
     pub memory: Memory,
-    /// Prior mean of both GPs: `constant`, or `linear` (the targets' least-squares plane on
-    /// the GP's inputs, with the kernel modelling the rest). docs/sparse.md.
-    #[arg(long, value_parser = parse_mean, default_value_t = params().gp_mean, value_name = "constant|linear")]
-    pub mean: MeanFunction,
+    /// Which GPs have a linear prior mean (the targets' least-squares plane on the GP's inputs,
+    /// the kernel modelling the rest): `none`, `transition` or `both`. On the sensor GP it can
+    /// cost observability. docs/sparse.md.
+    #[arg(long, value_parser = parse_linear_mean, default_value_t = params().linear_mean, value_name = "none|transition|both")]
+    pub linear_mean: LinearMean,
     /// Largest signal variance of both GPs, as a multiple of the variance of what each kernel
     /// models, or `none` for only the 1e5 box: keeps a near-linear fit from extrapolating like
     /// a polynomial. docs/sparse.md.
@@ -802,9 +803,9 @@ pub struct ExperimentArgs {
     /// Play operators' radii as fractions of the input's range, or `none` (as `hbn train`).
     #[arg(long, value_parser = parse_memory, default_value_t = Memory(params().memory), value_name = "R[,..]|none")]
     pub memory: Memory,
-    /// Prior mean of both GPs, `constant` or `linear` (as `hbn train`).
-    #[arg(long, value_parser = parse_mean, default_value_t = params().gp_mean, value_name = "constant|linear")]
-    pub mean: MeanFunction,
+    /// Which GPs have a linear prior mean: `none`, `transition` or `both` (as `hbn train`).
+    #[arg(long, value_parser = parse_linear_mean, default_value_t = params().linear_mean, value_name = "none|transition|both")]
+    pub linear_mean: LinearMean,
     /// Write all rows as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,

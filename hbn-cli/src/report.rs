@@ -28,7 +28,7 @@ pub fn flag(setting: Setting) -> &'static str {
             Param::Blr => "the BLR prior (set in the Rust API)",
             Param::Validation => "--validation",
             Param::Memory => "--memory",
-            Param::Mean => "--mean",
+            Param::LinearMean => "--linear-mean",
             Param::MaxSignalVariance => "--max-signal-variance",
         },
         Setting::Log(o) => match o {

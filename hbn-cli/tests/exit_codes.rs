@@ -456,7 +456,7 @@ fn every_parameter_check_names_its_flag() {
         (train(&["--max-gap", "inf"]), "--max-gap", 1),
         (train(&["--kernel", "rbf"]), "--kernel", 2),
         (train(&["--subset", "all"]), "--subset", 2),
-        (train(&["--mean", "quadratic"]), "--mean", 2),
+        (train(&["--linear-mean", "sensor"]), "--linear-mean", 2),
         (
             train(&["--max-signal-variance", "0"]),
             "--max-signal-variance",

@@ -145,8 +145,8 @@ BAD_PARAMS = [
     ("memory", [1.5]),
     ("memory", [0.1] * 5),
     ("memory", "lots"),
-    ("mean", "quadratic"),
-    ("mean", 1),
+    ("linear_mean", "sensor"),
+    ("linear_mean", 1),
     ("max_signal_variance", 0.0),
     ("max_signal_variance", "lots"),
 ]
@@ -167,17 +167,18 @@ def test_memory_sets_the_play_operators():
     assert not np.array_equal(a, b)
 
 
-def test_mean_sets_the_gps_prior_mean():
+def test_linear_mean_sets_the_gps_prior_means():
     d = hbn.simulate("preisach", 300, seed=1, noise_gain=1.0)
     fast = dict(max_points=80, n_restarts=1, max_iter=30, validation=0.0, memory=[])
-    assert hbn.default_params()["mean"] == "constant"
-    constant = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], **fast)
-    linear = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], mean="linear", **fast)
-    assert constant.params["mean"] == "constant" and linear.params["mean"] == "linear"
+    assert hbn.default_params()["linear_mean"] == "none"
     te = hbn.simulate("preisach", 200, seed=2, noise_gain=1.0)
-    a, _ = constant.estimate(te["u"], te["y"])
-    b, _ = linear.estimate(te["u"], te["y"])
-    assert not np.array_equal(a, b)
+    estimates = []
+    for choice in ["none", "transition", "both"]:
+        model = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], linear_mean=choice, **fast)
+        assert model.params["linear_mean"] == choice
+        estimates.append(model.estimate(te["u"], te["y"])[0])
+    assert not np.array_equal(estimates[0], estimates[1])
+    assert not np.array_equal(estimates[1], estimates[2])
 
 
 @pytest.mark.parametrize("keyword,value", BAD_PARAMS)

@@ -789,7 +789,7 @@ impl Explorer {
         let spec = m
             .transition_kernel
             .spec(TRANSITION_DIM + self.plays.len(), TRANSITION_DIRECTION);
-        let mut gp_params = m.gp_params(spec);
+        let mut gp_params = m.gp_params(spec, crate::GpRole::Transition);
         let warm = init.is_some();
         gp_params.init = init;
         gp_params.optimize = optimize;

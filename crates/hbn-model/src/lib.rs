@@ -51,7 +51,7 @@ pub use dataset::{Dataset, MIN_SAMPLES, Sequence, Table, build_dataset};
 pub use error::{DataError, ModelError, ModelFileProblem, Signal};
 pub use estimate::{Estimate, NEAR_UNOBSERVABLE, OBSERVABILITY_WINDOW, ObservabilitySummary};
 pub use filter::{Filter, FilterOutput};
-/// The GPs' prior mean ([`HbnParams::gp_mean`]).
+/// A GP's prior mean ([`HbnParams::linear_mean`]).
 pub use hbn_gp::MeanFunction;
 pub use local::LocalData;
 pub use model::{
@@ -60,7 +60,7 @@ pub use model::{
 };
 pub use params::{
     Candidate, CheckedHbnParams, ConfigError, DEFAULT_INDUCING, DEFAULT_MEMORY, HbnParams,
-    Increments, KernelChoice, KernelFamily, Param, ParamValue, Problem, Selection, SignalInfo,
-    Signals, UnknownKernel,
+    Increments, KernelChoice, KernelFamily, LinearMean, Param, ParamValue, Problem, Selection,
+    SignalInfo, Signals, UnknownKernel,
 };
 pub use tuning::{CandidateRow, FilterTuning, NoiseScales, ValidationReport};

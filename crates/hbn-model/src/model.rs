@@ -386,7 +386,7 @@ impl HbnModel {
         let se_spec = params.sensor_kernel.spec(SENSOR_DIM, SENSOR_DIRECTION);
         let mut starts = Vec::new();
         let mut fit_gp = |which: GpRole, spec, table: &crate::dataset::Table| {
-            let mut gp_params = params.gp_params(spec);
+            let mut gp_params = params.gp_params(spec, which);
             if let Some(pair) = fixed {
                 let gp = match which {
                     GpRole::Transition => pair.0,

@@ -244,6 +244,67 @@ impl std::str::FromStr for Increments {
     }
 }
 
+/// Which GPs have a linear prior mean ([`MeanFunction::Linear`]): the targets' least-squares
+/// plane on the GP's inputs, subtracted before the kernel and added back in prediction.
+///
+/// It takes the near-linear part of a relation away from the kernel, whose likelihood is
+/// otherwise nearly flat along a ridge of growing signal variance and length scales (see
+/// [`HbnParams::max_signal_variance`]). On the sensor GP it can cost observability: `y_k` is
+/// nearly `y_{k-1}` at a high rate, the plane puts its weight there, and the filter then learns
+/// little about `x_k` from `y_k` (measured in `docs/sparse.md`, where the exact model lost the
+/// state in one run of three); [`LinearMean::Transition`] leaves the sensor GP's constant mean.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LinearMean {
+    /// Both GPs have a constant mean (the thesis; model files from before this option).
+    #[default]
+    None,
+    /// The transition GP has a linear mean, the sensor GP a constant one.
+    Transition,
+    /// Both GPs have a linear mean.
+    Both,
+}
+
+impl LinearMean {
+    /// Every choice, in the order of their names.
+    pub const ALL: [LinearMean; 3] = [LinearMean::None, LinearMean::Transition, LinearMean::Both];
+
+    /// `none`, `transition` or `both`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            LinearMean::None => "none",
+            LinearMean::Transition => "transition",
+            LinearMean::Both => "both",
+        }
+    }
+
+    /// The prior mean of `role`'s GP.
+    pub const fn mean(self, role: crate::GpRole) -> MeanFunction {
+        match (self, role) {
+            (LinearMean::Both, _) | (LinearMean::Transition, crate::GpRole::Transition) => {
+                MeanFunction::Linear
+            }
+            _ => MeanFunction::Constant,
+        }
+    }
+}
+
+impl std::fmt::Display for LinearMean {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for LinearMean {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        LinearMean::ALL
+            .into_iter()
+            .find(|m| m.name().eq_ignore_ascii_case(s.trim()))
+            .ok_or_else(|| format!("unknown linear mean `{s}`; choose none, transition or both"))
+    }
+}
+
 /// Training parameters of the HBN. [`HbnParams::default`] is the one place hbn's defaults are
 /// written; [`HbnParams::check`] is the one place they are checked.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -292,11 +353,11 @@ pub struct HbnParams {
     /// this option read as [`Increments::None`].
     #[serde(default)]
     pub increments: Increments,
-    /// Prior mean of both GPs ([`MeanFunction`]): constant, or a linear fit on the inputs
-    /// that the kernel models the rest of. Model files written before this option read as
-    /// [`MeanFunction::Constant`].
+    /// Which GPs have a linear prior mean ([`LinearMean`]): a least-squares plane on their
+    /// inputs that the kernel models the rest of. Model files written before this option read
+    /// as [`LinearMean::None`].
     #[serde(default)]
-    pub gp_mean: MeanFunction,
+    pub linear_mean: LinearMean,
     /// Largest signal variance of both GPs, relative to the variance of what each kernel
     /// models (the targets', or with a linear mean the residual's), or `None` for only the
     /// `1e5` box ([`hbn_gp::GpParams::max_signal_variance`]). Model files written before this
@@ -389,7 +450,7 @@ impl Default for HbnParams {
             blr: LocalRegression::default(),
             validation: 0.25,
             increments: Increments::None,
-            gp_mean: MeanFunction::Constant,
+            linear_mean: LinearMean::None,
             max_signal_variance: None,
             memory: DEFAULT_MEMORY.to_vec(),
             select: Selection::default(),
@@ -435,8 +496,8 @@ pub enum Param {
     Validation,
     /// [`HbnParams::memory`] (a list of radii, possibly empty).
     Memory,
-    /// [`HbnParams::gp_mean`] (`constant` or `linear`).
-    Mean,
+    /// [`HbnParams::linear_mean`] (`none`, `transition` or `both`).
+    LinearMean,
     /// [`HbnParams::max_signal_variance`] (a number, or `none`).
     MaxSignalVariance,
 }
@@ -460,7 +521,7 @@ impl Param {
         Param::Blr,
         Param::Validation,
         Param::Memory,
-        Param::Mean,
+        Param::LinearMean,
         Param::MaxSignalVariance,
     ];
 
@@ -483,7 +544,7 @@ impl Param {
             Param::Blr => "blr",
             Param::Validation => "validation",
             Param::Memory => "memory",
-            Param::Mean => "gp_mean",
+            Param::LinearMean => "linear_mean",
             Param::MaxSignalVariance => "max_signal_variance",
         }
     }
@@ -627,7 +688,7 @@ impl CheckedHbnParams {
     }
 
     /// GP parameters for one kernel structure (valid by construction).
-    pub(crate) fn gp_params(&self, spec: KernelSpec) -> GpParams {
+    pub(crate) fn gp_params(&self, spec: KernelSpec, role: crate::GpRole) -> GpParams {
         let p = &self.0;
         let mut g = GpParams::new(spec);
         g.max_points = p.max_points;
@@ -638,7 +699,7 @@ impl CheckedHbnParams {
         g.seed = p.seed;
         g.normalize = p.normalize;
         g.noise_floor = p.noise_floor;
-        g.mean = p.gp_mean;
+        g.mean = p.linear_mean.mean(role);
         g.max_signal_variance = p.max_signal_variance;
         g
     }
@@ -990,18 +1051,18 @@ impl HbnParams {
             (Param::Memory, _) => {
                 return wrong("a list of numbers (fractions of the input's range), or none");
             }
-            (Param::Mean, ParamValue::Text(t)) => {
-                self.gp_mean = t.parse().map_err(|_| {
+            (Param::LinearMean, ParamValue::Text(t)) => {
+                self.linear_mean = t.parse().map_err(|_| {
                     ConfigError::new(
                         param,
                         Problem::Unknown {
                             given: t,
-                            choices: "constant, linear",
+                            choices: "none, transition, both",
                         },
                     )
                 })?;
             }
-            (Param::Mean, _) => return wrong("a prior mean name"),
+            (Param::LinearMean, _) => return wrong("none, transition or both"),
             (Param::MaxSignalVariance, ParamValue::Real(v)) => self.max_signal_variance = Some(v),
             (Param::MaxSignalVariance, ParamValue::Int(v)) => {
                 self.max_signal_variance = Some(v as f64);
@@ -1063,7 +1124,7 @@ impl HbnParams {
             Param::Memory => {
                 ParamValue::List(self.memory.iter().map(|&r| ParamValue::Real(r)).collect())
             }
-            Param::Mean => ParamValue::Text(self.gp_mean.name().to_owned()),
+            Param::LinearMean => ParamValue::Text(self.linear_mean.name().to_owned()),
             Param::MaxSignalVariance => match self.max_signal_variance {
                 Some(v) => ParamValue::Real(v),
                 None => ParamValue::Text("none".to_owned()),

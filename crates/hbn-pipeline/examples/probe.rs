@@ -1,4 +1,5 @@
-//! Diagnostic for one experiment case: `probe SYSTEM GAIN SEED`; `INDUCING=m`, `MEAN=linear`,
+//! Diagnostic for one experiment case: `probe SYSTEM GAIN SEED`; `INDUCING=m`, `LINEAR_MEAN=both`,
+//! `MAX_SIGNAL_VARIANCE=v`,
 //! `KERNEL=name` and `STRIDE=k` in the environment change the model and the printout.
 use hbn_core::Mode;
 use hbn_model::{HbnModel, HbnParams};
@@ -38,8 +39,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Ok(m) = std::env::var("INDUCING") {
         params.n_inducing = m.parse().ok();
     }
-    if let Ok(m) = std::env::var("MEAN") {
-        params.gp_mean = m.parse()?;
+    if let Ok(m) = std::env::var("LINEAR_MEAN") {
+        params.linear_mean = m.parse()?;
+    }
+    if let Ok(v) = std::env::var("MAX_SIGNAL_VARIANCE") {
+        params.max_signal_variance = Some(v.parse()?);
     }
     if let Ok(k) = std::env::var("KERNEL") {
         params.transition_kernel = k.parse()?;

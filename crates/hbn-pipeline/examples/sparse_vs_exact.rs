@@ -6,8 +6,8 @@
 //! `cargo run --release -p hbn-pipeline --example sparse_vs_exact -- OUT.json [systems] [gains]
 //! [seeds] [m,...]`; with `SPARSE_ONLY=1` in the environment the exact model is skipped (its
 //! figures do not change when only the sparse GP does), and `INCREMENTS=none|transition|both`
-//! sets what both models learn ([`hbn_model::Increments`]), `MEAN=constant|linear` their
-//! GPs' prior mean ([`hbn_model::MeanFunction`]), `MAX_SIGNAL_VARIANCE=v` their bound
+//! sets what both models learn ([`hbn_model::Increments`]), `LINEAR_MEAN=none|transition|both`
+//! which GPs have a linear prior mean ([`hbn_model::LinearMean`]), `MAX_SIGNAL_VARIANCE=v` their bound
 //! ([`HbnParams::max_signal_variance`]).
 use hbn_model::HbnParams;
 use hbn_pipeline::experiment::{ExperimentConfig, run_case};
@@ -31,9 +31,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Ok(v) => v.parse()?,
         Err(_) => hbn_model::Increments::default(),
     };
-    let gp_mean: hbn_model::MeanFunction = match std::env::var("MEAN") {
+    let linear_mean: hbn_model::LinearMean = match std::env::var("LINEAR_MEAN") {
         Ok(v) => v.parse()?,
-        Err(_) => hbn_model::MeanFunction::default(),
+        Err(_) => hbn_model::LinearMean::default(),
     };
     let max_signal_variance: Option<f64> = match std::env::var("MAX_SIGNAL_VARIANCE") {
         Ok(v) => Some(v.parse()?),
@@ -57,7 +57,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         params: HbnParams {
                             n_inducing,
                             increments,
-                            gp_mean,
+                            linear_mean,
                             max_signal_variance,
                             ..HbnParams::default()
                         },

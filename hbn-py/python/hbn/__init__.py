@@ -627,8 +627,9 @@ class HysteresisModel:
     :attr:`tuning`), ``memory`` (the input's long memory: radii of play operators whose outputs
     the transition GP reads besides ``u_{k-1}`` and ``u_{k-2}``, as fractions of the training
     input's range, at most 4; ``[]`` for the thesis' four inputs; default ``[0.05, 0.2]``, see
-    ``docs/memory.md``), ``mean`` (the GPs' prior mean, ``"constant"`` or ``"linear"``; see
-    :class:`GaussianProcess`), ``max_signal_variance`` (largest GP signal variance, as a multiple
+    ``docs/memory.md``), ``linear_mean`` (which GPs have a linear prior mean: ``"none"``,
+    ``"transition"`` or ``"both"``; see :class:`GaussianProcess` and ``docs/sparse.md``),
+    ``max_signal_variance`` (largest GP signal variance, as a multiple
     of the variance each kernel models, or ``"none"`` for only the ``1e5`` box). They are
     the flags of ``hbn train``. A bad value
     raises :class:`ConfigError` whose ``keyword`` names it.
