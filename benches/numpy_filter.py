@@ -208,8 +208,6 @@ def ekf_config(model: Dict[str, Any]) -> Dict[str, Any]:
     }
 
 
-# hbn_core::MAX_REJECTED_RUN: the gate rejects at most this many measurements in a row.
-MAX_REJECTED_RUN = 10
 
 
 def _clamp(v: float, b: Tuple[float, float]) -> float:
@@ -351,18 +349,16 @@ class NumpyEkf:
             s_var = p[2, 2] + r
             innov = y_k - z[2]
             nis = innov * innov / s_var if math.isfinite(s_var) and s_var > 0 else 0.0
-            gated = (
-                math.isfinite(s_var)
-                and s_var >= c["innovation_min"]
-                and c["nis_gate"] > 0.0
-                and nis > c["nis_gate"]
-                and st["rejected_run"] < MAX_REJECTED_RUN
-            )
-            if gated:
-                # The outlier gate (hbn_core::ekf::update): the measurement is skipped.
-                st["rejected_run"] += 1
-            elif math.isfinite(s_var) and s_var >= c["innovation_min"]:
-                st["rejected_run"] = 0
+            if math.isfinite(s_var) and s_var >= c["innovation_min"]:
+                if c["nis_gate"] > 0.0 and nis > c["nis_gate"]:
+                    # The outlier gate (hbn_core::ekf::update) down-weights: S becomes
+                    # innov^2 / gate and R grows by the same amount.
+                    st["rejected_run"] += 1
+                    s_gated = innov * innov / c["nis_gate"]
+                    r = r + (s_gated - s_var)
+                    s_var = s_gated
+                else:
+                    st["rejected_run"] = 0
                 gain = p[:, 2] / s_var
                 zn = z + gain * innov
                 ikh = np.eye(3)

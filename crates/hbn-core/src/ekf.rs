@@ -64,7 +64,8 @@ impl Flags {
     pub const COVARIANCE_CLAMPED: u32 = 1 << 6;
     /// The state left its box and was clamped.
     pub const STATE_CLAMPED: u32 = 1 << 7;
-    /// The innovation exceeded the outlier gate; the update was skipped.
+    /// The innovation exceeded the outlier gate ([`EkfConfig::nis_gate`]); the measurement
+    /// was down-weighted to the gate's NIS (the name is from when it was skipped).
     pub const OUTLIER_REJECTED: u32 = 1 << 8;
     /// EKF+BLR: the transition window held no training samples (prior used).
     pub const BLR_EMPTY_TRANSITION: u32 = 1 << 9;
@@ -194,9 +195,13 @@ pub struct EkfConfig {
     pub jac_max: f64,
     /// Smallest innovation variance accepted for an update.
     pub innovation_min: f64,
-    /// Outlier gate on the normalised innovation squared; `0` disables it. A measurement whose
-    /// NIS exceeds the gate is skipped, unless [`MAX_REJECTED_RUN`] measurements in a row were:
-    /// a run that long means the state, not the sensor, is off, and the filter takes it.
+    /// Outlier gate on the normalised innovation squared `NIS = nu^2 / S`; `0` disables it. A
+    /// measurement whose NIS exceeds the gate is down-weighted, not skipped: the update uses
+    /// the innovation variance `nu^2 / gate` (its measurement variance inflated by the
+    /// difference), so its NIS is the gate's and the state moves by `P_xs gate / nu`, less the
+    /// larger the outlier. A spike barely moves the state; a lasting offset (a state that is
+    /// off, or a model error, as on noise-free data where `R` is tiny) is followed at a
+    /// bounded pace instead of being ignored until the state is lost.
     pub nis_gate: f64,
     /// State box: `x` and `s` are clamped to `[lo, hi]` (from the training ranges).
     pub x_bounds: (f64, f64),
@@ -290,10 +295,6 @@ impl EkfConfig {
 /// signal variance and long length scales, whose latent variance stays a small fraction of the
 /// prior far outside the data.
 pub const EXTRAPOLATION_RATIO: f64 = 0.5;
-
-/// Most consecutive measurements the outlier gate ([`EkfConfig::nis_gate`]) rejects; the next
-/// one is taken whatever its NIS.
-pub const MAX_REJECTED_RUN: u32 = 10;
 
 /// Prior of `x_0` from the first measurement: training `(y, x)` pairs sorted by `y`. Hysteresis
 /// makes `x` given `y` ambiguous; the spread of `x` over the training samples whose `y` is
@@ -520,7 +521,7 @@ pub struct EkfState {
     pub plays: PlayState,
     /// Steps taken.
     pub steps: u64,
-    /// Measurements rejected in a row by the outlier gate (see [`MAX_REJECTED_RUN`]).
+    /// Measurements down-weighted in a row by the outlier gate ([`EkfConfig::nis_gate`]).
     pub rejected_run: u32,
 }
 
@@ -1151,13 +1152,18 @@ fn update(
     }
     let innovation = y_k - st.z.z;
     let nis = innovation * innovation / s_var;
-    if cfg.nis_gate > 0.0 && nis > cfg.nis_gate && st.rejected_run < MAX_REJECTED_RUN {
+    // The outlier gate down-weights: `S` becomes `nu^2 / gate` (larger than `S`, finite as
+    // `nu` is) and `R` grows by the same amount, so the Joseph form below stays consistent.
+    let (s_used, r) = if cfg.nis_gate > 0.0 && nis > cfg.nis_gate {
         *flags |= Flags::OUTLIER_REJECTED;
         st.rejected_run = st.rejected_run.saturating_add(1);
-        return (innovation, s_var, nis);
-    }
-    st.rejected_run = 0;
-    let gain: Vector3<f64> = st.p.column(2) / s_var;
+        let s_gated = innovation * innovation / cfg.nis_gate;
+        (s_gated, r + (s_gated - s_var))
+    } else {
+        st.rejected_run = 0;
+        (s_var, r)
+    };
+    let gain: Vector3<f64> = st.p.column(2) / s_used;
     let z = st.z + gain * innovation;
     // Joseph form: P = (I - K H) P (I - K H)^T + K R K^T, H = [0, 0, 1].
     // `I - K H`: the identity with `K` subtracted from its last column (written out, with the
@@ -1381,6 +1387,97 @@ pub fn state_information(jacobians: &[Matrix3<f64>], r: &[f64]) -> Option<f64> {
 mod tests {
     use super::*;
     use crate::rng::Rng;
+
+    fn gate_config(nis_gate: f64) -> EkfConfig {
+        EkfConfig {
+            mode: Mode::Ekf,
+            q_floor: 1e-8,
+            r_floor: 1e-8,
+            qx_model_floor: 0.0,
+            r_model_floor: 0.0,
+            p_min: 1e-12,
+            p_max: 1e3,
+            jac_max: 1e3,
+            innovation_min: 1e-12,
+            nis_gate,
+            x_bounds: (-1e3, 1e3),
+            y_bounds: (-1e3, 1e3),
+            x0_mean: 0.0,
+            x0_var: 1.0,
+            q_scale: 1.0,
+            r_scale: 1.0,
+            std_scale: 1.0,
+        }
+    }
+
+    fn gate_state() -> EkfState {
+        EkfState {
+            z: Vector3::new(0.2, 0.1, 0.5),
+            p: Matrix3::new(0.04, 0.01, 0.02, 0.01, 0.03, 0.01, 0.02, 0.01, 0.05),
+            u_last: 0.0,
+            u_prev: 0.0,
+            plays: [0.0; crate::play::MAX_PLAYS],
+            steps: 5,
+            rejected_run: 0,
+        }
+    }
+
+    /// Below the gate the update is the plain Kalman update; above it the innovation variance
+    /// becomes `nu^2 / gate`, so the state moves by `P_xs gate / nu`: less the larger the
+    /// outlier, never skipped, and the Joseph form with the inflated `R` keeps `P` symmetric
+    /// positive definite. The flag and the run count say so.
+    #[test]
+    fn the_outlier_gate_down_weights_in_proportion() {
+        let (r, gate) = (0.01, 25.0);
+        let cfg = gate_config(gate);
+        let s_var = gate_state().p.m33 + r;
+        let step = |y: f64, cfg: &EkfConfig| {
+            let mut st = gate_state();
+            let mut flags = 0;
+            let out = update(&mut st, y, r, cfg, &mut flags);
+            (st, flags, out)
+        };
+        // Inside the gate: K = P_col / S, exactly the ungated update.
+        let nu = 3.0 * s_var.sqrt();
+        let (st, flags, (innov, s_out, nis)) = step(0.5 + nu, &cfg);
+        assert_eq!(flags & Flags::OUTLIER_REJECTED, 0);
+        assert_eq!(st.rejected_run, 0);
+        let (open, _, _) = step(0.5 + nu, &gate_config(0.0));
+        assert_eq!(st.z, open.z);
+        assert!((innov - nu).abs() < 1e-12 && (s_out - s_var).abs() < 1e-15);
+        assert!((nis - 9.0).abs() < 1e-9);
+        // Outside: the reported NIS and S are the model's; the move is P_xs gate / nu.
+        let mut last_move = f64::INFINITY;
+        for sigmas in [6.0, 20.0, 100.0, 1e4] {
+            let nu = sigmas * s_var.sqrt();
+            let (st, flags, (_, s_out, nis)) = step(0.5 + nu, &cfg);
+            assert_ne!(flags & Flags::OUTLIER_REJECTED, 0, "{sigmas}");
+            assert_eq!(st.rejected_run, 1);
+            assert!((s_out - s_var).abs() < 1e-15 && (nis - sigmas * sigmas).abs() < 1e-6 * nis);
+            let moved = st.z.x - gate_state().z.x;
+            let want = gate_state().p.m13 * gate / nu;
+            assert!(
+                (moved - want).abs() < 1e-12 * want.abs().max(1.0),
+                "{moved} vs {want}"
+            );
+            assert!(moved > 0.0 && moved < last_move, "{sigmas}: {moved}");
+            last_move = moved;
+            let (vals, _) = crate::eigen::symmetric_eigen3(&st.p).unwrap();
+            assert!(vals.iter().all(|&v| v > 0.0), "{vals:?}");
+            assert_eq!(st.p, st.p.transpose());
+        }
+        // A run of gated measurements is counted; an accepted one resets the count.
+        let mut st = gate_state();
+        let mut flags = 0;
+        for k in 1..=3 {
+            let y = st.z.z + 50.0 * s_var.sqrt();
+            update(&mut st, y, r, &cfg, &mut flags);
+            assert_eq!(st.rejected_run, k);
+        }
+        let y = st.z.z;
+        update(&mut st, y, r, &cfg, &mut flags);
+        assert_eq!(st.rejected_run, 0);
+    }
 
     #[test]
     fn the_ldl_exit_only_accepts_covariances_inside_the_bounds() {

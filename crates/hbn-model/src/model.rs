@@ -166,8 +166,7 @@ pub const INIT_NEIGHBOURS: usize = 50;
 
 /// The outlier gate every trained model's filter ships with ([`EkfConfig::nis_gate`]): a
 /// measurement whose normalised innovation squared exceeds 25 (5 standard deviations; a
-/// Gaussian innovation does so once in 1.7 million samples) is skipped, at most
-/// [`hbn_core::MAX_REJECTED_RUN`] in a row.
+/// Gaussian innovation does so once in 1.7 million samples) is down-weighted to that NIS.
 pub const OUTLIER_GATE: f64 = 25.0;
 
 #[derive(Serialize, Deserialize)]
