@@ -86,6 +86,8 @@ class NumpyGP:
         self.in_scale = np.asarray(gp["input_scale"], dtype=np.float64)
         self.out_mean = float(gp["output_mean"])
         self.out_scale = float(gp["output_scale"])
+        # A linear prior mean's slopes in raw units (model files of format 4; absent: constant).
+        self.linear = np.asarray(gp.get("linear", []), dtype=np.float64)
         self.noise_var_raw = float(gp["noise_variance"]) * self.out_scale**2
         n = len(gp["alpha"])
         self.n = n
@@ -170,7 +172,11 @@ class NumpyGP:
             b = self.sigma_factor @ k
             reduction -= b @ b
         var = self.out_scale**2 * max(kss - reduction, 0.0)
-        return self.out_mean + self.out_scale * mean_std, var, grad
+        mean = self.out_mean + self.out_scale * mean_std
+        if self.linear.size:
+            mean += float(self.linear @ (x_raw - self.in_mean))
+            grad = grad + self.linear
+        return mean, var, grad
 
 
 # ------------------------------------------------------------------------------------------------
@@ -400,8 +406,8 @@ def load_model_json(path: str) -> Dict[str, Any]:
     """The ``model`` object of an hbn model file (checks the format tag)."""
     with open(path, "r", encoding="utf-8") as fh:
         doc = json.load(fh)
-    if doc.get("format") != "hbn-model" or doc.get("version") not in (1, 2, 3):
-        raise ValueError(f"{path}: not an hbn model file of format version 1, 2 or 3")
+    if doc.get("format") != "hbn-model" or doc.get("version") not in (1, 2, 3, 4):
+        raise ValueError(f"{path}: not an hbn model file of format version 1 to 4")
     return doc["model"]
 
 

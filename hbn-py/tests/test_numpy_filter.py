@@ -68,3 +68,21 @@ def test_numpy_gp_matches_hbn_gp(trained):
 def test_bench_compare_runs():
     r = numpy_filter.compare(steps=150, max_points=80, train_steps=300)
     assert r["max_abs_diff_x"] < 1e-6 and r["ratio"] > 0
+
+
+def test_numpy_filter_matches_hbn_with_linear_means(tmp_path):
+    """Models with a linear prior mean on both GPs (model format 4): the numpy predictor adds
+    the plane's slopes, and the filters agree."""
+    train = hbn.simulate("duhem", 800, seed=3, noise_gain=1.0)
+    model = hbn.HysteresisModel.fit(
+        train["u"], train["x"], train["y"], max_points=200, n_restarts=1, linear_mean="both"
+    )
+    path = tmp_path / "model.hbn"
+    model.save(path)
+    doc = numpy_filter.load_model_json(str(path))
+    assert len(doc["transition"]["linear"]) == len(doc["transition"]["input_mean"])
+    test = hbn.simulate("duhem", 300, seed=4, noise_gain=1.0)
+    est = model.estimate(test["u"], test["y"], mode="ekf")
+    x_np, std_np = numpy_filter.numpy_estimate(doc, test["u"], test["y"])
+    assert np.max(np.abs(x_np - est.x)) < 1e-6
+    assert np.max(np.abs(std_np - est.x_std)) < 1e-6
