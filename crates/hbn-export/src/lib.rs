@@ -804,6 +804,48 @@ mod tests {
         }
     }
 
+    /// Tables of format version 3 (before the linear mean; firmware built then holds them)
+    /// still read: the same tables with each GP's linear-slope count removed and the version
+    /// set to 3 give the same view, scratch size and steps as the version-4 tables.
+    #[test]
+    fn version_3_tables_still_read() {
+        let m = model(Some(16));
+        let t = model_tables(&m, Mode::Ekf).unwrap();
+        assert_eq!(t.layout[1], tables::VERSION);
+        // Layout: magic, version, mode, has_init, has_local, max_neighbours, then per GP
+        // profile, metric, dim, warp units, direction (2), n, sparse, mean input, whitening
+        // length and (version 4) the slope count, here 0.
+        let (first, second) = (6 + 10, 6 + 11 + 10);
+        assert_eq!((t.layout[first], t.layout[second]), (0, 0));
+        let mut old = t.layout.clone();
+        old.remove(second);
+        old.remove(first);
+        old[1] = 3;
+        assert_eq!(
+            tables::scratch_len(&old).unwrap(),
+            tables::scratch_len(&t.layout).unwrap()
+        );
+        let (new_model, old_model) = (
+            t.tables().model().unwrap(),
+            Tables {
+                layout: &old,
+                ..t.tables()
+            }
+            .model()
+            .unwrap(),
+        );
+        assert_eq!(old_model.config, new_model.config);
+        let mut s1 = vec![0.0; tables::scratch_len(&old).unwrap()];
+        let mut s2 = s1.clone();
+        let mut e_old = Estimator::new(old_model.view, old_model.config, &mut s1).unwrap();
+        let mut e_new = Estimator::new(new_model.view, new_model.config, &mut s2).unwrap();
+        for k in 0..200 {
+            let u = 0.5 + 0.4 * (0.05 * k as f64).sin();
+            let (a, b) = (e_old.step(u, u), e_new.step(u, u));
+            assert_eq!(a.x.to_bits(), b.x.to_bits(), "k={k}");
+        }
+    }
+
     /// A sparse model (m = 32) trained on 1200 samples: the step on its f32 tables stays
     /// within 2% of the range of x of the f64 step (measured: 0.2% EKF, 1.3% EKF+BLR).
     /// The mean `k^T alpha` cancels, so f32 tables keep each weight as two f32 parts: read back,
