@@ -79,6 +79,10 @@ impl Flags {
     /// the variance of its training targets, whichever is smaller: the operating point is
     /// outside the training data, and the GP's uncertainty there is as large as the signal.
     pub const EXTRAPOLATION: u32 = 1 << 13;
+    /// The state had been clamped to its box for [`LOST_AFTER`] steps in a row: the filter
+    /// was lost, and re-started from the model's [`InitPrior`] at this step's measurement
+    /// (the inputs and plays kept).
+    pub const RELOCALISED: u32 = 1 << 14;
 
     /// Whether `bit` is set.
     pub fn has(self, bit: u32) -> bool {
@@ -86,7 +90,7 @@ impl Flags {
     }
 
     /// Name of each bit, in bit order (bit `i` is `NAMES[i]`).
-    pub const NAMES: [&'static str; 14] = [
+    pub const NAMES: [&'static str; 15] = [
         "input_invalid",
         "measurement_invalid",
         "model_invalid",
@@ -101,6 +105,7 @@ impl Flags {
         "blr_capped",
         "initialised",
         "extrapolation",
+        "relocalised",
     ];
 
     /// Names of the set flags, for logs (`no_std`: yields `&'static str`).
@@ -295,6 +300,15 @@ impl EkfConfig {
 /// signal variance and long length scales, whose latent variance stays a small fraction of the
 /// prior far outside the data.
 pub const EXTRAPOLATION_RATIO: f64 = 0.5;
+
+/// Steps in a row with the state clamped to its box ([`Flags::STATE_CLAMPED`]) after which the
+/// filter counts as lost and re-starts from the model's [`InitPrior`] at the current
+/// measurement ([`Flags::RELOCALISED`]). The box is the training range of `x` widened by 10%
+/// of its span on each side, so a state held at its edge is outside everything the GPs were
+/// trained on; a filter there does not come back by itself (its Jacobians and variances are
+/// extrapolations, and it can lock into a cycle between the two edges). Without an
+/// [`InitPrior`], or with a non-finite measurement, nothing happens.
+pub const LOST_AFTER: u32 = 10;
 
 /// Prior of `x_0` from the first measurement: training `(y, x)` pairs sorted by `y`. Hysteresis
 /// makes `x` given `y` ambiguous; the spread of `x` over the training samples whose `y` is
@@ -523,6 +537,8 @@ pub struct EkfState {
     pub steps: u64,
     /// Measurements down-weighted in a row by the outlier gate ([`EkfConfig::nis_gate`]).
     pub rejected_run: u32,
+    /// Steps in a row whose state was clamped to its box ([`LOST_AFTER`]).
+    pub clamped_run: u32,
 }
 
 /// One linearised GP: value, input gradient, noise variance.
@@ -655,6 +671,14 @@ impl<'m> Ekf<'m> {
         // ---- update ----
         let (innovation, s_var, nis) = update(&mut st, y_k, pred.r, &cfg, &mut flags);
         st.steps = st.steps.saturating_add(1);
+        if flags & Flags::STATE_CLAMPED != 0 {
+            st.clamped_run = st.clamped_run.saturating_add(1);
+            if st.clamped_run >= LOST_AFTER {
+                self.relocalise(&mut st, y_k, &mut flags);
+            }
+        } else {
+            st.clamped_run = 0;
+        }
         *state = Some(st);
         StepOutput {
             x: st.z.x,
@@ -705,6 +729,7 @@ impl<'m> Ekf<'m> {
             plays: self.model.plays.start(u0),
             steps: 1,
             rejected_run: 0,
+            clamped_run: 0,
         };
         let out = StepOutput {
             x: st.z.x,
@@ -719,6 +744,26 @@ impl<'m> Ekf<'m> {
             flags: Flags(f),
         };
         (st, out)
+    }
+
+    /// A lost filter's re-start: `x_k` and `x_{k-1}` from the model's [`InitPrior`] at `y_k`,
+    /// uncorrelated with `s_k`, which is `y_k` with the variance of the first step. The
+    /// inputs, plays and counters of steps are kept. Nothing happens without a prior or with a
+    /// non-finite `y_k` (the state stays clamped, and the run counter keeps counting).
+    fn relocalise(&self, st: &mut EkfState, y_k: f64, flags: &mut u32) {
+        let cfg = self.config;
+        let Some((x_mean, x_var)) = self.model.init.and_then(|prior| prior.prior(y_k)) else {
+            return;
+        };
+        let s = clamp_to(y_k, cfg.y_bounds.0, cfg.y_bounds.1);
+        let x = clamp_to(x_mean, cfg.x_bounds.0, cfg.x_bounds.1);
+        let r = self.fallback_r();
+        let p = Matrix3::new(x_var, x_var, 0.0, x_var, x_var, 0.0, 0.0, 0.0, r);
+        st.z = Vector3::new(x, x, s);
+        st.p = bound_covariance(p, cfg.p_min, cfg.p_max, flags);
+        st.clamped_run = 0;
+        st.rejected_run = 0;
+        *flags |= Flags::RELOCALISED;
     }
 
     /// The prediction's noise variances at the linearisation point: `q_x` (transition) and
@@ -1419,7 +1464,117 @@ mod tests {
             plays: [0.0; crate::play::MAX_PLAYS],
             steps: 5,
             rejected_run: 0,
+            clamped_run: 0,
         }
+    }
+
+    /// A GP that is its linear mean `sum_j slopes_j x_j` (one support point with zero weight;
+    /// a small, finite variance from a long-length-scale kernel).
+    fn linear_gp<'a>(
+        theta: &'a [f64],
+        zeros: &'a [f64],
+        ones: &'a [f64],
+        slopes: &'a [f64],
+    ) -> GpView<'a> {
+        let d = slopes.len();
+        GpView::new(crate::gp::GpParts {
+            kernel: crate::kernel::Kernel::new(crate::kernel::KernelSpec::se_ard(d), theta, &[])
+                .unwrap(),
+            input_mean: &zeros[..d],
+            input_scale: &ones[..d],
+            output_mean: 0.0,
+            output_scale: 1.0,
+            linear: slopes,
+            features: &zeros[..d],
+            directions: &[],
+            alpha: &zeros[..1],
+            alpha_lo: &[],
+            variance: crate::gp::Variance::Exact {
+                chol_packed: &ones[..1],
+            },
+            noise_var: 1e-6,
+        })
+        .unwrap()
+    }
+
+    /// A filter whose model throws the state out of its box holds it at the edge; after
+    /// [`LOST_AFTER`] clamped steps in a row it re-starts from the [`InitPrior`] at the
+    /// measurement, flags it, and counts again from zero. A stable model never does, and
+    /// without a prior the filter stays clamped (nothing to re-start from).
+    #[test]
+    fn a_lost_filter_relocalises_from_the_measurement() {
+        let theta = [0.0, 3.0, 3.0, 3.0, 3.0];
+        let (zeros, ones) = ([0.0; 4], [1.0; 4]);
+        let pairs = [[-0.5, -0.4], [0.0, 0.0], [0.3, 0.25], [0.5, 0.4]];
+        let run = |slope: f64, with_prior: bool| {
+            let slopes_t = [slope, 0.0, 0.0, 0.0];
+            let model = HbnView {
+                transition: linear_gp(&theta, &zeros, &ones, &slopes_t),
+                sensor: linear_gp(&theta[..4], &zeros, &ones, &[0.0, 0.0, 1.0]),
+                transition_local: None,
+                sensor_local: None,
+                blr: LocalRegression::default(),
+                init: with_prior.then(|| InitPrior::new(&pairs, 1, 1e-4).unwrap()),
+                plays: Plays::NONE,
+            };
+            let cfg = EkfConfig {
+                x_bounds: (-1.0, 1.0),
+                y_bounds: (-1.0, 1.0),
+                x0_mean: 0.5,
+                ..gate_config(25.0)
+            };
+            let ekf = Ekf::new(model, cfg).unwrap();
+            let mut scratch = [0.0; 64];
+            assert!(ekf.scratch_len() <= scratch.len());
+            let mut state = None;
+            let outs: [StepOutput; 40] =
+                core::array::from_fn(|_| ekf.step(&mut state, &mut scratch, 0.0, 0.3));
+            (outs, state.unwrap())
+        };
+        // x_k = 4 x_{k-1}: every prediction from 0.3 leaves the box [-1, 1].
+        let (outs, _) = run(4.0, true);
+        let clamped = |o: &StepOutput| o.flags.has(Flags::STATE_CLAMPED);
+        let relocalised: [bool; 40] =
+            core::array::from_fn(|k| outs[k].flags.has(Flags::RELOCALISED));
+        let first = relocalised
+            .iter()
+            .position(|&r| r)
+            .expect("never relocalised");
+        // It fires on the LOST_AFTER-th clamped step of a run, not before (the first step
+        // predicts 4 x 0.25 = 1, the edge itself).
+        let lost = LOST_AFTER as usize;
+        assert!(first >= lost, "{first}");
+        assert!(
+            outs[first + 1 - lost..=first].iter().all(clamped),
+            "{first}"
+        );
+        assert!(!clamped(&outs[first - lost]), "{first}");
+        // The re-start: x from the prior at y = 0.3 (the pair (0.3, 0.25)), its variance the
+        // floor, s = y.
+        assert_eq!(outs[first].x, 0.25);
+        assert!(
+            (outs[first].x_std - 1e-2).abs() < 1e-8,
+            "{}",
+            outs[first].x_std
+        );
+        // It counts again from zero: the step after the re-start predicts the edge again
+        // (unclamped), and the next re-start ends the next LOST_AFTER clamped steps.
+        let second = first + 1 + relocalised[first + 1..].iter().position(|&r| r).unwrap();
+        assert!(!clamped(&outs[first + 1]));
+        assert_eq!(second, first + 1 + lost);
+        // Without a prior: clamped throughout, never relocalised, still counting.
+        let (outs, st) = run(4.0, false);
+        assert!(outs.iter().all(|o| !o.flags.has(Flags::RELOCALISED)));
+        assert!(outs[1..].iter().all(clamped));
+        assert_eq!(st.clamped_run, 39);
+        // A stable model (x_k = 0.5 x_{k-1}) stays in its box and never re-starts.
+        let (outs, st) = run(0.5, true);
+        assert!(
+            outs[1..]
+                .iter()
+                .all(|o| !clamped(o) && !o.flags.has(Flags::RELOCALISED))
+        );
+        assert_eq!(st.clamped_run, 0);
     }
 
     /// Below the gate the update is the plain Kalman update; above it the innovation variance

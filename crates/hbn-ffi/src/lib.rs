@@ -67,7 +67,7 @@ pub struct HbnOutput {
     /// Its standard deviation.
     pub x_std: f64,
     /// Guards that fired, a bit set (bit `i` is `hbn_core::Flags::NAMES[i]`: 1 input_invalid,
-    /// 2 measurement_invalid, 4 model_invalid, ..., 4096 initialised, 8192 extrapolation).
+    /// 2 measurement_invalid, 4 model_invalid, ..., 4096 initialised, 8192 extrapolation, 16384 relocalised).
     pub flags: u32,
 }
 
