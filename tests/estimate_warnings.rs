@@ -1,6 +1,7 @@
 //! `hbn estimate` warns when a log is recorded at another rate than the model's, and when many
-//! samples lie outside the training data (the `extrapolation` flag), and says neither on a log
-//! like the training logs.
+//! samples lie outside the training data (the `extrapolation` flag), when the filter lost the
+//! state and re-started (the `relocalised` flag), and says none of it on a log like the
+//! training logs.
 
 use std::path::Path;
 
@@ -104,4 +105,34 @@ fn estimate_warns_about_other_rates_and_data_outside_the_training_range() {
     );
     let (out, _) = hbn(&["estimate", "--model", &model, "--log", &far, "--verbose"]);
     assert!(out.contains("extrapolation x"), "{out}");
+
+    // A sensor that reads far above its training range from sample 300 on (a wrong unit, a
+    // broken sensor): the gate down-weights every one of those measurements, and says so.
+    let y_bad: Vec<f64> = run
+        .y
+        .iter()
+        .enumerate()
+        .map(|(k, v)| if k >= 300 { 100.0 * v + 50.0 } else { *v })
+        .collect();
+    let topics = [
+        ScalarTopic {
+            topic: "/input",
+            values: &run.u,
+        },
+        ScalarTopic {
+            topic: "/sensor",
+            values: &y_bad,
+        },
+    ];
+    let lost = p("lost.mcap");
+    hbn_io::write_scalar_log(Path::new(&lost), &t, &topics, Encoding::Json).expect("write");
+    let (out, err) = hbn(&["estimate", "--model", &model, "--log", &lost, "--verbose"]);
+    assert!(
+        err.contains(
+            "warning: 300 of 600 measurements (50.0%) were more than 5 standard deviations \
+             from the model's prediction (flag `outlier_rejected`)"
+        ),
+        "{err}"
+    );
+    assert!(out.contains("outlier_rejected x300"), "{out}");
 }

@@ -45,8 +45,8 @@ pub mod tables;
 pub mod eigen;
 pub use blr::{LocalRegression, Neighbourhood, NeighbourhoodParts, Posterior};
 pub use ekf::{
-    EXTRAPOLATION_RATIO, Ekf, EkfConfig, EkfState, Estimator, Flags, HbnView, InitPrior, Mode,
-    StepOutput, observability_eigenvalues, state_information,
+    EXTRAPOLATION_RATIO, Ekf, EkfConfig, EkfState, Estimator, Flags, HbnView, InitPrior,
+    LOST_AFTER, Mode, StepOutput, observability_eigenvalues, state_information,
 };
 pub use error::CoreError;
 pub use gp::{GpParts, GpView, Prediction, Variance, Want};

@@ -64,6 +64,12 @@ pub struct LogEstimate {
 /// carries an [`EstimateWarning::Extrapolation`].
 pub const EXTRAPOLATION_WARNING: f64 = 0.05;
 
+/// Share of measurements down-weighted by the outlier gate ([`hbn_core::Flags::OUTLIER_REJECTED`])
+/// above which an estimate carries an [`EstimateWarning::Outliers`]. A calibrated filter gates
+/// about one sample in a million (the gate is 5 standard deviations); a quarter of the log is a
+/// sensor that disagrees with the model (a broken sensor, another unit, another robot).
+pub const OUTLIER_WARNING: f64 = 0.25;
+
 /// Something about an estimate a user should know before trusting it.
 #[derive(Clone, Debug, PartialEq)]
 pub enum EstimateWarning {
@@ -72,6 +78,23 @@ pub enum EstimateWarning {
     Extrapolation {
         /// Samples flagged.
         samples: usize,
+        /// Samples in all.
+        total: usize,
+    },
+    /// Many measurements disagreed with the model's prediction by more than the outlier gate
+    /// and were down-weighted (more than [`OUTLIER_WARNING`] of the samples).
+    Outliers {
+        /// Samples down-weighted.
+        samples: usize,
+        /// Samples in all.
+        total: usize,
+    },
+    /// The filter lost the state and re-started from the measurement
+    /// ([`hbn_core::Flags::RELOCALISED`]: its state sat at the edge of the training range for
+    /// [`hbn_core::LOST_AFTER`] samples in a row).
+    Lost {
+        /// Re-starts.
+        times: usize,
         /// Samples in all.
         total: usize,
     },
@@ -97,6 +120,24 @@ impl std::fmt::Display for EstimateWarning {
                  train with data that cover these inputs and states",
                 100.0 * *samples as f64 / (*total).max(1) as f64
             ),
+            EstimateWarning::Outliers { samples, total } => write!(
+                f,
+                "{samples} of {total} measurements ({:.1}%) were more than 5 standard deviations \
+                 from the model's prediction (flag `outlier_rejected`) and were down-weighted: \
+                 check the sensor and that the log's signals and units match the training logs; \
+                 if they do, the model's noise is too small for this log (train on logs like it)",
+                100.0 * *samples as f64 / (*total).max(1) as f64
+            ),
+            EstimateWarning::Lost { times, total } => write!(
+                f,
+                "the filter lost the state {times} time{} in {total} samples (flag \
+                 `relocalised`: the estimate sat at the edge of the training range for {} \
+                 samples in a row) and re-started from the measurement; the estimate around \
+                 those samples is unreliable: check that the log's signals and units match the \
+                 training logs, or train with data that cover these inputs and states",
+                if *times == 1 { "" } else { "s" },
+                hbn_core::LOST_AFTER
+            ),
             EstimateWarning::RateMismatch {
                 path,
                 native_hz,
@@ -113,7 +154,8 @@ impl std::fmt::Display for EstimateWarning {
 
 impl LogEstimate {
     /// What a user should know about this estimate: many samples outside the training data
-    /// (more than [`EXTRAPOLATION_WARNING`]), signals recorded at another rate than the
+    /// (more than [`EXTRAPOLATION_WARNING`]), many measurements down-weighted as outliers (more
+    /// than [`OUTLIER_WARNING`]), any re-start of a lost filter, signals recorded at another rate than the
     /// model's (by more than [`crate::RATE_NOTICE_TOLERANCE`]).
     pub fn warnings(&self) -> Vec<EstimateWarning> {
         let mut out = Vec::new();
@@ -126,6 +168,21 @@ impl LogEstimate {
             .count();
         if samples as f64 > EXTRAPOLATION_WARNING * total as f64 {
             out.push(EstimateWarning::Extrapolation { samples, total });
+        }
+        let count = |bit: u32| {
+            self.estimate
+                .flags
+                .iter()
+                .filter(|&&f| hbn_core::Flags(f).has(bit))
+                .count()
+        };
+        let samples = count(hbn_core::Flags::OUTLIER_REJECTED);
+        if samples as f64 > OUTLIER_WARNING * total as f64 {
+            out.push(EstimateWarning::Outliers { samples, total });
+        }
+        let times = count(hbn_core::Flags::RELOCALISED);
+        if times > 0 {
+            out.push(EstimateWarning::Lost { times, total });
         }
         let model_hz = self.log.rate_hz();
         for (path, native) in self.log.paths.iter().zip(&self.log.native_rates) {
@@ -374,6 +431,76 @@ pub fn estimate_schema() -> Value {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An estimate of `n` samples whose flags are `flags(k)`, on a 100 Hz log with no signals.
+    fn flagged(n: usize, flags: impl Fn(usize) -> u32) -> LogEstimate {
+        LogEstimate {
+            log: LogData {
+                file: "log.mcap".into(),
+                paths: Vec::new(),
+                native_rates: Vec::new(),
+                aligned: hbn_io::Aligned {
+                    rate_hz: 100.0,
+                    t0_ns: 0,
+                    t_s: Vec::new(),
+                    columns: Vec::new(),
+                },
+            },
+            estimate: Estimate {
+                x: vec![0.0; n],
+                flags: (0..n).map(flags).collect(),
+                ..Estimate::default()
+            },
+            mode: Mode::Ekf,
+        }
+    }
+
+    /// One re-start of a lost filter is worth a warning; the share of outliers is, above
+    /// OUTLIER_WARNING; routine flags are not.
+    #[test]
+    fn lost_filters_and_many_outliers_are_warned_about() {
+        use hbn_core::Flags;
+        assert!(
+            flagged(100, |_| Flags::BLR_CAPPED | Flags::NOISE_FLOOR)
+                .warnings()
+                .is_empty()
+        );
+        let w = flagged(100, |k| if k == 40 { Flags::RELOCALISED } else { 0 }).warnings();
+        assert_eq!(
+            w,
+            vec![EstimateWarning::Lost {
+                times: 1,
+                total: 100
+            }]
+        );
+        assert!(
+            w[0].to_string()
+                .starts_with("the filter lost the state 1 time in 100 samples")
+        );
+        let gated = |share: usize| {
+            flagged(100, move |k| {
+                if k < share {
+                    Flags::OUTLIER_REJECTED
+                } else {
+                    0
+                }
+            })
+            .warnings()
+        };
+        assert!(gated(25).is_empty());
+        let w = gated(26);
+        assert_eq!(
+            w,
+            vec![EstimateWarning::Outliers {
+                samples: 26,
+                total: 100
+            }]
+        );
+        assert!(
+            w[0].to_string()
+                .starts_with("26 of 100 measurements (26.0%)")
+        );
+    }
 
     #[test]
     fn files_for_a_mode_carry_its_name() {

@@ -36,8 +36,8 @@ mod train;
 pub use error::{LogOption, OptionError, PipelineError, Setting};
 pub use estimate::{
     CSV_HEADER, ESTIMATE_SCHEMA, ESTIMATE_TOPIC, EXTRAPOLATION_WARNING, EstimateWarning,
-    LogEstimate, Outputs, SignalChoice, estimate_log, estimate_log_modes, estimate_schema,
-    file_for_mode, read_at_model_rate,
+    LogEstimate, OUTLIER_WARNING, Outputs, SignalChoice, estimate_log, estimate_log_modes,
+    estimate_schema, file_for_mode, read_at_model_rate,
 };
 pub use eval::{Evaluation, Method, Score, evaluate_log};
 pub use log::{
