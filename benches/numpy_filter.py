@@ -222,16 +222,9 @@ def _clamp(v: float, b: Tuple[float, float]) -> float:
     return min(max(v, b[0]), b[1])
 
 
-def _clamp_hit(v: float, b: Tuple[float, float], hit: list) -> float:
-    """``_clamp`` that records in ``hit[0]`` whether it changed ``v`` (``STATE_CLAMPED``)."""
-    c = _clamp(v, b)
-    if c != v:
-        hit[0] = True
-    return c
-
-
-#: ``hbn_core::ekf::LOST_AFTER``: steps in a row with the state clamped after which the filter
-#: re-starts from the prior of x at the current measurement.
+#: ``hbn_core::ekf::LOST_AFTER``: steps in a row whose transition prediction from the estimate
+#: left the state box, after which the filter re-starts from the prior of x at the current
+#: measurement.
 LOST_AFTER = 10
 
 
@@ -309,7 +302,7 @@ class NumpyEkf:
             "u_prev": u0,
             "plays": np.full(len(self.radii), u0),
             "rejected_run": 0,
-            "clamped_run": 0,
+            "lost_run": 0,
         }
         return c["x0_mean"], c["std_scale"] * math.sqrt(p[0, 0])
 
@@ -327,9 +320,10 @@ class NumpyEkf:
         t = self._linearise(
             self.tr, np.concatenate([[x1, x2, st["u_last"], st["u_prev"]], st["plays"]])
         )
-        hit = [False]
+        left_box = False
         if t is not None:
-            xk = _clamp_hit(t[0], c["x_bounds"], hit)
+            left_box = not (c["x_bounds"][0] <= t[0] <= c["x_bounds"][1])
+            xk = _clamp(t[0], c["x_bounds"])
             s = self._linearise(self.se, np.array([x1, s1, xk]))
             if s is not None:
                 a1, a2 = _clamp_jac(t[2][0], jm), _clamp_jac(t[2][1], jm)
@@ -341,7 +335,7 @@ class NumpyEkf:
                     c["q_floor"],
                 )
                 q_s = _floor(c["q_scale"] * s[1], c["q_floor"])
-                s_pred = _clamp_hit(s[0], c["y_bounds"], hit)
+                s_pred = _clamp(s[0], c["y_bounds"])
                 z = np.array([xk, x1, s_pred])
                 r = _floor(
                     c["r_scale"] * max(self.se.noise_var_raw, c["r_model_floor"]), c["r_floor"]
@@ -388,13 +382,11 @@ class NumpyEkf:
                 pn = ikh @ p @ ikh.T + r * np.outer(gain, gain)
                 if np.all(np.isfinite(zn)) and np.all(np.isfinite(pn)):
                     xb, yb = c["x_bounds"], c["y_bounds"]
-                    z = np.array(
-                        [_clamp_hit(zn[0], xb, hit), _clamp_hit(zn[1], xb, hit), _clamp_hit(zn[2], yb, hit)]
-                    )
+                    z = np.array([_clamp(zn[0], xb), _clamp(zn[1], xb), _clamp(zn[2], yb)])
                     p = _bound_cov(pn, c["p_min"], c["p_max"])
         # A lost filter (hbn_core's Ekf::relocalise): re-started from the prior of x at y_k.
-        st["clamped_run"] = st["clamped_run"] + 1 if hit[0] else 0
-        if st["clamped_run"] >= LOST_AFTER:
+        st["lost_run"] = st["lost_run"] + 1 if left_box else 0
+        if st["lost_run"] >= LOST_AFTER:
             prior = initial_state(self.model, y_k)
             if prior is not None:
                 xm, xv = prior
@@ -404,7 +396,7 @@ class NumpyEkf:
                 p = _bound_cov(
                     np.array([[xv, xv, 0.0], [xv, xv, 0.0], [0.0, 0.0, rr]]), c["p_min"], c["p_max"]
                 )
-                st["clamped_run"] = 0
+                st["lost_run"] = 0
                 st["rejected_run"] = 0
         st["z"], st["p"] = z, p
         return z[0], c["std_scale"] * math.sqrt(max(p[0, 0], 0.0))

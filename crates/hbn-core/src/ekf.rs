@@ -79,9 +79,9 @@ impl Flags {
     /// the variance of its training targets, whichever is smaller: the operating point is
     /// outside the training data, and the GP's uncertainty there is as large as the signal.
     pub const EXTRAPOLATION: u32 = 1 << 13;
-    /// The state had been clamped to its box for [`LOST_AFTER`] steps in a row: the filter
-    /// was lost, and re-started from the model's [`InitPrior`] at this step's measurement
-    /// (the inputs and plays kept).
+    /// The transition's prediction from the estimate had left the state box for
+    /// [`LOST_AFTER`] steps in a row: the filter was lost, and re-started from the model's
+    /// [`InitPrior`] at this step's measurement (the inputs and plays kept).
     pub const RELOCALISED: u32 = 1 << 14;
 
     /// Whether `bit` is set.
@@ -301,13 +301,15 @@ impl EkfConfig {
 /// prior far outside the data.
 pub const EXTRAPOLATION_RATIO: f64 = 0.5;
 
-/// Steps in a row with the state clamped to its box ([`Flags::STATE_CLAMPED`]) after which the
-/// filter counts as lost and re-starts from the model's [`InitPrior`] at the current
-/// measurement ([`Flags::RELOCALISED`]). The box is the training range of `x` widened by 10%
-/// of its span on each side, so a state held at its edge is outside everything the GPs were
-/// trained on; a filter there does not come back by itself (its Jacobians and variances are
-/// extrapolations, and it can lock into a cycle between the two edges). Without an
-/// [`InitPrior`], or with a non-finite measurement, nothing happens.
+/// Steps in a row in which the transition GP's prediction from the estimate, `x_k^-`, left the
+/// state box, after which the filter counts as lost and re-starts from the model's [`InitPrior`]
+/// at the current measurement ([`Flags::RELOCALISED`]). The box is the training range of `x`
+/// widened by 10% of its span on each side, so such a prediction comes from a state the model
+/// knows nothing about; a filter there does not come back by itself (its Jacobians and
+/// variances are extrapolations, and it can lock into a cycle between the two edges). The
+/// prediction's mean counts, in every mode: not the posterior (the update may pull it back
+/// each step while the next prediction leaves again), nor the unscented mode's sigma points.
+/// Without an [`InitPrior`], or with a non-finite measurement, nothing happens.
 pub const LOST_AFTER: u32 = 10;
 
 /// Prior of `x_0` from the first measurement: training `(y, x)` pairs sorted by `y`. Hysteresis
@@ -537,8 +539,9 @@ pub struct EkfState {
     pub steps: u64,
     /// Measurements down-weighted in a row by the outlier gate ([`EkfConfig::nis_gate`]).
     pub rejected_run: u32,
-    /// Steps in a row whose state was clamped to its box ([`LOST_AFTER`]).
-    pub clamped_run: u32,
+    /// Steps in a row whose transition prediction from the estimate left the state box
+    /// ([`LOST_AFTER`]).
+    pub lost_run: u32,
 }
 
 /// One linearised GP: value, input gradient, noise variance.
@@ -566,6 +569,8 @@ struct Predicted {
     r: f64,
     s_pred: f64,
     jacobian: Matrix3<f64>,
+    /// The transition GP's mean from the estimate left the state box ([`LOST_AFTER`]).
+    left_box: bool,
 }
 
 /// Lower Cholesky factor of a symmetric positive-definite 3x3 matrix, `None` if it is not
@@ -671,13 +676,13 @@ impl<'m> Ekf<'m> {
         // ---- update ----
         let (innovation, s_var, nis) = update(&mut st, y_k, pred.r, &cfg, &mut flags);
         st.steps = st.steps.saturating_add(1);
-        if flags & Flags::STATE_CLAMPED != 0 {
-            st.clamped_run = st.clamped_run.saturating_add(1);
-            if st.clamped_run >= LOST_AFTER {
+        if pred.left_box {
+            st.lost_run = st.lost_run.saturating_add(1);
+            if st.lost_run >= LOST_AFTER {
                 self.relocalise(&mut st, y_k, &mut flags);
             }
         } else {
-            st.clamped_run = 0;
+            st.lost_run = 0;
         }
         *state = Some(st);
         StepOutput {
@@ -729,7 +734,7 @@ impl<'m> Ekf<'m> {
             plays: self.model.plays.start(u0),
             steps: 1,
             rejected_run: 0,
-            clamped_run: 0,
+            lost_run: 0,
         };
         let out = StepOutput {
             x: st.z.x,
@@ -749,7 +754,7 @@ impl<'m> Ekf<'m> {
     /// A lost filter's re-start: `x_k` and `x_{k-1}` from the model's [`InitPrior`] at `y_k`,
     /// uncorrelated with `s_k`, which is `y_k` with the variance of the first step. The
     /// inputs, plays and counters of steps are kept. Nothing happens without a prior or with a
-    /// non-finite `y_k` (the state stays clamped, and the run counter keeps counting).
+    /// non-finite `y_k` (the run counter then keeps counting).
     fn relocalise(&self, st: &mut EkfState, y_k: f64, flags: &mut u32) {
         let cfg = self.config;
         let Some((x_mean, x_var)) = self.model.init.and_then(|prior| prior.prior(y_k)) else {
@@ -761,7 +766,7 @@ impl<'m> Ekf<'m> {
         let p = Matrix3::new(x_var, x_var, 0.0, x_var, x_var, 0.0, 0.0, 0.0, r);
         st.z = Vector3::new(x, x, s);
         st.p = bound_covariance(p, cfg.p_min, cfg.p_max, flags);
-        st.clamped_run = 0;
+        st.lost_run = 0;
         st.rejected_run = 0;
         *flags |= Flags::RELOCALISED;
     }
@@ -816,6 +821,7 @@ impl<'m> Ekf<'m> {
             r: self.fallback_r(),
             s_pred: s1,
             jacobian: f_mat,
+            left_box: false,
         }
     }
 
@@ -878,6 +884,7 @@ impl<'m> Ekf<'m> {
             r,
             s_pred,
             jacobian: f_mat,
+            left_box: outside(t.mean, cfg.x_bounds),
         }
     }
 
@@ -1005,6 +1012,7 @@ impl<'m> Ekf<'m> {
             r,
             s_pred: st.z.z,
             jacobian,
+            left_box: outside(t.mean, cfg.x_bounds),
         }
     }
 
@@ -1317,6 +1325,11 @@ fn inside_by_ldl(p: &Matrix3<f64>, lo: f64, hi: f64) -> bool {
     false
 }
 
+/// Whether `v` lies outside `[b.0, b.1]` (or is not a number).
+fn outside(v: f64, b: (f64, f64)) -> bool {
+    !(v >= b.0 && v <= b.1)
+}
+
 fn clamp_flag(v: f64, b: (f64, f64), flags: &mut u32) -> f64 {
     let c = if v.is_finite() {
         clamp_to(v, b.0, b.1)
@@ -1464,7 +1477,7 @@ mod tests {
             plays: [0.0; crate::play::MAX_PLAYS],
             steps: 5,
             rejected_run: 0,
-            clamped_run: 0,
+            lost_run: 0,
         }
     }
 
@@ -1498,9 +1511,9 @@ mod tests {
     }
 
     /// A filter whose model throws the state out of its box holds it at the edge; after
-    /// [`LOST_AFTER`] clamped steps in a row it re-starts from the [`InitPrior`] at the
-    /// measurement, flags it, and counts again from zero. A stable model never does, and
-    /// without a prior the filter stays clamped (nothing to re-start from).
+    /// [`LOST_AFTER`] predictions in a row outside the box (each clamped) it re-starts from the
+    /// [`InitPrior`] at the measurement, flags it, and counts again from zero. A stable model
+    /// never does, and without a prior the filter stays clamped (nothing to re-start from).
     #[test]
     fn a_lost_filter_relocalises_from_the_measurement() {
         let theta = [0.0, 3.0, 3.0, 3.0, 3.0];
@@ -1566,7 +1579,7 @@ mod tests {
         let (outs, st) = run(4.0, false);
         assert!(outs.iter().all(|o| !o.flags.has(Flags::RELOCALISED)));
         assert!(outs[1..].iter().all(clamped));
-        assert_eq!(st.clamped_run, 39);
+        assert_eq!(st.lost_run, 39);
         // A stable model (x_k = 0.5 x_{k-1}) stays in its box and never re-starts.
         let (outs, st) = run(0.5, true);
         assert!(
@@ -1574,7 +1587,7 @@ mod tests {
                 .iter()
                 .all(|o| !clamped(o) && !o.flags.has(Flags::RELOCALISED))
         );
-        assert_eq!(st.clamped_run, 0);
+        assert_eq!(st.lost_run, 0);
     }
 
     /// Below the gate the update is the plain Kalman update; above it the innovation variance

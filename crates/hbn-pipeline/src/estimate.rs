@@ -90,8 +90,8 @@ pub enum EstimateWarning {
         total: usize,
     },
     /// The filter lost the state and re-started from the measurement
-    /// ([`hbn_core::Flags::RELOCALISED`]: its state sat at the edge of the training range for
-    /// [`hbn_core::LOST_AFTER`] samples in a row).
+    /// ([`hbn_core::Flags::RELOCALISED`]: the model's prediction from its estimate left the
+    /// training range for [`hbn_core::LOST_AFTER`] samples in a row).
     Lost {
         /// Re-starts.
         times: usize,
@@ -131,8 +131,8 @@ impl std::fmt::Display for EstimateWarning {
             EstimateWarning::Lost { times, total } => write!(
                 f,
                 "the filter lost the state {times} time{} in {total} samples (flag \
-                 `relocalised`: the estimate sat at the edge of the training range for {} \
-                 samples in a row) and re-started from the measurement; the estimate around \
+                 `relocalised`: the model's prediction from the estimate left the training range \
+                 for {} samples in a row) and re-started from the measurement; the estimate around \
                  those samples is unreliable: check that the log's signals and units match the \
                  training logs, or train with data that cover these inputs and states",
                 if *times == 1 { "" } else { "s" },
