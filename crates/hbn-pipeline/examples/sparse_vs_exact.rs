@@ -8,7 +8,13 @@
 //! figures do not change when only the sparse GP does), and `INCREMENTS=none|transition|both`
 //! sets what both models learn ([`hbn_model::Increments`]), `LINEAR_MEAN=none|transition|both`
 //! which GPs have a linear prior mean ([`hbn_model::LinearMean`]), `MAX_SIGNAL_VARIANCE=v` their bound
-//! ([`HbnParams::max_signal_variance`]).
+//! ([`HbnParams::max_signal_variance`]). `TRAIN_STEPS=n` and `REPEATS=r` change the training
+//! set (default 500 and 10, the thesis protocol); `TRAIN_STEPS=5000 REPEATS=1` is one
+//! non-repeating log of the same size, like a robot's. `MAX_POINTS=n` sets the exact GP's
+//! support points (default 500; the row's names say it), `SUBSET_POLICY=farthest-point|random`
+//! how it picks them. `SELECT_INDUCING=m` adds a run `select{m}`: exact GPs with `m` inducing
+//! points as the alternative that held-out selection ([`hbn_model::Selection`]) chooses
+//! between. An empty `m,...` list runs no plain sparse model.
 use hbn_model::HbnParams;
 use hbn_pipeline::experiment::{ExperimentConfig, run_case};
 use hbn_sim::SystemKind;
@@ -39,6 +45,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Ok(v) => Some(v.parse()?),
         Err(_) => None,
     };
+    let defaults = ExperimentConfig::default();
+    let train_steps: usize = match std::env::var("TRAIN_STEPS") {
+        Ok(v) => v.parse()?,
+        Err(_) => defaults.train_steps,
+    };
+    let repeats: usize = match std::env::var("REPEATS") {
+        Ok(v) => v.parse()?,
+        Err(_) => defaults.repeats,
+    };
+    let max_points: usize = match std::env::var("MAX_POINTS") {
+        Ok(v) => v.parse()?,
+        Err(_) => HbnParams::default().max_points,
+    };
+    let subset_policy: hbn_gp::SubsetPolicy = match std::env::var("SUBSET_POLICY") {
+        Ok(v) => serde_json::from_value(serde_json::Value::String(v))?,
+        Err(_) => HbnParams::default().subset_policy,
+    };
+    let select: Option<usize> = match std::env::var("SELECT_INDUCING") {
+        Ok(v) => Some(v.parse()?),
+        Err(_) => None,
+    };
     let mut rows = Vec::new();
     for &system in &systems {
         for &gain in &gains {
@@ -49,23 +76,42 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 row.insert("seed".into(), seed.into());
                 let exact = std::env::var_os("SPARSE_ONLY").is_none();
                 let runs = exact
-                    .then(|| ("exact500".to_string(), None))
+                    .then(|| (format!("exact{max_points}"), None, None))
                     .into_iter()
-                    .chain(ms.iter().map(|&m| (format!("sparse{m}"), Some(m))));
-                for (name, n_inducing) in runs {
+                    .chain(ms.iter().map(|&m| (format!("sparse{m}"), Some(m), None)))
+                    .chain(select.map(|m| (format!("select{m}"), None, Some(m))));
+                for (name, n_inducing, alternative) in runs {
                     let cfg = ExperimentConfig {
                         params: HbnParams {
                             n_inducing,
                             increments,
                             linear_mean,
                             max_signal_variance,
+                            max_points,
+                            subset_policy,
+                            select: hbn_model::Selection {
+                                inducing: alternative.map(Some).into_iter().collect(),
+                                ..Default::default()
+                            },
                             ..HbnParams::default()
                         },
+                        train_steps,
+                        repeats,
                         ..ExperimentConfig::default()
                     };
                     let r = run_case(system, seed, gain, &cfg)?;
                     row.insert(format!("{name}_ekf"), r.nrmse_ekf.into());
                     row.insert(format!("{name}_ekf_blr"), r.nrmse_ekf_blr.into());
+                    row.insert(format!("{name}_ukf"), r.nrmse_ukf.into());
+                    row.insert(format!("{name}_default"), r.nrmse_default.into());
+                    row.insert(
+                        format!("{name}_default_mode"),
+                        r.default_mode.to_string().into(),
+                    );
+                    row.insert(
+                        format!("{name}_calibration"),
+                        serde_json::to_value(&r.calibration_default)?,
+                    );
                     row.insert(format!("{name}_seconds"), r.train_seconds.into());
                 }
                 eprintln!("{}", serde_json::Value::Object(row.clone()));
