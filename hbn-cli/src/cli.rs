@@ -282,12 +282,16 @@ fn memory_text(m: &[f64]) -> String {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Inducing(pub Option<usize>);
 
-/// The primary inducing setting (the first given, else the default) and the alternatives
-/// model selection tries (the rest).
+/// The primary inducing setting and the alternatives model selection tries: the first given
+/// and the rest, else the library's defaults (exact GPs, with sparse GPs of
+/// [`hbn_model::DEFAULT_INDUCING`] points as the alternative).
 pub fn inducing_choice(given: &[Inducing]) -> (Option<usize>, Vec<Option<usize>>) {
     match given.split_first() {
         Some((first, rest)) => (first.0, rest.iter().map(|i| i.0).collect()),
-        None => (params().n_inducing, Vec::new()),
+        None => {
+            let d = params();
+            (d.n_inducing, d.select.inducing)
+        }
     }
 }
 
@@ -426,9 +430,10 @@ pub struct TrainArgs {
     /// Kernel of the sensor GP (overrides --kernel).
     #[arg(long, value_parser = parse_kernel)]
     pub sensor_kernel: Option<KernelChoice>,
-    /// Inducing points per GP for sparse GPs trained on every sample (64 is a good start), or
-    /// `exact` (the default): exact GPs on at most --max-points samples each. Several,
-    /// comma-separated (`exact,64,128`), are chosen among on held-out data, with every --kernel.
+    /// Inducing points per GP for sparse GPs trained on every sample, or `exact`: exact GPs on
+    /// at most --max-points samples each. Several, comma-separated (`exact,64,128`), are
+    /// chosen among on held-out data, with every --kernel. Default `exact,64`: the held-out
+    /// data choose (docs/results.md, "Sparse or exact"); with --validation 0, exact.
     #[arg(long, value_parser = parse_inducing, value_delimiter = ',', value_name = "M|exact[,..]")]
     pub inducing: Vec<Inducing>,
     /// Most support points per exact GP (with --inducing exact).
@@ -793,8 +798,8 @@ pub struct ExperimentArgs {
     /// Samples of the test input.
     #[arg(long, default_value_t = experiment().test_steps)]
     pub test_steps: usize,
-    /// Inducing points per GP (sparse GPs on every sample), or `exact` (the default); several,
-    /// comma-separated, are chosen among on held-out data.
+    /// Inducing points per GP (sparse GPs on every sample), or `exact`; several,
+    /// comma-separated, are chosen among on held-out data (default `exact,64`, as hbn train).
     #[arg(long, value_parser = parse_inducing, value_delimiter = ',', value_name = "M|exact[,..]")]
     pub inducing: Vec<Inducing>,
     /// Most support points per GP.

@@ -275,12 +275,17 @@ fn candidate_table(rows: &[hbn_model::CandidateRow]) -> String {
         let name = format!("{}{star}", r.candidate);
         match (&r.scored, &r.note) {
             (Some((mode, sc)), _) => s.push_str(&format!(
-                "    {name:<24} {:<8} {:>8.4} {:>7.1}% {:>8.3} {:>8.1}\n",
+                "    {name:<24} {:<8} {:>8.4} {:>7.1}% {:>8.3} {:>8}\n",
                 mode.name(),
                 sc.nrmse,
                 100.0 * sc.calibration.coverage_2sigma,
                 sc.calibration.nlpd,
-                r.seconds
+                // Not saved in model files: a loaded model has none.
+                if r.seconds > 0.0 {
+                    format!("{:.1}", r.seconds)
+                } else {
+                    "-".to_owned()
+                }
             )),
             (None, note) => s.push_str(&format!(
                 "    {name:<24} not scored: {}\n",
@@ -289,7 +294,8 @@ fn candidate_table(rows: &[hbn_model::CandidateRow]) -> String {
         }
     }
     s.push_str(
-        "    * chosen: the lowest held-out NLPD of its default mode; the model is that \
+        "    * chosen: the lowest held-out NLPD of its default mode among those with a held-out \
+         nRMSE no higher than the first's; the model is that \
          candidate's\n",
     );
     s

@@ -189,12 +189,16 @@ pub struct CandidateRow {
     /// Its default mode and that mode's tuned held-out scores; `None` when it could not be
     /// scored (see `note`).
     pub scored: Option<(Mode, HeldOutScores)>,
-    /// Seconds its training and tuning took.
+    /// Seconds its training and tuning took. Not saved (like
+    /// [`crate::TrainingSummary::seconds`]), so that a model file depends only on its data and
+    /// parameters: 0 in a loaded model.
+    #[serde(skip)]
     pub seconds: f64,
     /// Why it has no score (a training error, or the filter failing on the held-out data).
     #[serde(default)]
     pub note: Option<String>,
-    /// The candidate chosen (the lowest held-out NLPD).
+    /// The candidate chosen: the lowest held-out NLPD among the candidates whose held-out
+    /// nRMSE is no higher than the first's.
     pub chosen: bool,
 }
 

@@ -91,7 +91,8 @@ FilterOutput = _hbn.FilterOutput
 SYSTEMS: Tuple[str, ...] = tuple(_hbn.systems())
 #: Kernel names accepted by ``kernel=`` (each of the first five optionally with ``+dir``).
 KERNELS: str = _hbn.kernel_names()
-#: Suggested inducing points per GP for sparse models (``HysteresisModel.fit(n_inducing=...)``).
+#: Inducing points per GP of the default model's sparse candidate (``HysteresisModel.fit``
+#: chooses between exact GPs and sparse GPs with this many points on held-out data).
 DEFAULT_INDUCING: int = _hbn.DEFAULT_INDUCING
 #: Estimation modes accepted by ``mode=``.
 MODES: Tuple[str, ...] = tuple(_hbn.mode_names())
@@ -617,8 +618,10 @@ class HysteresisModel:
     Training parameters are keyword arguments (``**params``) applied over the library defaults
     (:func:`default_params`): ``kernel`` (both GPs; see :data:`KERNELS`), ``transition_kernel``,
     ``sensor_kernel``, ``n_inducing`` (``None``: exact GPs on at most ``max_points`` samples;
-    an integer: sparse GPs with that many inducing points, trained on every sample; see
-    :data:`DEFAULT_INDUCING`), ``max_points``, ``subset`` (``"farthest-point"`` or ``"random"``),
+    an integer: sparse GPs with that many inducing points, trained on every sample; a list:
+    chosen among on held-out data, see below; default ``[None, DEFAULT_INDUCING]``, so the
+    held-out data choose between exact and sparse GPs, and with ``validation=0`` the exact GPs
+    are trained), ``max_points``, ``subset`` (``"farthest-point"`` or ``"random"``),
     ``n_restarts`` (optimiser starts per GP), ``max_iter`` (L-BFGS iterations per start),
     ``seed``, ``normalize``, ``noise_floor``, ``blr_window`` (half-width of the EKF+BLR window as a
     fraction of each coordinate's range), ``validation`` (fraction of every run held out at a
@@ -637,7 +640,8 @@ class HysteresisModel:
     Model selection: ``kernel`` and ``n_inducing`` also take a list (``kernel=["matern52",
     "se-ard"]``, ``n_inducing=[None, 64]``, ``None`` being the exact GP). Every combination is
     trained and its filter tuned on the same held-out data, and the one whose default mode has
-    the lowest held-out NLPD becomes the model; each candidate costs one training. The table is
+    the lowest held-out NLPD among those at least as accurate held out (nRMSE) as the first
+    becomes the model; each candidate costs one training. The table is
     ``summary["validation"]["candidates"]``, and :attr:`params` holds the chosen configuration.
 
     >>> import hbn
@@ -679,9 +683,10 @@ class HysteresisModel:
 
         ``u``, ``x``, ``y``: one trajectory (1-D arrays of equal length, at least 3 samples) or
         lists of trajectories (rows never straddle two trajectories). ``**params``: training
-        parameters (see the class documentation; ``n_inducing=None``, the default, trains exact
-        GPs on at most ``max_points`` samples each; an integer, ``hbn.DEFAULT_INDUCING`` = 64 is
-        a good start, trains sparse GPs with that many inducing points on every sample). ``signals`` (optional) records where the
+        parameters (see the class documentation; ``n_inducing=None`` trains exact GPs on at most
+        ``max_points`` samples each; an integer trains sparse GPs with that many inducing points
+        on every sample; the default ``[None, hbn.DEFAULT_INDUCING]`` trains both and keeps the
+        one that estimates the held-out data better). ``signals`` (optional) records where the
         signals come from, ``{"u": "/valve.pressure", "x": ..., "y": ...}`` (or with ``{"name",
         "path", "unit"}`` dicts as values): ``hbn estimate --model`` then reads ``u`` and ``y``
         from those message paths. To train from MCAP logs use :meth:`from_logs`, which keeps the
