@@ -108,9 +108,13 @@ def test_defaults_come_from_the_library():
     m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=60)
     got = m.params
     for k, v in p.items():
-        if k not in ("max_points", "signals"):
+        if k not in ("max_points", "signals", "n_inducing"):
             assert got[k] == v, k
     assert got["max_points"] == 60
+    # The default lists the inducing settings chosen among on held-out data (exact GPs first);
+    # the model holds the one chosen.
+    assert p["n_inducing"] == ["exact", hbn.DEFAULT_INDUCING]
+    assert got["n_inducing"] in p["n_inducing"]
     o = hbn.default_log_options()
     assert o["rate"] is None and o["max_gap"] > 0 and o["time_source"] == "log"
     assert hbn.default_gp_params()["n_restarts"] >= 1
