@@ -110,7 +110,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     );
                     row.insert(
                         format!("{name}_calibration"),
-                        serde_json::to_value(&r.calibration_default)?,
+                        serde_json::to_value(r.calibration_default)?,
                     );
                     row.insert(format!("{name}_seconds"), r.train_seconds.into());
                 }
