@@ -1230,6 +1230,31 @@ mod tests {
         }
     }
 
+    /// The default model is chosen on held-out data between exact GPs (the primary, trained
+    /// alone when nothing is held out) and sparse GPs of `DEFAULT_INDUCING` points.
+    #[test]
+    fn the_default_chooses_between_exact_and_sparse_gps() {
+        let p = HbnParams::default();
+        let names: Vec<String> = p.candidates().iter().map(|c| c.to_string()).collect();
+        assert_eq!(names, ["matern52 exact", "matern52 m=64"]);
+        assert_eq!(p.candidate().n_inducing, None);
+        assert!(p.validation > 0.0);
+        // Read back as the list the CLI and Python show.
+        assert_eq!(
+            p.get(Param::Inducing),
+            Some(ParamValue::List(vec![
+                ParamValue::Text("exact".into()),
+                ParamValue::Int(DEFAULT_INDUCING as u64)
+            ]))
+        );
+        // Without held-out data it still checks (the primary is then trained).
+        let q = HbnParams {
+            validation: 0.0,
+            ..HbnParams::default()
+        };
+        assert!(q.check_ref().is_ok());
+    }
+
     /// Lists set alternatives (the first value is the primary one), read back as lists, and
     /// give the candidates in order; a single value drops the alternatives.
     #[test]
