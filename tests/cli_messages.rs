@@ -582,6 +582,49 @@ fn memory_flag_sets_the_play_operators_and_names_itself_when_wrong() {
 }
 
 #[test]
+fn lags_flag_sets_the_low_pass_inputs_and_names_itself_when_wrong() {
+    let (_dir, log, m) = small_model();
+    let dir = tempfile::tempdir().unwrap();
+    let m2 = dir.path().join("m2.hbn").to_string_lossy().into_owned();
+    let inspect = |model: &str| {
+        let (e, out) = hbn(&["inspect", model, "--json"]);
+        assert!(e.is_none(), "{e:?}");
+        serde_json::from_str::<serde_json::Value>(&out).unwrap()
+    };
+    // The default model has none.
+    assert_eq!(inspect(&m)["memory"]["lag_seconds"], serde_json::json!([]));
+    let (e, _) = train_small(&log, &m2, &["--lags", "0.5,2"]);
+    assert!(e.is_none(), "{e:?}");
+    let v = inspect(&m2);
+    assert_eq!(v["memory"]["lag_seconds"], serde_json::json!([0.5, 2.0]));
+    let a = v["memory"]["lag_coefficients"].as_array().unwrap();
+    assert_eq!(a.len(), 2);
+    // 100 Hz: a = 1 - exp(-1 / 50) for 0.5 s.
+    let a0 = a[0].as_f64().unwrap();
+    assert!((a0 - (1.0 - (-0.02f64).exp())).abs() < 1e-12, "{a0}");
+    // The transition's inputs name the lags after the plays.
+    let names: Vec<String> = v["transition"]["inputs"]
+        .as_array()
+        .map(|a| {
+            a.iter()
+                .filter_map(|n| n.as_str().map(String::from))
+                .collect()
+        })
+        .unwrap_or_default();
+    assert!(names.iter().any(|n| n.starts_with("lag(")), "{names:?}");
+    // Bad values, and too many plays and lags together, name the flag.
+    for bad in [
+        &["--lags", "0"][..],
+        &["--lags", "1,x"],
+        &["--lags", "1,2,3"],
+    ] {
+        let (e, _) = train_small(&log, &m2, bad);
+        let text = e.unwrap_or_else(|| panic!("{bad:?} accepted"));
+        assert!(text.contains("--lags"), "{bad:?}: {text}");
+    }
+}
+
+#[test]
 fn linear_mean_flag_sets_the_gps_prior_means_and_inspect_shows_them() {
     let (_dir, log, m) = small_model();
     let dir = tempfile::tempdir().unwrap();

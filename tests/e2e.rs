@@ -230,3 +230,42 @@ fn model_files_with_and_without_play_operators_load() {
     let without = plain.estimate(&test.u, &test.y, Mode::Ekf).unwrap();
     assert_ne!(bits(&with.x), bits(&without.x));
 }
+
+/// Lags ride along in the model file at the model's rate, reach the transition GP as inputs
+/// after the plays, and change the estimate; a file from before lags existed (no `lags`
+/// parameter) loads as a model without them, estimating bit for bit as before. (What they
+/// gain on a system with creep is measured in docs/memory.md, not here: with this test's small
+/// training budget the soft actuator's estimate is not better with them.)
+#[test]
+fn lags_ride_along_and_reach_the_transition_gp() {
+    let system = SystemKind::SoftActuator;
+    let (with, _) = common::train_model_with(system, 1.0, 150, 1, |p| p.lags = vec![1.0]);
+    let (plain, _) = common::train_model_with(system, 1.0, 150, 1, |_| {});
+    let plays = with.plays().unwrap();
+    let a = hbn::core::lag_coefficient(1.0, with.rate_hz()).unwrap();
+    assert_eq!(plays.lags(), &[a]);
+    assert_eq!(plays.radii().len(), hbn::model::DEFAULT_MEMORY.len());
+    assert_eq!(plays.len(), hbn::model::DEFAULT_MEMORY.len() + 1);
+    assert_eq!(
+        with.transition().kernel().dim,
+        plain.transition().kernel().dim + 1
+    );
+    let back = HbnModel::from_json(&with.to_json().unwrap(), "lags").unwrap();
+    assert_eq!(back.plays().unwrap(), plays);
+
+    // Without lags, written as an older build wrote it.
+    let mut v: serde_json::Value = serde_json::from_str(&plain.to_json().unwrap()).unwrap();
+    let params = v["model"]["params"].as_object_mut().unwrap();
+    assert!(params.remove("lags").is_some());
+    let old = HbnModel::from_json(&v.to_string(), "old").unwrap();
+    assert!(old.params().lags.is_empty() && old.plays().unwrap().lags().is_empty());
+
+    let test = common::test_run(system, 1.0, 400, 1);
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+    let a_old = old.estimate(&test.u, &test.y, Mode::Ekf).unwrap();
+    let a_plain = plain.estimate(&test.u, &test.y, Mode::Ekf).unwrap();
+    assert_eq!(bits(&a_old.x), bits(&a_plain.x));
+    let a_with = with.estimate(&test.u, &test.y, Mode::Ekf).unwrap();
+    assert_ne!(bits(&a_with.x), bits(&a_plain.x));
+    assert!(a_with.x.iter().all(|x| x.is_finite()));
+}

@@ -174,7 +174,7 @@ fn exported_models_reproduce_hbn_estimate_in_c_and_rust() {
             &["--inducing", "32", "--linear-mean", "both"],
             false,
         ),
-        ("sparse-memory", &["--inducing", "32"], false),
+        ("sparse-memory", &["--inducing", "32", "--lags", "1"], false),
         (
             "exact",
             &["--inducing", "exact", "--max-points", "150"],

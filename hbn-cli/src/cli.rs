@@ -239,6 +239,32 @@ impl std::fmt::Display for Memory {
     }
 }
 
+/// `--lags`: time constants (seconds) of the transition's lags, or none.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Lags(pub Vec<f64>);
+
+fn parse_lags(s: &str) -> Result<Lags, String> {
+    let t = s.trim();
+    if t.eq_ignore_ascii_case("none") {
+        return Ok(Lags(Vec::new()));
+    }
+    t.split(',')
+        .map(|r| match r.trim().parse::<f64>() {
+            Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+            _ => Err(format!(
+                "expected time constants in seconds (> 0), comma-separated, or `none`; got {r:?}"
+            )),
+        })
+        .collect::<Result<Vec<f64>, String>>()
+        .map(Lags)
+}
+
+impl std::fmt::Display for Lags {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&memory_text(&self.0))
+    }
+}
+
 /// `--max-signal-variance`: a bound, or `none`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Cap(pub Option<f64>);
@@ -470,6 +496,12 @@ pub struct TrainArgs {
     /// comma-separated (at most 4), or `none` for the thesis' four inputs. docs/memory.md.
     #[arg(long, value_parser = parse_memory, default_value_t = Memory(params().memory), value_name = "R[,..]|none")]
     pub memory: Memory,
+    /// The input's recent past: time constants in seconds of first-order low-pass filters
+    /// (lags) of u whose outputs the transition GP reads after the plays, comma-separated
+    /// (plays and lags at most 4 in all), or `none`. For creep and viscoelastic relaxation
+    /// (soft actuators). docs/memory.md.
+    #[arg(long, value_parser = parse_lags, default_value_t = Lags(params().lags), value_name = "TAU[,..]|none")]
+    pub lags: Lags,
     /// Which GPs have a linear prior mean (the targets' least-squares plane on the GP's inputs,
     /// the kernel modelling the rest): `none`, `transition` or `both`. On the sensor GP it can
     /// cost observability. docs/sparse.md.
@@ -808,6 +840,9 @@ pub struct ExperimentArgs {
     /// Play operators' radii as fractions of the input's range, or `none` (as `hbn train`).
     #[arg(long, value_parser = parse_memory, default_value_t = Memory(params().memory), value_name = "R[,..]|none")]
     pub memory: Memory,
+    /// Lags' time constants in seconds, or `none` (as `hbn train`).
+    #[arg(long, value_parser = parse_lags, default_value_t = Lags(params().lags), value_name = "TAU[,..]|none")]
+    pub lags: Lags,
     /// Which GPs have a linear prior mean: `none`, `transition` or `both` (as `hbn train`).
     #[arg(long, value_parser = parse_linear_mean, default_value_t = params().linear_mean, value_name = "none|transition|both")]
     pub linear_mean: LinearMean,

@@ -88,6 +88,7 @@ pub fn run(ui: &mut Ui<'_>, args: &ExperimentArgs) -> anyhow::Result<Vec<Experim
                 },
                 max_points: args.max_points,
                 memory: args.memory.0.clone(),
+                lags: args.lags.0.clone(),
                 linear_mean: args.linear_mean,
                 ..HbnParams::default()
             }

@@ -31,6 +31,14 @@ pub fn input_names(model: &HbnModel, role: GpRole) -> Vec<String> {
                     .iter()
                     .map(|f| format!("play({u}, {f})[k-1]")),
             );
+            // Then one lag per `--lags` time constant.
+            names.extend(
+                model
+                    .params()
+                    .lags
+                    .iter()
+                    .map(|tau| format!("lag({u}, {tau} s)[k-1]")),
+            );
             names
         }
         GpRole::Sensor => vec![format!("{x}[k-1]"), format!("{y}[k-1]"), format!("{x}[k]")],
@@ -129,6 +137,8 @@ pub fn model_json(model: &HbnModel) -> Value {
         "memory": {
             "fractions": p.memory,
             "radii": model.plays().map(|pl| pl.radii().to_vec()).unwrap_or_default(),
+            "lag_seconds": p.lags,
+            "lag_coefficients": model.plays().map(|pl| pl.lags().to_vec()).unwrap_or_default(),
         },
         "training_ranges": {"u": us, "x": xs, "y": ys},
         "transition": gp_json(

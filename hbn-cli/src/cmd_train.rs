@@ -37,6 +37,7 @@ impl TrainArgs {
             blr_window: self.blr_window,
             validation: self.validation,
             memory: self.memory.0.clone(),
+            lags: self.lags.0.clone(),
             linear_mean: self.linear_mean,
             max_signal_variance: self.max_signal_variance.0,
             ..d

@@ -28,6 +28,7 @@ pub fn flag(setting: Setting) -> &'static str {
             Param::Blr => "the BLR prior (set in the Rust API)",
             Param::Validation => "--validation",
             Param::Memory => "--memory",
+            Param::Lags => "--lags",
             Param::LinearMean => "--linear-mean",
             Param::MaxSignalVariance => "--max-signal-variance",
         },

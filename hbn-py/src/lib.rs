@@ -61,6 +61,7 @@ fn param_keyword(p: Param) -> &'static str {
         Param::Blr => "blr",
         Param::Validation => "validation",
         Param::Memory => "memory",
+        Param::Lags => "lags",
         Param::LinearMean => "linear_mean",
         Param::MaxSignalVariance => "max_signal_variance",
     }

@@ -149,6 +149,10 @@ BAD_PARAMS = [
     ("memory", [1.5]),
     ("memory", [0.1] * 5),
     ("memory", "lots"),
+    ("lags", [0.0]),
+    ("lags", [-1.0]),
+    ("lags", [1.0] * 3),
+    ("lags", "slow"),
     ("linear_mean", "sensor"),
     ("linear_mean", 1),
     ("max_signal_variance", 0.0),
@@ -168,6 +172,20 @@ def test_memory_sets_the_play_operators():
     te = hbn.simulate("preisach", 200, seed=2, noise_gain=1.0)
     a, _ = default.estimate(te["u"], te["y"])
     b, _ = plain.estimate(te["u"], te["y"])
+    assert not np.array_equal(a, b)
+
+
+def test_lags_set_low_pass_inputs_of_the_transition():
+    d = hbn.simulate("soft-actuator", 300, seed=1, noise_gain=1.0)
+    fast = dict(max_points=80, n_restarts=1, max_iter=30, validation=0.0)
+    assert hbn.default_params()["lags"] == []
+    plain = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], **fast)
+    lagged = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], lags=[1.0], **fast)
+    assert lagged.params["lags"] == [1.0]
+    assert lagged.params["memory"] == [0.05, 0.2]
+    te = hbn.simulate("soft-actuator", 200, seed=2, noise_gain=1.0)
+    a, _ = plain.estimate(te["u"], te["y"])
+    b, _ = lagged.estimate(te["u"], te["y"])
     assert not np.array_equal(a, b)
 
 

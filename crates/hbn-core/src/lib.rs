@@ -9,7 +9,7 @@
 //!   exact or sparse (inducing points);
 //! - [`ekf`]: the EKF / EKF+BLR step on the augmented HBN state;
 //! - [`blr`]: local Bayesian linear regression with a bounded neighbourhood query;
-//! - [`play`]: play operators, the input's long memory for the transition GP;
+//! - [`play`]: play operators and lags, the input's memory for the transition GP;
 //! - [`rng`]: a small portable random number generator;
 //! - [`tables`]: a trained model as constant tables (flash) and the view read back from them.
 #![cfg_attr(not(feature = "std"), no_std)]
@@ -51,4 +51,4 @@ pub use ekf::{
 pub use error::CoreError;
 pub use gp::{GpParts, GpView, Prediction, Variance, Want};
 pub use kernel::{Kernel, KernelSpec, MAX_DIM, Metric, Profile};
-pub use play::{MAX_PLAYS, PlayState, Plays, transition_input};
+pub use play::{MAX_PLAYS, PlayState, Plays, lag_coefficient, transition_input};

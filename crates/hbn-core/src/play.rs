@@ -17,19 +17,29 @@
 //! `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}, p^1_{k-1}, .., p^m_{k-1}]`. The plays depend on the
 //! input alone, so the filter's Jacobians and noise are those of the HBN without them.
 //! `docs/memory.md` has the measurements that chose the default radii.
+//!
+//! Beside the plays, a model may have **lags**: first-order low-pass filters of the input,
+//! `l_k = l_{k-1} + a (u_k - l_{k-1})`, `l_0 = u_0`, with `a = 1 - exp(-dt / tau)` for a time
+//! constant `tau`. They summarise the recent past of `u` on the scale `tau`, which is what
+//! creep and viscoelastic relaxation (soft materials) depend on and two samples of `u` cannot
+//! show. They follow the plays among the transition's inputs, and count towards
+//! [`MAX_PLAYS`].
 
 use crate::CoreError;
 
-/// Most play operators a model can have (the transition's dimension, `4 + plays`, stays
-/// within [`crate::MAX_DIM`]).
+/// Most memory operators (plays and lags together) a model can have (the transition's
+/// dimension, `4 + plays + lags`, stays within [`crate::MAX_DIM`]).
 pub const MAX_PLAYS: usize = 4;
 
-/// The radii of a model's play operators, in the input's units (checked: finite and positive,
-/// at most [`MAX_PLAYS`]). The default has none: the thesis' HBN.
+/// A model's memory operators of the input: play operators (their radii, in the input's
+/// units) and lags (their coefficients `a` in `(0, 1]`), checked, at most [`MAX_PLAYS`] in
+/// all. The default has none: the thesis' HBN.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Plays {
     radii: [f64; MAX_PLAYS],
     len: usize,
+    lags: [f64; MAX_PLAYS],
+    n_lags: usize,
 }
 
 /// The plays' values after some input: what the filter carries between steps.
@@ -40,7 +50,30 @@ impl Plays {
     pub const NONE: Plays = Plays {
         radii: [0.0; MAX_PLAYS],
         len: 0,
+        lags: [0.0; MAX_PLAYS],
+        n_lags: 0,
     };
+
+    /// Play operators and lags: [`Plays::new`]`(radii)` plus lags with coefficients `lags`
+    /// (each in `(0, 1]`: [`lag_coefficient`]); at most [`MAX_PLAYS`] in all.
+    pub fn with_lags(radii: &[f64], lags: &[f64]) -> Result<Self, CoreError> {
+        let mut out = Self::new(radii)?;
+        if radii.len() + lags.len() > MAX_PLAYS {
+            return Err(CoreError::InvalidSpec(
+                "a model has at most 4 play operators and lags in all",
+            ));
+        }
+        for (slot, &a) in out.lags.iter_mut().zip(lags) {
+            if !(a.is_finite() && a > 0.0 && a <= 1.0) {
+                return Err(CoreError::InvalidSpec(
+                    "a lag's coefficient must lie in (0, 1]",
+                ));
+            }
+            *slot = a;
+        }
+        out.n_lags = lags.len();
+        Ok(out)
+    }
 
     /// Checks the radii: at most [`MAX_PLAYS`], each finite and positive.
     pub fn new(radii: &[f64]) -> Result<Self, CoreError> {
@@ -62,19 +95,24 @@ impl Plays {
         Ok(out)
     }
 
-    /// The radii.
+    /// The play operators' radii.
     pub fn radii(&self) -> &[f64] {
         self.radii.get(..self.len).unwrap_or(&[])
     }
 
-    /// Number of play operators.
+    /// The lags' coefficients `a`.
+    pub fn lags(&self) -> &[f64] {
+        self.lags.get(..self.n_lags).unwrap_or(&[])
+    }
+
+    /// Number of memory operators (plays and lags): the transition's extra inputs.
     pub fn len(&self) -> usize {
-        self.len
+        self.len + self.n_lags
     }
 
     /// Whether there are none.
     pub fn is_empty(&self) -> bool {
-        self.len == 0
+        self.len() == 0
     }
 
     /// The plays at the first input `u_0`: all equal to it (unused slots too).
@@ -82,16 +120,21 @@ impl Plays {
         [u0; MAX_PLAYS]
     }
 
-    /// Advances the plays by one input `u` (unused slots follow `u`). A non-finite `u`
-    /// leaves them as they are.
+    /// Advances the plays, then the lags, by one input `u` (unused slots follow `u`). A
+    /// non-finite `u` leaves them as they are.
     pub fn advance(&self, state: &mut PlayState, u: f64) {
         if !u.is_finite() {
             return;
         }
+        let (radii, lags) = (self.radii(), self.lags());
         for (i, p) in state.iter_mut().enumerate() {
-            *p = match self.radii().get(i) {
-                Some(&r) => clamp_play(*p, u - r, u + r),
-                None => u,
+            *p = match (
+                radii.get(i),
+                i.checked_sub(radii.len()).and_then(|j| lags.get(j)),
+            ) {
+                (Some(&r), _) => clamp_play(*p, u - r, u + r),
+                (None, Some(&a)) => *p + a * (u - *p),
+                (None, None) => u,
             };
         }
     }
@@ -108,7 +151,15 @@ impl Plays {
     }
 }
 
-/// The transition's input `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}, plays after u_{k-1}]`, with
+/// The coefficient `a = 1 - exp(-1 / (rate_hz tau))` of a lag with time constant `tau`
+/// seconds at `rate_hz` samples per second (`None` unless both are finite and positive).
+pub fn lag_coefficient(tau: f64, rate_hz: f64) -> Option<f64> {
+    let samples = tau * rate_hz;
+    (tau.is_finite() && rate_hz.is_finite() && tau > 0.0 && rate_hz > 0.0 && samples.is_finite())
+        .then(|| -libm::expm1(-1.0 / samples))
+}
+
+/// The transition's input `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}, plays and lags after u_{k-1}]`, with
 /// every play slot filled: a GP with `4 + plays.len()` inputs reads the first that many (the
 /// filter, the open-loop simulation, the training rows and the explorer all build it here).
 pub fn transition_input(
@@ -172,6 +223,40 @@ mod tests {
         assert!(Plays::new(&[f64::NAN]).is_err());
         assert!(Plays::new(&[1.0; 5]).is_err());
         assert_eq!(Plays::new(&[1.0, 2.0]).unwrap().radii(), &[1.0, 2.0]);
+    }
+
+    #[test]
+    fn a_lag_is_a_first_order_low_pass_after_the_plays() {
+        let a = lag_coefficient(1.0, 10.0).unwrap();
+        assert!((a - (1.0 - (-0.1f64).exp())).abs() < 1e-15);
+        let m = Plays::with_lags(&[1.0], &[0.5]).unwrap();
+        assert_eq!(m.len(), 2);
+        assert_eq!(m.lags(), &[0.5]);
+        let u = [0.0, 2.0, 2.0, 2.0, 0.0];
+        let mut out = [[0.0; MAX_PLAYS]; 5];
+        m.run(&u, &mut out);
+        // Slot 0: the play of radius 1; slot 1: the lag, halfway towards u at every step.
+        assert_eq!(out.map(|s| s[0]), [0.0, 1.0, 1.0, 1.0, 1.0]);
+        assert_eq!(out.map(|s| s[1]), [0.0, 1.0, 1.5, 1.75, 0.875]);
+        // Unused slots follow the input.
+        assert_eq!(out[4][2], 0.0);
+        // A lag of coefficient 1 is the input itself.
+        let id = Plays::with_lags(&[], &[1.0]).unwrap();
+        let mut s = id.start(3.0);
+        id.advance(&mut s, 7.0);
+        assert_eq!(s[0], 7.0);
+    }
+
+    #[test]
+    fn bad_lags_are_rejected() {
+        assert!(Plays::with_lags(&[], &[0.0]).is_err());
+        assert!(Plays::with_lags(&[], &[1.5]).is_err());
+        assert!(Plays::with_lags(&[], &[f64::NAN]).is_err());
+        assert!(Plays::with_lags(&[1.0; 3], &[0.5; 2]).is_err());
+        assert!(Plays::with_lags(&[0.0], &[0.5]).is_err());
+        assert_eq!(lag_coefficient(0.0, 100.0), None);
+        assert_eq!(lag_coefficient(1.0, f64::INFINITY), None);
+        assert_eq!(lag_coefficient(f64::NAN, 100.0), None);
     }
 
     #[test]

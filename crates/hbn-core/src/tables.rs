@@ -30,8 +30,9 @@ pub const MAGIC: u32 = u32::from_le_bytes(*b"HBN1");
 /// Format version written by [`encode`] and read by [`Tables::model`] (3 adds the play
 /// operators after the prior of `x_0`; 4 adds each GP's linear mean, its slope count after
 /// the whitening length and its slopes after the output scalars; tables of version 2 are read
-/// as having no plays, of versions 2 and 3 as having constant means).
-pub const VERSION: u32 = 4;
+/// as having no plays, of versions 2 and 3 as having constant means; 5 adds the lags' count and
+/// coefficients after the plays, and tables before it are read as having no lags).
+pub const VERSION: u32 = 5;
 /// Oldest format version [`Tables::model`] reads.
 pub const OLDEST_VERSION: u32 = 2;
 /// Last value of every layout (catches a truncated or misaligned table).
@@ -168,9 +169,13 @@ pub fn encode<S: TableSink>(
             sink.real(p[1]);
         }
     }
-    sink.int(count(view.plays.len())?);
+    sink.int(count(view.plays.radii().len())?);
     for &r in view.plays.radii() {
         sink.real(r);
+    }
+    sink.int(count(view.plays.lags().len())?);
+    for &a in view.plays.lags() {
+        sink.real(a);
     }
     sink.int(END);
     Ok(())
@@ -463,7 +468,17 @@ impl<'a> Tables<'a> {
             if n > crate::play::MAX_PLAYS {
                 return Err(TRUNCATED);
             }
-            Plays::new(r.reals(n)?)?
+            let radii = r.reals(n)?;
+            let lags = if version >= 5 {
+                let n = r.size()?;
+                if n > crate::play::MAX_PLAYS {
+                    return Err(TRUNCATED);
+                }
+                r.reals(n)?
+            } else {
+                &[]
+            };
+            Plays::with_lags(radii, lags)?
         } else {
             Plays::NONE
         };

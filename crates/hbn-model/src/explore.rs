@@ -406,7 +406,8 @@ impl Explorer {
         let params = params.check()?;
         let span = params.u_max - params.u_min;
         let radii: Vec<f64> = params.model.memory.iter().map(|f| f * span).collect();
-        let plays = Plays::new(&radii).map_err(ModelError::from)?;
+        let lags = params.model.lag_coefficients().map_err(ModelError::from)?;
+        let plays = Plays::with_lags(&radii, &lags).map_err(ModelError::from)?;
         Ok(Self {
             plays,
             rng: Rng::new(params.seed ^ EXPLORE_SALT),

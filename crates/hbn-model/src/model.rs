@@ -369,20 +369,22 @@ impl HbnModel {
     }
 
     /// The play operators of `params.memory` on the input range of `trajectories` (all of
-    /// them, so that the folds of filter-aware training share the radii).
+    /// them, so that the folds of filter-aware training share the radii), and the lags of
+    /// `params.lags`.
     fn plays_for(
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
     ) -> Result<Plays, ModelError> {
+        let lags = params.lag_coefficients()?;
         if params.memory.is_empty() {
-            return Ok(Plays::NONE);
+            return Ok(Plays::with_lags(&[], &lags)?);
         }
         for (i, t) in trajectories.iter().enumerate() {
             t.validate(i)?;
         }
         let span = SignalStats::of(trajectories.iter().flat_map(|t| t.u.iter())).span();
         let radii: Vec<f64> = params.memory.iter().map(|f| f * span).collect();
-        Ok(Plays::new(&radii)?)
+        Ok(Plays::with_lags(&radii, &lags)?)
     }
 
     /// Fits both GPs and the local data on `trajectories`; with `fixed`, every GP keeps the
@@ -523,9 +525,13 @@ impl HbnModel {
         })
     }
 
-    /// The transition's play operators ([`HbnParams::memory`] in the input's units).
+    /// The transition's play operators ([`HbnParams::memory`] in the input's units) and lags
+    /// ([`HbnParams::lags`] at the model's rate).
     pub fn plays(&self) -> Result<Plays, ModelError> {
-        Ok(Plays::new(&self.play_radii)?)
+        Ok(Plays::with_lags(
+            &self.play_radii,
+            &self.params.lag_coefficients()?,
+        )?)
     }
 
     /// The borrowed predictor of one relation, in the signal's own units (with the previous

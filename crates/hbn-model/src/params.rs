@@ -375,6 +375,14 @@ pub struct HbnParams {
     /// before this option read as empty.
     #[serde(default)]
     pub memory: Vec<f64>,
+    /// Lags that give the transition GP the input's recent past ([`hbn_core::play`]):
+    /// first-order low-pass filters of `u` with these time constants in seconds (each
+    /// finite and positive), after the plays; plays and lags at most
+    /// [`hbn_core::MAX_PLAYS`] in all. Creep and viscoelastic relaxation, common in soft
+    /// actuators and sensors, depend on that past. Empty (the default): none. Model files
+    /// written before this option read as empty.
+    #[serde(default)]
+    pub lags: Vec<f64>,
     /// Alternative kernels and inducing settings that filter-aware training chooses among on
     /// the held-out data ([`Selection`]). The default has one: sparse GPs with
     /// [`DEFAULT_INDUCING`] inducing points besides the primary exact GPs. Empty: this
@@ -463,6 +471,7 @@ impl Default for HbnParams {
             linear_mean: LinearMean::None,
             max_signal_variance: None,
             memory: DEFAULT_MEMORY.to_vec(),
+            lags: Vec::new(),
             select: Selection {
                 kernels: Vec::new(),
                 inducing: vec![Some(DEFAULT_INDUCING)],
@@ -509,6 +518,8 @@ pub enum Param {
     Validation,
     /// [`HbnParams::memory`] (a list of radii, possibly empty).
     Memory,
+    /// [`HbnParams::lags`] (a list of time constants in seconds, possibly empty).
+    Lags,
     /// [`HbnParams::linear_mean`] (`none`, `transition` or `both`).
     LinearMean,
     /// [`HbnParams::max_signal_variance`] (a number, or `none`).
@@ -517,7 +528,7 @@ pub enum Param {
 
 impl Param {
     /// Every parameter, in the order front ends list them.
-    pub const ALL: [Param; 18] = [
+    pub const ALL: [Param; 19] = [
         Param::Rate,
         Param::Kernel,
         Param::TransitionKernel,
@@ -534,6 +545,7 @@ impl Param {
         Param::Blr,
         Param::Validation,
         Param::Memory,
+        Param::Lags,
         Param::LinearMean,
         Param::MaxSignalVariance,
     ];
@@ -557,6 +569,7 @@ impl Param {
             Param::Blr => "blr",
             Param::Validation => "validation",
             Param::Memory => "memory",
+            Param::Lags => "lags",
             Param::LinearMean => "linear_mean",
             Param::MaxSignalVariance => "max_signal_variance",
         }
@@ -780,10 +793,26 @@ impl HbnParams {
         }
     }
 
+    /// The coefficients `a` of [`HbnParams::lags`] at [`HbnParams::rate_hz`]
+    /// ([`hbn_core::lag_coefficient`]); an error when a time constant or the rate is not finite
+    /// and positive (checked parameters never are).
+    pub fn lag_coefficients(&self) -> Result<Vec<f64>, hbn_core::CoreError> {
+        self.lags
+            .iter()
+            .map(|&tau| {
+                hbn_core::lag_coefficient(tau, self.rate_hz).ok_or(
+                    hbn_core::CoreError::InvalidSpec(
+                        "a lag's time constant and the rate must be finite and positive",
+                    ),
+                )
+            })
+            .collect()
+    }
+
     /// Inputs of the transition GP: the thesis' four plus one per play operator
-    /// ([`HbnParams::memory`]).
+    /// ([`HbnParams::memory`]) and lag ([`HbnParams::lags`]).
     pub fn transition_dim(&self) -> usize {
-        TRANSITION_DIM + self.memory.len()
+        TRANSITION_DIM + self.memory.len() + self.lags.len()
     }
 
     /// Checks every field once; training then trusts them. Each error names the [`Param`].
@@ -827,6 +856,17 @@ impl HbnParams {
                     reason: "at most 4 play operators",
                 },
             ));
+        }
+        if self.memory.len() + self.lags.len() > hbn_core::MAX_PLAYS {
+            return Err(ConfigError::new(
+                Param::Lags,
+                Problem::Invalid {
+                    reason: "at most 4 play operators and lags in all",
+                },
+            ));
+        }
+        for &tau in &self.lags {
+            positive(Param::Lags, tau)?;
         }
         for &r in &self.memory {
             if !(r.is_finite() && r > 0.0 && r <= 1.0) {
@@ -1050,6 +1090,29 @@ impl HbnParams {
             (Param::Memory, _) => {
                 return wrong("a list of numbers (fractions of the input's range), or none");
             }
+            (Param::Lags, ParamValue::List(v)) => {
+                self.lags = v
+                    .into_iter()
+                    .map(|r| match r {
+                        ParamValue::Real(r) => Ok(r),
+                        ParamValue::Int(r) => Ok(r as f64),
+                        _ => Err(ConfigError::new(
+                            param,
+                            Problem::WrongType {
+                                expected: "a list of numbers (time constants in seconds)",
+                            },
+                        )),
+                    })
+                    .collect::<Result<_, _>>()?;
+            }
+            (Param::Lags, ParamValue::Real(r)) => self.lags = vec![r],
+            (Param::Lags, ParamValue::Int(r)) => self.lags = vec![r as f64],
+            (Param::Lags, ParamValue::Text(t)) if t.trim().eq_ignore_ascii_case("none") => {
+                self.lags.clear();
+            }
+            (Param::Lags, _) => {
+                return wrong("a list of numbers (time constants in seconds), or none");
+            }
             (Param::LinearMean, ParamValue::Text(t)) => {
                 self.linear_mean = t.parse().map_err(|_| {
                     ConfigError::new(
@@ -1123,6 +1186,9 @@ impl HbnParams {
             Param::Memory => {
                 ParamValue::List(self.memory.iter().map(|&r| ParamValue::Real(r)).collect())
             }
+            Param::Lags => {
+                ParamValue::List(self.lags.iter().map(|&r| ParamValue::Real(r)).collect())
+            }
             Param::LinearMean => ParamValue::Text(self.linear_mean.name().to_owned()),
             Param::MaxSignalVariance => match self.max_signal_variance {
                 Some(v) => ParamValue::Real(v),
@@ -1158,7 +1224,10 @@ mod tests {
     #[test]
     fn every_check_names_its_parameter() {
         type Spoil = fn(&mut HbnParams);
-        let bad: [(Param, Spoil); 17] = [
+        let bad: [(Param, Spoil); 20] = [
+            (Param::Lags, |p| p.lags = vec![0.0]),
+            (Param::Lags, |p| p.lags = vec![f64::INFINITY]),
+            (Param::Lags, |p| p.lags = vec![1.0; 3]),
             (Param::Memory, |p| p.memory = vec![0.0]),
             (Param::Memory, |p| p.memory = vec![1.5]),
             (Param::Memory, |p| p.memory = vec![0.1; 5]),

@@ -630,6 +630,9 @@ class HysteresisModel:
     :attr:`tuning`), ``memory`` (the input's long memory: radii of play operators whose outputs
     the transition GP reads besides ``u_{k-1}`` and ``u_{k-2}``, as fractions of the training
     input's range, at most 4; ``[]`` for the thesis' four inputs; default ``[0.05, 0.2]``, see
+    ``docs/memory.md``), ``lags`` (time constants in seconds of first-order low-pass filters of
+    the input whose outputs the transition GP reads after the plays, for creep and
+    viscoelastic relaxation; plays and lags at most 4 in all; default ``[]``, see
     ``docs/memory.md``), ``linear_mean`` (which GPs have a linear prior mean: ``"none"``,
     ``"transition"`` or ``"both"``; see :class:`GaussianProcess` and ``docs/sparse.md``),
     ``max_signal_variance`` (largest GP signal variance, as a multiple
