@@ -804,45 +804,61 @@ mod tests {
         }
     }
 
-    /// Tables of format version 3 (before the linear mean; firmware built then holds them)
-    /// still read: the same tables with each GP's linear-slope count removed and the version
-    /// set to 3 give the same view, scratch size and steps as the version-4 tables.
+    /// Tables of format versions 3 (before the linear mean) and 4 (before the lags) still
+    /// read (firmware built then holds them): the same tables with the lags' count removed
+    /// (version 4), and each GP's linear-slope count too (version 3), give the same view,
+    /// scratch size and steps as the current tables.
     #[test]
-    fn version_3_tables_still_read() {
+    fn version_3_and_4_tables_still_read() {
         let m = model(Some(16));
         let t = model_tables(&m, Mode::Ekf).unwrap();
         assert_eq!(t.layout[1], tables::VERSION);
+        // The layout ends with the plays' count, (version 5) the lags' count, here 0, and END.
+        let n = t.layout.len();
+        assert_eq!(t.layout[n - 2], 0);
+        let mut v4 = t.layout.clone();
+        v4.remove(n - 2);
+        v4[1] = 4;
         // Layout: magic, version, mode, has_init, has_local, max_neighbours, then per GP
         // profile, metric, dim, warp units, direction (2), n, sparse, mean input, whitening
         // length and (version 4) the slope count, here 0.
         let (first, second) = (6 + 10, 6 + 11 + 10);
         assert_eq!((t.layout[first], t.layout[second]), (0, 0));
-        let mut old = t.layout.clone();
-        old.remove(second);
-        old.remove(first);
-        old[1] = 3;
+        let mut v3 = v4.clone();
+        v3.remove(second);
+        v3.remove(first);
+        v3[1] = 3;
+        for old in [v4, v3] {
+            check_old_tables(&t, &old);
+        }
+    }
+
+    /// `old` (a layout of an older version of `t`'s tables) reads as the same model as `t`.
+    fn check_old_tables(t: &ModelTables, old: &[u32]) {
+        let version = old[1];
         assert_eq!(
-            tables::scratch_len(&old).unwrap(),
-            tables::scratch_len(&t.layout).unwrap()
+            tables::scratch_len(old).unwrap(),
+            tables::scratch_len(&t.layout).unwrap(),
+            "version {version}"
         );
         let (new_model, old_model) = (
             t.tables().model().unwrap(),
             Tables {
-                layout: &old,
+                layout: old,
                 ..t.tables()
             }
             .model()
             .unwrap(),
         );
         assert_eq!(old_model.config, new_model.config);
-        let mut s1 = vec![0.0; tables::scratch_len(&old).unwrap()];
+        let mut s1 = vec![0.0; tables::scratch_len(old).unwrap()];
         let mut s2 = s1.clone();
         let mut e_old = Estimator::new(old_model.view, old_model.config, &mut s1).unwrap();
         let mut e_new = Estimator::new(new_model.view, new_model.config, &mut s2).unwrap();
         for k in 0..200 {
             let u = 0.5 + 0.4 * (0.05 * k as f64).sin();
             let (a, b) = (e_old.step(u, u), e_new.step(u, u));
-            assert_eq!(a.x.to_bits(), b.x.to_bits(), "k={k}");
+            assert_eq!(a.x.to_bits(), b.x.to_bits(), "version {version}, k={k}");
         }
     }
 
