@@ -59,7 +59,7 @@ pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<HbnModel> {
     if candidates.len() > 1 {
         let names: Vec<String> = candidates.iter().map(|c| c.to_string()).collect();
         ui.notice(format!(
-            "model selection: training {} candidates one after the other ({}); the one with the \
+            "model selection: training {} candidates side by side ({}); the one with the \
              lowest held-out NLPD, if at least as accurate held out as the first, becomes the model",
             candidates.len(),
             names.join(", ")

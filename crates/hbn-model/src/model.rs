@@ -240,10 +240,9 @@ impl HbnModel {
         let mut first_error = None;
         // The first candidate trained, kept in case none can be scored.
         let mut fallback: Option<(usize, HbnModel)> = None;
-        for candidate in candidates {
-            let t = Instant::now();
-            let p = params.for_candidate(candidate);
-            let (scored, note) = match Self::fit_tuned(trajectories, &p, observe) {
+        let trained = Self::fit_candidates(trajectories, params, &candidates, observe);
+        for (candidate, (fitted, seconds)) in candidates.into_iter().zip(trained) {
+            let (scored, note) = match fitted {
                 Ok(model) => {
                     let scored = model.summary.validation.as_ref().and_then(|v| {
                         v.rows
@@ -276,7 +275,7 @@ impl HbnModel {
             rows.push(crate::tuning::CandidateRow {
                 candidate,
                 scored,
-                seconds: t.elapsed().as_secs_f64(),
+                seconds,
                 note,
                 chosen: false,
             });
@@ -312,6 +311,55 @@ impl HbnModel {
         }
         model.summary.seconds = t0.elapsed().as_secs_f64();
         Ok(model)
+    }
+
+    /// Trains every candidate ([`Self::fit_tuned`]) and returns each one's result and wall
+    /// seconds, in the order given. As many run side by side as the machine has cores (one
+    /// candidate's GP search leaves cores idle); each is deterministic, so the results do not
+    /// depend on the thread count. Progress of every candidate reaches `observe` on this
+    /// thread.
+    fn fit_candidates(
+        trajectories: &[Sequence<'_>],
+        params: &CheckedHbnParams,
+        candidates: &[crate::Candidate],
+        observe: &mut dyn FnMut(GpRole, &FitProgress),
+    ) -> Vec<(Result<Self, ModelError>, f64)> {
+        let threads = std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1)
+            .max(1);
+        let mut out = Vec::with_capacity(candidates.len());
+        for group in candidates.chunks(threads) {
+            let (tx, rx) = std::sync::mpsc::channel::<(GpRole, FitProgress)>();
+            let results = std::thread::scope(|scope| {
+                let handles: Vec<_> = group
+                    .iter()
+                    .map(|&candidate| {
+                        let tx = tx.clone();
+                        let p = params.for_candidate(candidate);
+                        scope.spawn(move || {
+                            let t = Instant::now();
+                            let fitted = Self::fit_tuned(trajectories, &p, &mut |role, prog| {
+                                // The receiver lives until every sender is gone.
+                                let _ = tx.send((role, prog.clone()));
+                            });
+                            (fitted, t.elapsed().as_secs_f64())
+                        })
+                    })
+                    .collect();
+                drop(tx);
+                for (role, prog) in rx {
+                    observe(role, &prog);
+                }
+                handles
+                    .into_iter()
+                    // A panic is a bug: it propagates, as it would without the threads.
+                    .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                    .collect::<Vec<_>>()
+            });
+            out.extend(results);
+        }
+        out
     }
 
     /// One configuration: its GPs fitted on every run, then (with `params.validation > 0`)
