@@ -217,20 +217,29 @@ fn parse_positive(s: &str) -> Result<f64, String> {
 pub struct Memory(pub Vec<f64>);
 
 fn parse_memory(s: &str) -> Result<Memory, String> {
+    number_list(
+        s,
+        |v| v > 0.0 && v <= 1.0,
+        "fractions of the input's range in (0, 1]",
+    )
+    .map(Memory)
+}
+
+/// A comma-separated list of finite numbers that pass `ok`, or `none` (empty); `what` says
+/// what they must be.
+fn number_list(s: &str, ok: fn(f64) -> bool, what: &str) -> Result<Vec<f64>, String> {
     let t = s.trim();
     if t.eq_ignore_ascii_case("none") {
-        return Ok(Memory(Vec::new()));
+        return Ok(Vec::new());
     }
     t.split(',')
         .map(|r| match r.trim().parse::<f64>() {
-            Ok(v) if v.is_finite() && v > 0.0 && v <= 1.0 => Ok(v),
+            Ok(v) if v.is_finite() && ok(v) => Ok(v),
             _ => Err(format!(
-                "expected fractions of the input's range in (0, 1], comma-separated, or `none`; \
-                 got {r:?}"
+                "expected {what}, comma-separated, or `none`; got {r:?}"
             )),
         })
-        .collect::<Result<Vec<f64>, String>>()
-        .map(Memory)
+        .collect()
 }
 
 impl std::fmt::Display for Memory {
@@ -244,19 +253,7 @@ impl std::fmt::Display for Memory {
 pub struct Lags(pub Vec<f64>);
 
 fn parse_lags(s: &str) -> Result<Lags, String> {
-    let t = s.trim();
-    if t.eq_ignore_ascii_case("none") {
-        return Ok(Lags(Vec::new()));
-    }
-    t.split(',')
-        .map(|r| match r.trim().parse::<f64>() {
-            Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
-            _ => Err(format!(
-                "expected time constants in seconds (> 0), comma-separated, or `none`; got {r:?}"
-            )),
-        })
-        .collect::<Result<Vec<f64>, String>>()
-        .map(Lags)
+    number_list(s, |v| v > 0.0, "time constants in seconds (> 0)").map(Lags)
 }
 
 impl std::fmt::Display for Lags {

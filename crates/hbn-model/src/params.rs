@@ -731,6 +731,23 @@ impl CheckedHbnParams {
     }
 }
 
+/// The numbers of a list parameter (integers read as reals); `expected` names the type in
+/// the error for anything else.
+fn numbers(
+    param: Param,
+    values: Vec<ParamValue>,
+    expected: &'static str,
+) -> Result<Vec<f64>, ConfigError> {
+    values
+        .into_iter()
+        .map(|r| match r {
+            ParamValue::Real(r) => Ok(r),
+            ParamValue::Int(r) => Ok(r as f64),
+            _ => Err(ConfigError::new(param, Problem::WrongType { expected })),
+        })
+        .collect()
+}
+
 const SUBSET_NAMES: &str = "farthest-point, random";
 
 fn subset_name(p: SubsetPolicy) -> &'static str {
@@ -1069,19 +1086,11 @@ impl HbnParams {
             (Param::Validation, ParamValue::Real(v)) => self.validation = v,
             (Param::Validation, ParamValue::Int(v)) => self.validation = v as f64,
             (Param::Memory, ParamValue::List(v)) => {
-                self.memory = v
-                    .into_iter()
-                    .map(|r| match r {
-                        ParamValue::Real(r) => Ok(r),
-                        ParamValue::Int(r) => Ok(r as f64),
-                        _ => Err(ConfigError::new(
-                            param,
-                            Problem::WrongType {
-                                expected: "a list of numbers (fractions of the input's range)",
-                            },
-                        )),
-                    })
-                    .collect::<Result<_, _>>()?;
+                self.memory = numbers(
+                    param,
+                    v,
+                    "a list of numbers (fractions of the input's range)",
+                )?;
             }
             (Param::Memory, ParamValue::Real(r)) => self.memory = vec![r],
             (Param::Memory, ParamValue::Text(t)) if t.trim().eq_ignore_ascii_case("none") => {
@@ -1091,19 +1100,7 @@ impl HbnParams {
                 return wrong("a list of numbers (fractions of the input's range), or none");
             }
             (Param::Lags, ParamValue::List(v)) => {
-                self.lags = v
-                    .into_iter()
-                    .map(|r| match r {
-                        ParamValue::Real(r) => Ok(r),
-                        ParamValue::Int(r) => Ok(r as f64),
-                        _ => Err(ConfigError::new(
-                            param,
-                            Problem::WrongType {
-                                expected: "a list of numbers (time constants in seconds)",
-                            },
-                        )),
-                    })
-                    .collect::<Result<_, _>>()?;
+                self.lags = numbers(param, v, "a list of numbers (time constants in seconds)")?;
             }
             (Param::Lags, ParamValue::Real(r)) => self.lags = vec![r],
             (Param::Lags, ParamValue::Int(r)) => self.lags = vec![r as f64],
