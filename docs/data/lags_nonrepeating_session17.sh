@@ -1,9 +1,11 @@
 #!/bin/bash
-# usage: run.sh SYSTEM  -> one line per (gain, seed, variant)
-H=/work/main/target/release/hbn
+# Lags on non-repeating logs (docs/memory.md). usage: HBN_BIN=target/release/hbn OUT=DIR
+# docs/data/lags_nonrepeating_session17.sh SYSTEM  -> one line per (gain, seed, variant)
+H=$(realpath ${HBN_BIN:-target/release/hbn})
+OUT=${OUT:-/tmp/nr}
 sys=$1
 for gain in 1 10; do for seed in 1 2; do
-  d=/tmp/nr/$sys-$gain-$seed; mkdir -p $d; cd $d
+  d=$OUT/$sys-$gain-$seed; mkdir -p $d; cd $d
   $H -q simulate --system $sys --steps 5000 --input-seed $seed --seed $((10*seed+1)) --noise-gain $gain --out train.mcap
   $H -q simulate --system $sys --steps 1000 --input-seed $((seed+100)) --seed $((10*seed+2)) --noise-gain $gain --out test.mcap
   for v in none 1; do
