@@ -59,6 +59,13 @@ fn train_small(log: &str, out: &str, extra: &[&str]) -> (Option<String>, String)
 }
 
 /// A small model trained on a simulated log; returns (dir, log, model).
+/// `hbn inspect MODEL --json`, parsed (the command must succeed).
+fn inspect(model: &str) -> serde_json::Value {
+    let (e, out) = hbn(&["inspect", model, "--json"]);
+    assert!(e.is_none(), "{e:?}");
+    serde_json::from_str(&out).unwrap()
+}
+
 fn small_model() -> (tempfile::TempDir, String, String) {
     let d = tempfile::tempdir().expect("tempdir");
     let p = |n: &str| d.path().join(n).to_string_lossy().into_owned();
@@ -586,11 +593,6 @@ fn lags_flag_sets_the_low_pass_inputs_and_names_itself_when_wrong() {
     let (_dir, log, m) = small_model();
     let dir = tempfile::tempdir().unwrap();
     let m2 = dir.path().join("m2.hbn").to_string_lossy().into_owned();
-    let inspect = |model: &str| {
-        let (e, out) = hbn(&["inspect", model, "--json"]);
-        assert!(e.is_none(), "{e:?}");
-        serde_json::from_str::<serde_json::Value>(&out).unwrap()
-    };
     // The default model has none.
     assert_eq!(inspect(&m)["memory"]["lag_seconds"], serde_json::json!([]));
     let (e, _) = train_small(&log, &m2, &["--lags", "0.5,2"]);
@@ -629,11 +631,6 @@ fn linear_mean_flag_sets_the_gps_prior_means_and_inspect_shows_them() {
     let (_dir, log, m) = small_model();
     let dir = tempfile::tempdir().unwrap();
     let m2 = dir.path().join("m2.hbn").to_string_lossy().into_owned();
-    let inspect = |model: &str| {
-        let (e, out) = hbn(&["inspect", model, "--json"]);
-        assert!(e.is_none(), "{e:?}");
-        serde_json::from_str::<serde_json::Value>(&out).unwrap()
-    };
     let v = inspect(&m);
     for gp in ["transition", "sensor"] {
         assert_eq!(v[gp]["mean"], "constant", "{gp}");
