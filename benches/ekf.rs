@@ -6,7 +6,7 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use hbn::core::{Estimator, Mode};
-use hbn::model::{HbnModel, HbnParams};
+use hbn::model::{HbnModel, HbnParams, Selection};
 use hbn::pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
 use hbn::pipeline::sequences;
 use hbn::sim::SystemKind;
@@ -38,6 +38,9 @@ fn bench_step(c: &mut Criterion) {
             memory,
             n_starts: 1,
             max_iters: 50,
+            // One configuration: the default's held-out choice between exact and sparse GPs
+            // would otherwise bench whichever it picked under this case's label.
+            select: Selection::default(),
             ..HbnParams::default()
         };
         let model = HbnModel::fit(&seqs, &params).unwrap();

@@ -8,7 +8,7 @@
 //! `MAX_SIGNAL_VARIANCE=v` in the environment set [`HbnParams::linear_mean`] and
 //! [`HbnParams::max_signal_variance`].
 
-use hbn::model::{HbnModel, HbnParams, Sequence};
+use hbn::model::{HbnModel, HbnParams, Selection, Sequence};
 use hbn::sim::{InputKind, SimConfig, SystemKind, generate_input, simulate};
 use std::time::Instant;
 
@@ -60,6 +60,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         n_inducing: Some(m),
         linear_mean,
         max_signal_variance,
+        // The m of the command line alone: the default's held-out choice would also train
+        // the exact GPs' candidate (500 points) and tune its filter.
+        select: Selection::default(),
         ..HbnParams::default()
     };
     let checked = params.check()?;
