@@ -164,6 +164,7 @@ fn bad_flags_are_named_and_nothing_is_written() {
         (&["--alpha-end", "1.5"][..], "invalid --alpha-end"),
         (&["--horizon", "0"][..], "invalid --horizon"),
         (&["--candidates", "1"][..], "invalid --candidates"),
+        (&["--pool", "1"][..], "invalid --pool"),
         (&["--refit-every", "0"][..], "invalid --refit-every"),
     ] {
         let (e, _) = base(extra);

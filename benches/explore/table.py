@@ -17,6 +17,7 @@ NAMES = {
     "random-walk": "random walk (thesis)",
     "explore-ramps": "explorer (ramps, default)",
     "explore-steps": "explorer (thesis steps)",
+    "explore-ramps-grid": "explorer (most uncertain ramp of a grid: the rule until session 17)",
 }
 
 
@@ -40,10 +41,13 @@ def main(paths):
                     continue
     systems = sorted({k[0] for k in runs})
     sizes = sorted({k[1] for k in runs})
-    methods = [m for m in ORDER if any(k[2] == m for k in runs)]
+    # Known methods in their order, then any other (a variant measured beside them), in the
+    # order of first appearance, named as written.
+    seen = list(dict.fromkeys(k[2] for k in runs))
+    methods = [m for m in ORDER if m in seen] + [m for m in seen if m not in ORDER]
     head = ["system", "samples", "seeds"]
     for m in methods:
-        head += [NAMES[m]] + (["ratio"] if m != "random-ramps" else [])
+        head += [NAMES.get(m, m)] + (["ratio"] if m != "random-ramps" else [])
     print("| " + " | ".join(head) + " |")
     print("|" + "---|" * len(head))
     ratios = defaultdict(list)
@@ -70,10 +74,10 @@ def main(paths):
             print("| " + " | ".join(cells) + " |")
     print()
     for m, r in ratios.items():
-        print(f"- {NAMES[m]} / random ramps: geometric mean {geo(r):.2f} over {len(r)} cells, "
+        print(f"- {NAMES.get(m, m)} / random ramps: geometric mean {geo(r):.2f} over {len(r)} cells, "
               f"no worse in {sum(x <= 1.0 for x in r)}")
     for m, r in vs_walk.items():
-        print(f"- {NAMES[m]} / random walk: geometric mean {geo(r):.2f} over {len(r)} cells, "
+        print(f"- {NAMES.get(m, m)} / random walk: geometric mean {geo(r):.2f} over {len(r)} cells, "
               f"no worse in {sum(x <= 1.0 for x in r)}")
     print("\nData needed to reach the accuracy of random ramps on the most samples:")
     for s in systems:
@@ -85,7 +89,7 @@ def main(paths):
             need = next((n for n in sizes
                          if runs.get((s, n, m)) and mean(runs[(s, n, m)]) <= target), None)
             said = f"{need} samples" if need else f"more than {top}"
-            print(f"- {s}, {NAMES[m]}: {said} (random ramps: {top} samples, nRMSE {target:.4f})")
+            print(f"- {s}, {NAMES.get(m, m)}: {said} (random ramps: {top} samples, nRMSE {target:.4f})")
 
 
 if __name__ == "__main__":

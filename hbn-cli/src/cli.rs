@@ -726,9 +726,13 @@ pub struct ExploreArgs {
     /// Refit the transition GP on the planned samples every N samples.
     #[arg(long, default_value_t = explore().refit_every, value_name = "N")]
     pub refit_every: usize,
-    /// Candidate steps evaluated per sample.
+    /// Candidate steps evaluated per sample (--strategy steps).
     #[arg(long, default_value_t = explore().candidates)]
     pub candidates: usize,
+    /// Random ramps drawn per uncertainty-seeking choice; the most uncertain is followed
+    /// (--strategy ramps). More seeks harder (docs/exploration.md).
+    #[arg(long, default_value_t = explore().pool, value_name = "N")]
+    pub pool: usize,
     /// Look-ahead (samples) of the uncertainty search: a candidate ramp is scored over its
     /// first N samples.
     #[arg(long, default_value_t = explore().horizon, value_name = "N")]

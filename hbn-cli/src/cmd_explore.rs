@@ -31,6 +31,7 @@ pub fn run(ui: &mut Ui<'_>, args: &ExploreArgs) -> anyhow::Result<Schedule> {
     params.alpha_ramp = args.alpha_ramp;
     params.refit_every = args.refit_every;
     params.candidates = args.candidates;
+    params.pool = args.pool;
     params.horizon = args.horizon;
     params.strategy = args
         .strategy

@@ -1192,7 +1192,7 @@ impl ExplorerCore {
     #[new]
     #[pyo3(signature = (u_min, u_max, max_step, rate, seed, u_start, random_samples,
         alpha_start, alpha_end, alpha_ramp, refit_every, optimize_every, candidates, horizon,
-        strategy, params))]
+        strategy, pool, params))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -1211,6 +1211,7 @@ impl ExplorerCore {
         candidates: Option<usize>,
         horizon: Option<usize>,
         strategy: Option<&str>,
+        pool: Option<usize>,
         params: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         let mut p = ExploreParams::new(u_min, u_max, max_step);
@@ -1231,6 +1232,7 @@ impl ExplorerCore {
         p.optimize_every = optimize_every.unwrap_or(p.optimize_every);
         p.candidates = candidates.unwrap_or(p.candidates);
         p.horizon = horizon.unwrap_or(p.horizon);
+        p.pool = pool.unwrap_or(p.pool);
         if let Some(s) = strategy {
             p.strategy =
                 Strategy::from_str(s).map_err(|e| raise(py, Fail::config("strategy", e)))?;
@@ -1322,6 +1324,7 @@ fn explore_dict<'py>(py: Python<'py>, p: &ExploreParams) -> PyResult<Bound<'py, 
     d.set_item("refit_every", p.refit_every)?;
     d.set_item("optimize_every", p.optimize_every)?;
     d.set_item("candidates", p.candidates)?;
+    d.set_item("pool", p.pool)?;
     d.set_item("horizon", p.horizon)?;
     d.set_item("strategy", p.strategy.name())?;
     d.set_item("seed", p.seed)?;

@@ -90,6 +90,8 @@ def test_a_plan_keeps_the_bounds_and_leaves_the_explorer_unchanged():
         (dict(optimize_every=0), "optimize_every"),
         (dict(candidates=1), "candidates"),
         (dict(horizon=0), "horizon"),
+        (dict(pool=1), "pool"),
+        (dict(pool=-2), "pool"),
         (dict(strategy="zigzag"), "strategy"),
         (dict(max_points=1), "max_points"),
         (dict(rate=-1.0), "rate"),
@@ -123,6 +125,8 @@ def test_defaults_come_from_the_library():
     for k, v in d.items():
         assert s[k] == v, k
     assert d["strategy"] == "ramps" and d["horizon"] == 50 and d["random_samples"] == 200
+    assert d["pool"] == 8
+    assert hbn.Explorer(0.0, 1.0, 0.02, pool=3).settings["pool"] == 3
 
 
 def test_the_simulator_gives_what_simulate_gives():

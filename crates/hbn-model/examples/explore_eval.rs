@@ -7,7 +7,9 @@
 //! Usage: cargo run --release -p hbn-model --example explore_eval -- SYSTEMS SIZES SEEDS [METHODS]
 //! e.g. `-- bouc-wen,preisach,soft-actuator 500,1000,2000 1,2,3`; prints one CSV line per run.
 //! METHODS (default all): random-ramps, random-walk (the thesis' random inputs: a bounded
-//! random walk, `hbn_sim::InputKind::RandomWalk`), explore-ramps, explore-steps.
+//! random walk, `hbn_sim::InputKind::RandomWalk`), explore-ramps, explore-steps, and
+//! explore-ramps-poolN (the ramps strategy with a pool of N random ramps instead of the
+//! default's `ExploreParams::pool`).
 use hbn_model::explore::{ExploreParams, Explorer, Strategy};
 use hbn_model::{HbnModel, HbnParams, Sequence, metrics::nrmse};
 use hbn_sim::{
@@ -73,13 +75,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             println!("{system},{seed},{n},{method},{s},{t:.1}");
                             continue;
                         }
-                        "explore-ramps" => Strategy::Ramps,
                         "explore-steps" => Strategy::Steps,
+                        m if m.starts_with("explore-ramps") => Strategy::Ramps,
                         other => return Err(format!("unknown method {other}").into()),
                     };
                     let mut p = ExploreParams::new(0.0, 1.0, hbn_sim::DEFAULT_MAX_INCREMENT);
                     p.seed = seed;
                     p.strategy = strategy;
+                    if let Some(size) = method.strip_prefix("explore-ramps-pool") {
+                        p.pool = size.parse()?;
+                    } else if method != "explore-ramps" && method != "explore-steps" {
+                        return Err(format!("unknown method {method}").into());
+                    }
                     let mut explorer = Explorer::new(p)?;
                     let mut robot = Simulator::new(&cfg)?;
                     for _ in 0..n {

@@ -300,6 +300,14 @@ fn every_bad_parameter_is_named() {
                 ..base()
             },
         ),
+        ("pool", ExploreParams { pool: 1, ..base() }),
+        (
+            "pool",
+            ExploreParams {
+                pool: hbn_model::explore::MAX_POOL + 1,
+                ..base()
+            },
+        ),
     ];
     for (field, params) in cases {
         match Explorer::new(params) {

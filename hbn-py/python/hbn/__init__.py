@@ -967,10 +967,12 @@ class Explorer:
     ``alpha_end``, ``alpha_ramp`` (the weight of uncertainty seeking grows linearly from
     ``alpha_start`` to ``alpha_end`` over ``alpha_ramp`` samples), ``refit_every`` (refit the
     transition GP every N samples), ``optimize_every`` (re-learn its hyperparameters,
-    warm-started, every N samples), ``candidates``, ``horizon`` (the uncertainty search) and
-    ``strategy`` (``"ramps"``: ramps to target levels at constant slopes, the next ramp chosen
-    by uncertainty with probability ``alpha``; ``"steps"``: the thesis' per-sample rule
-    ``u += alpha * eps + (1 - alpha) * w``). ``**params``: training parameters of
+    warm-started, every N samples), ``horizon`` (look-ahead of the uncertainty search, in
+    samples), ``strategy`` (``"ramps"``: ramps to random target levels at random slopes, as
+    :func:`simulate` drives its systems, the next ramp being, with probability ``alpha``, the
+    most uncertain of ``pool`` such random ramps; ``"steps"``: the thesis' per-sample rule
+    ``u += alpha * eps + (1 - alpha) * w``, ``eps`` the best of ``candidates`` steps) and
+    ``pool`` (random ramps drawn per seeking choice; more seeks harder). ``**params``: training parameters of
     :meth:`HysteresisModel.fit` (``max_points``, ``n_inducing``, ``kernel``, ...), used by the
     explorer's transition GP and by :meth:`model`. A bad value raises :class:`ConfigError`
     whose ``keyword`` names it. docs/exploration.md says what it gains over random inputs,
@@ -1005,6 +1007,7 @@ class Explorer:
         candidates: Optional[int] = None,
         horizon: Optional[int] = None,
         strategy: Optional[str] = None,
+        pool: Optional[int] = None,
         **params: Any,
     ) -> None:
         count = GaussianProcess._count
@@ -1024,6 +1027,7 @@ class Explorer:
             count(candidates, "candidates"),
             count(horizon, "horizon"),
             _opt_str(strategy),
+            count(pool, "pool"),
             params,
         )
 

@@ -239,6 +239,7 @@ class Explorer:
         candidates: Optional[int] = None,
         horizon: Optional[int] = None,
         strategy: Optional[str] = None,
+        pool: Optional[int] = None,
         **params: Any,
     ) -> None: ...
     def propose(self) -> float: ...

@@ -115,6 +115,7 @@ class ExplorerCore:
         candidates: Optional[int],
         horizon: Optional[int],
         strategy: Optional[str],
+        pool: Optional[int],
         params: Optional[Dict[str, Any]],
     ) -> None: ...
     def propose(self) -> float: ...
