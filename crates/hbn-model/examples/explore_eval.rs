@@ -52,7 +52,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             for &n in &sizes {
                 for method in &methods {
                     let t0 = std::time::Instant::now();
-                    let strategy = match method.as_str() {
+                    let choice = match method.as_str() {
                         "random-ramps" => {
                             let tr = simulate_random(&cfg, n)?;
                             let seqs = [Sequence::new(&tr.u, &tr.x, &tr.y)];
@@ -75,18 +75,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             println!("{system},{seed},{n},{method},{s},{t:.1}");
                             continue;
                         }
-                        "explore-steps" => Strategy::Steps,
-                        m if m.starts_with("explore-ramps") => Strategy::Ramps,
-                        other => return Err(format!("unknown method {other}").into()),
+                        "explore-steps" => (Strategy::Steps, None),
+                        "explore-ramps" => (Strategy::Ramps, None),
+                        other => match other.strip_prefix("explore-ramps-pool") {
+                            Some(size) => (Strategy::Ramps, Some(size.parse()?)),
+                            None => return Err(format!("unknown method {other}").into()),
+                        },
                     };
                     let mut p = ExploreParams::new(0.0, 1.0, hbn_sim::DEFAULT_MAX_INCREMENT);
                     p.seed = seed;
-                    p.strategy = strategy;
-                    if let Some(size) = method.strip_prefix("explore-ramps-pool") {
-                        p.pool = size.parse()?;
-                    } else if method != "explore-ramps" && method != "explore-steps" {
-                        return Err(format!("unknown method {method}").into());
-                    }
+                    (p.strategy, p.pool) = (choice.0, choice.1.unwrap_or(p.pool));
                     let mut explorer = Explorer::new(p)?;
                     let mut robot = Simulator::new(&cfg)?;
                     for _ in 0..n {
