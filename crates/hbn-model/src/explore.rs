@@ -28,9 +28,9 @@
 //! candidate is taken at `[x̂_t, x_{t-1}, u_t, u_{t-1}]` and beyond, the states `x̂` rolled
 //! forward by the transition GP's mean.
 //!
-//! What the measurements say (docs/exploration.md): on six simulators at 500 and 1000 samples,
-//! the explored data trained models 0.92x as inaccurate as the same number of samples of
-//! random ramps (geometric mean over 12 cells; no worse in 10), and about 6 times more
+//! What the measurements say (docs/exploration.md): on six simulators at 500 to 2000 samples,
+//! the explored data trained models 0.91x as inaccurate as the same number of samples of
+//! random ramps (geometric mean over 16 cells; no worse in 13), and about 6 times more
 //! accurate than the thesis' random walk. The most uncertain ramp over the whole range (the
 //! rule before the pool) sent the input to the ends of the range and scored 1.07x.
 //!
@@ -38,7 +38,8 @@
 //! [`ExploreParams::refit_every`] samples with the hyperparameters it has (a factorisation:
 //! the variance then knows where the new data are), and its hyperparameters are re-learned
 //! every [`ExploreParams::optimize_every`] samples, warm-started from the previous ones (one
-//! optimiser start). [`Explorer::model`] trains the whole HBN ([`HbnModel::fit`]) on
+//! optimiser start of at most [`RELEARN_MAX_ITERS`] iterations, so that `observe()` blocks
+//! for a bounded time). [`Explorer::model`] trains the whole HBN ([`HbnModel::fit`]) on
 //! everything observed.
 //!
 //! Guarantees (tested): a proposal lies in `[u_min, u_max]`, and, when the last observed input
@@ -352,6 +353,13 @@ impl std::str::FromStr for Strategy {
 
 /// Largest [`ExploreParams::pool`].
 pub const MAX_POOL: usize = 256;
+
+/// Most L-BFGS iterations of one warm-started re-learning of the transition GP's
+/// hyperparameters (every [`ExploreParams::optimize_every`] samples); the next one continues
+/// from where it ended. Measured (docs/exploration.md): warm starts took 16 to 22 iterations
+/// up to 1200 samples, then, once the likelihood moved to a new optimum, up to 100 with 5 to 9
+/// likelihood evaluations each, and `observe()` blocked for up to 5 s.
+pub const RELEARN_MAX_ITERS: u64 = 25;
 
 /// Points at which a candidate ramp's variance is sampled (evenly along its first `horizon`
 /// samples).
@@ -821,7 +829,13 @@ impl Explorer {
         let warm = init.is_some();
         gp_params.init = init;
         gp_params.optimize = optimize;
-        if warm {
+        if warm && optimize {
+            // Re-learning from where the last one ended: one start, and a bounded number of
+            // iterations, so that `observe()` blocks for a bounded time; the next re-learning
+            // goes on from here.
+            gp_params.n_starts = 1;
+            gp_params.max_iters = gp_params.max_iters.min(RELEARN_MAX_ITERS);
+        } else if warm {
             gp_params.n_starts = 1;
         }
         match hbn_gp::fit(&gp_params, &table.inputs, &table.targets) {
@@ -1031,5 +1045,34 @@ mod tests {
         // Without the outlier, one of the inside ramps (there is always an answer).
         let chosen = explorer.most_uncertain(u_prev, &inside).unwrap();
         assert!(inside.contains(&chosen));
+    }
+
+    #[test]
+    fn a_warm_relearning_stops_at_its_iteration_bound() {
+        // Hyperparameters far from the optimum: re-learning from them cannot finish within
+        // `RELEARN_MAX_ITERS` iterations (the same start without the bound takes more), so
+        // the bound is what stops it, and `observe()` blocks for a bounded time.
+        let mut explorer = trained_on_low_inputs();
+        let gp = explorer.transition.as_ref().unwrap();
+        let far = Hyperparameters {
+            theta: gp.theta().iter().map(|t| t + 4.0).collect(),
+            noise_variance: gp.noise_variance_std() * 1e3,
+        };
+        explorer.params.params.model.max_iters = 200;
+        explorer.refit(Some(far.clone()), true);
+        let report = explorer.transition.as_ref().unwrap().report();
+        assert_eq!(report.starts.len(), 1);
+        assert_eq!(report.starts[0].iterations, RELEARN_MAX_ITERS, "{report:?}");
+        // The same start without the bound goes on (what `observe()` did before the bound).
+        let table = explorer.transition_table().unwrap();
+        let m = &explorer.params.model;
+        let spec = m
+            .transition_kernel
+            .spec(TRANSITION_DIM + explorer.plays.len(), TRANSITION_DIRECTION);
+        let mut unbounded = m.gp_params(spec, crate::GpRole::Transition);
+        unbounded.init = Some(far);
+        unbounded.n_starts = 1;
+        let gp = hbn_gp::fit(&unbounded, &table.inputs, &table.targets).unwrap();
+        assert!(gp.report().starts[0].iterations > RELEARN_MAX_ITERS);
     }
 }
