@@ -829,14 +829,14 @@ impl Explorer {
         let warm = init.is_some();
         gp_params.init = init;
         gp_params.optimize = optimize;
+        if warm {
+            gp_params.n_starts = 1;
+        }
         if warm && optimize {
-            // Re-learning from where the last one ended: one start, and a bounded number of
-            // iterations, so that `observe()` blocks for a bounded time; the next re-learning
-            // goes on from here.
-            gp_params.n_starts = 1;
+            // Re-learning from where the last one ended: a bounded number of iterations, so
+            // that `observe()` blocks for a bounded time; the next re-learning goes on from
+            // here.
             gp_params.max_iters = gp_params.max_iters.min(RELEARN_MAX_ITERS);
-        } else if warm {
-            gp_params.n_starts = 1;
         }
         match hbn_gp::fit(&gp_params, &table.inputs, &table.targets) {
             Ok(gp) => self.transition = Some(gp),
