@@ -21,6 +21,11 @@ NAMES = {
 }
 
 
+def name(method):
+    """The table's name of a method: NAMES, or the method as written for a variant."""
+    return NAMES.get(method, method)
+
+
 def mean(v):
     return sum(v) / len(v)
 
@@ -47,7 +52,7 @@ def main(paths):
     methods = [m for m in ORDER if m in seen] + [m for m in seen if m not in ORDER]
     head = ["system", "samples", "seeds"]
     for m in methods:
-        head += [NAMES.get(m, m)] + (["ratio"] if m != "random-ramps" else [])
+        head += [name(m)] + (["ratio"] if m != "random-ramps" else [])
     print("| " + " | ".join(head) + " |")
     print("|" + "---|" * len(head))
     ratios = defaultdict(list)
@@ -74,10 +79,10 @@ def main(paths):
             print("| " + " | ".join(cells) + " |")
     print()
     for m, r in ratios.items():
-        print(f"- {NAMES.get(m, m)} / random ramps: geometric mean {geo(r):.2f} over {len(r)} cells, "
+        print(f"- {name(m)} / random ramps: geometric mean {geo(r):.2f} over {len(r)} cells, "
               f"no worse in {sum(x <= 1.0 for x in r)}")
     for m, r in vs_walk.items():
-        print(f"- {NAMES.get(m, m)} / random walk: geometric mean {geo(r):.2f} over {len(r)} cells, "
+        print(f"- {name(m)} / random walk: geometric mean {geo(r):.2f} over {len(r)} cells, "
               f"no worse in {sum(x <= 1.0 for x in r)}")
     print("\nData needed to reach the accuracy of random ramps on the most samples:")
     for s in systems:
@@ -89,7 +94,7 @@ def main(paths):
             need = next((n for n in sizes
                          if runs.get((s, n, m)) and mean(runs[(s, n, m)]) <= target), None)
             said = f"{need} samples" if need else f"more than {top}"
-            print(f"- {s}, {NAMES.get(m, m)}: {said} (random ramps: {top} samples, nRMSE {target:.4f})")
+            print(f"- {s}, {name(m)}: {said} (random ramps: {top} samples, nRMSE {target:.4f})")
 
 
 if __name__ == "__main__":

@@ -972,11 +972,11 @@ class Explorer:
     :func:`simulate` drives its systems, the next ramp being, with probability ``alpha``, the
     most uncertain of ``pool`` such random ramps; ``"steps"``: the thesis' per-sample rule
     ``u += alpha * eps + (1 - alpha) * w``, ``eps`` the best of ``candidates`` steps) and
-    ``pool`` (random ramps drawn per seeking choice; more seeks harder). ``**params``: training parameters of
-    :meth:`HysteresisModel.fit` (``max_points``, ``n_inducing``, ``kernel``, ...), used by the
-    explorer's transition GP and by :meth:`model`. A bad value raises :class:`ConfigError`
-    whose ``keyword`` names it. docs/exploration.md says what it gains over random inputs,
-    measured.
+    ``pool`` (random ramps drawn per seeking choice; more seeks harder). ``**params``:
+    training parameters of :meth:`HysteresisModel.fit` (``max_points``, ``n_inducing``,
+    ``kernel``, ...), used by the explorer's transition GP and by :meth:`model`. A bad value
+    raises :class:`ConfigError` whose ``keyword`` names it. docs/exploration.md says what it
+    gains over random inputs, measured.
 
     >>> import hbn
     >>> explorer = hbn.Explorer(0.0, 1.0, 0.02, random_samples=40, max_points=60, n_restarts=1)
