@@ -393,79 +393,93 @@ impl Sums {
     }
 }
 
-/// A fold model's filter settings for `mode` at the scales `(q, r)` (std scale 1).
-fn config_of(model: &HbnModel, mode: Mode, q: f64, r: f64) -> EkfConfig {
-    let mut c = model.untuned_config(mode);
-    c.q_scale = q;
-    c.r_scale = r;
-    c
+/// What one filter run of every fold leaves to score: the scored samples of every held-out
+/// block in order (estimate, its standard deviation at `std` scale 1, recorded state).
+#[derive(Clone, Debug, Default)]
+struct Run {
+    x: Vec<f64>,
+    sd: Vec<f64>,
+    reference: Vec<f64>,
 }
 
-/// Runs every fold's filter over its held-out runs and sums what the profile needs; empty
-/// sums if a filter fails.
-fn sums(trials: &[Trial<'_>], mode: Mode, q: f64, r: f64) -> Sums {
-    let mut out = Sums::default();
-    for t in trials {
-        let config = config_of(&t.model, mode, q, r);
-        for b in &t.blocks {
-            let s = &b.seq;
-            let Ok(est) = t.model.estimate_with(s.u, s.y, &config) else {
-                return Sums::default();
-            };
-            let scored = est.x.iter().zip(&est.x_std).zip(s.x).skip(b.burn_in);
-            for ((&xh, &sd), &xr) in scored {
-                if !(xh.is_finite() && sd.is_finite() && sd > 0.0 && xr.is_finite()) {
-                    continue;
-                }
-                let var = sd * sd;
-                out.n += 1;
-                out.log_var += var.ln();
-                out.nees += (xr - xh) * (xr - xh) / var;
+impl Run {
+    /// Runs every fold's filter in `mode` over its held-out blocks with the scales `(q, r)`
+    /// (`std` scale 1).
+    fn of(trials: &[Trial<'_>], mode: Mode, q: f64, r: f64) -> Result<Self, ModelError> {
+        let mut out = Self::default();
+        for t in trials {
+            let mut config = t.model.untuned_config(mode);
+            config.q_scale = q;
+            config.r_scale = r;
+            for b in &t.blocks {
+                let s = &b.seq;
+                let est = t.model.estimate_with(s.u, s.y, &config)?;
+                let k = b
+                    .burn_in
+                    .min(est.x.len())
+                    .min(est.x_std.len())
+                    .min(s.x.len());
+                out.x.extend_from_slice(&est.x[k..]);
+                out.sd.extend_from_slice(&est.x_std[k..]);
+                out.reference.extend_from_slice(&s.x[k..]);
             }
         }
+        Ok(out)
     }
-    out
-}
 
-/// Held-out scores of every fold together, the scales `scales` applied.
-fn scores(
-    trials: &[Trial<'_>],
-    mode: Mode,
-    scales: &NoiseScales,
-) -> Result<HeldOutScores, ModelError> {
-    let (mut x, mut sd, mut xr) = (Vec::new(), Vec::new(), Vec::new());
-    for t in trials {
-        let mut config = t.model.untuned_config(mode);
-        scales.apply(&mut config);
-        for b in &t.blocks {
-            let s = &b.seq;
-            let est = t.model.estimate_with(s.u, s.y, &config)?;
-            let k = b
-                .burn_in
-                .min(est.x.len())
-                .min(est.x_std.len())
-                .min(s.x.len());
-            x.extend_from_slice(&est.x[k..]);
-            sd.extend_from_slice(&est.x_std[k..]);
-            xr.extend_from_slice(&s.x[k..]);
+    /// What the profile objective needs, over the samples with a finite estimate, a finite
+    /// positive standard deviation and a finite recorded state.
+    fn sums(&self) -> Sums {
+        let mut out = Sums::default();
+        for ((&xh, &sd), &xr) in self.x.iter().zip(&self.sd).zip(&self.reference) {
+            if !(xh.is_finite() && sd.is_finite() && sd > 0.0 && xr.is_finite()) {
+                continue;
+            }
+            let var = sd * sd;
+            out.n += 1;
+            out.log_var += var.ln();
+            out.nees += (xr - xh) * (xr - xh) / var;
+        }
+        out
+    }
+
+    /// Held-out scores with the reported standard deviation scaled by `std` (exactly what a
+    /// filter with `std_scale = std` reports: it multiplies the same `sqrt(P_11)`).
+    fn scores(&self, std: f64) -> HeldOutScores {
+        let sd: Vec<f64> = self.sd.iter().map(|s| std * s).collect();
+        HeldOutScores {
+            nrmse: nrmse(&self.x, &self.reference),
+            calibration: calibration(&self.x, &sd, &self.reference),
         }
     }
-    Ok(HeldOutScores {
-        nrmse: nrmse(&x, &xr),
-        calibration: calibration(&x, &sd, &xr),
-    })
 }
 
-/// Evaluates `points` (`(log10 q, log10 r)`) on up to `threads` threads; results in order.
-fn evaluate_many(
-    trials: &[Trial<'_>],
-    mode: Mode,
-    points: &[(f64, f64)],
-) -> Vec<Option<(f64, f64)>> {
-    let eval = |&(lq, lr): &(f64, f64)| {
-        sums(trials, mode, 10f64.powf(lq), 10f64.powf(lr))
-            .profile()
-            .map(|(j, s)| (j + SCALE_PENALTY * (lq * lq + lr * lr), s))
+/// A point of the search in lattice units of [`LATTICE`] decades of `q` and of `r`. Every
+/// point the search can reach lies on the lattice, so a point met again is recognised exactly
+/// and not run twice.
+type Point = (i32, i32);
+
+/// The search's lattice spacing in decades: the grid, every step and the bounds are multiples.
+const LATTICE: f64 = 0.05;
+
+/// The scales `(q, r)` at a lattice point.
+fn scales_at((lq, lr): Point) -> (f64, f64) {
+    let decades = |k: i32| f64::from(k) * LATTICE;
+    (10f64.powf(decades(lq)), 10f64.powf(decades(lr)))
+}
+
+/// One evaluated point: the penalised profile objective and its best `std` scale (`None` when
+/// a filter failed or scored nothing), and the run behind it.
+type Evaluated = Option<(f64, f64, Run)>;
+
+/// Runs the filter at `points` on up to `threads` threads; results in order.
+fn evaluate_many(trials: &[Trial<'_>], mode: Mode, points: &[Point]) -> Vec<Evaluated> {
+    let eval = |&p: &Point| -> Evaluated {
+        let (q, r) = scales_at(p);
+        let run = Run::of(trials, mode, q, r).ok()?;
+        let (j, s) = run.sums().profile()?;
+        let (lq, lr) = (f64::from(p.0) * LATTICE, f64::from(p.1) * LATTICE);
+        Some((j + SCALE_PENALTY * (lq * lq + lr * lr), s, run))
     };
     let threads = std::thread::available_parallelism()
         .map_or(1, |n| n.get())
@@ -502,84 +516,105 @@ const SCALE_PENALTY: f64 = 0.1;
 const MAX_EVALUATIONS: usize = 45;
 /// Filter runs at most of a mode that starts from the first mode's optimum.
 const MAX_EVALUATIONS_FROM_START: usize = 16;
-/// Bounds of the search in decades.
-const LOG_MIN: f64 = -3.0;
-const LOG_MAX: f64 = 4.0;
+/// Bounds of the search, in lattice units (-3 and 4 decades).
+const LOG_MIN: i32 = -60;
+const LOG_MAX: i32 = 80;
+/// The first mode's grid, in lattice units (-1.5, 0.25 and 2 decades).
+const GRID: [i32; 3] = [-30, 5, 40];
+/// First steps of the pattern search in lattice units (0.8 decades; 0.4 from the first
+/// mode's optimum), and the last (0.1 decades).
+const FIRST_STEP: i32 = 16;
+const FIRST_STEP_FROM_START: i32 = 8;
+const LAST_STEP: i32 = 2;
 
-/// Learns the scales of one mode: a grid (or, with `start`, only the untuned point and
-/// `start`), then pattern search. Returns the scales, the profile objective at them and the
-/// number of filter runs.
-///
-/// The first mode searches the whole grid; the others start from its optimum (`start`, in
-/// decades), because the modes share both GPs and their optima lie close (measured: within
-/// 0.4 decades of each other on the demo's data). This halves the cost of tuning, most of
-/// which was the unscented mode's 17-point grid at 3.6 times the EKF's step cost.
-fn search(
-    trials: &[Trial<'_>],
-    mode: Mode,
-    start: Option<(f64, f64)>,
-) -> Option<(NoiseScales, usize)> {
-    let mut points: Vec<(f64, f64)> = vec![(0.0, 0.0)];
+/// What the search of one mode found.
+struct Found<R> {
+    /// The optimum in lattice units (where the next modes start).
+    at: Point,
+    /// The best `std` scale at the optimum.
+    std: f64,
+    /// Filter runs made (points met again are not run again).
+    evaluations: usize,
+    /// The run at the optimum, and at the untuned point (scales 1) when it ran.
+    best: R,
+    untuned: Option<R>,
+}
+
+/// Pattern search on the lattice for the lowest objective that `evaluate` returns (with the
+/// best `std` scale and the run behind it; `None` for a failed run): a grid (or, with
+/// `start`, only the untuned point and `start`), then a compass search from the best point,
+/// its step halved when no neighbour improves, down to [`LAST_STEP`], within `budget` runs.
+/// `evaluate` gets each batch of points at once (they may run in parallel) and is never asked
+/// for a point twice: the search comes back to points it has left (the centre it moved
+/// from), and those are looked up.
+fn pattern_search<R>(
+    start: Option<Point>,
+    mut evaluate: impl FnMut(&[Point]) -> Vec<Option<(f64, f64, R)>>,
+) -> Option<Found<R>> {
+    let mut points: Vec<Point> = vec![(0, 0)];
     match start {
-        Some(p) if p != (0.0, 0.0) => points.push(p),
+        Some(p) if p != (0, 0) => points.push(p),
         Some(_) => {}
         None => {
-            let grid = [-1.5, 0.25, 2.0];
-            for &lq in &grid {
-                for &lr in &grid {
+            for &lq in &GRID {
+                for &lr in &GRID {
                     points.push((lq, lr));
                 }
             }
         }
     }
-    let mut evaluations = points.len();
-    let mut best: Option<((f64, f64), f64, f64)> = None;
-    let consider =
-        |best: &mut Option<((f64, f64), f64, f64)>, p: (f64, f64), r: Option<(f64, f64)>| {
-            if let Some((j, s)) = r
-                && best.is_none_or(|b| j < b.1)
+    let mut seen: std::collections::HashMap<Point, Option<(f64, f64, R)>> =
+        std::collections::HashMap::new();
+    let mut best: Option<(Point, f64, f64)> = None;
+    let mut take = |seen: &mut std::collections::HashMap<Point, Option<(f64, f64, R)>>,
+                    batch: &[Point]| {
+        for (&p, e) in batch.iter().zip(evaluate(batch)) {
+            if let Some((j, s, _)) = &e
+                && best.is_none_or(|b| *j < b.1)
             {
-                *best = Some((p, j, s));
+                best = Some((p, *j, *s));
             }
-        };
-    for (p, r) in points.iter().zip(evaluate_many(trials, mode, &points)) {
-        consider(&mut best, *p, r);
-    }
+            seen.insert(p, e);
+        }
+        best
+    };
+    let mut evaluations = points.len();
+    let mut current = take(&mut seen, &points);
     // From the first mode's optimum the search only refines: a smaller first step and budget.
     let (mut step, budget) = if start.is_some() {
-        (0.4, MAX_EVALUATIONS_FROM_START)
+        (FIRST_STEP_FROM_START, MAX_EVALUATIONS_FROM_START)
     } else {
-        (0.8, MAX_EVALUATIONS)
+        (FIRST_STEP, MAX_EVALUATIONS)
     };
-    while step > 0.09 && evaluations < budget {
-        let ((lq, lr), j0, _) = best?;
-        let around: Vec<(f64, f64)> = [(step, 0.0), (-step, 0.0), (0.0, step), (0.0, -step)]
-            .iter()
-            .map(|(dq, dr)| {
-                (
-                    (lq + dq).clamp(LOG_MIN, LOG_MAX),
-                    (lr + dr).clamp(LOG_MIN, LOG_MAX),
-                )
-            })
-            .filter(|&p| p != (lq, lr))
-            .collect();
-        evaluations += around.len();
-        for (p, r) in around.iter().zip(evaluate_many(trials, mode, &around)) {
-            consider(&mut best, *p, r);
+    while step >= LAST_STEP && evaluations < budget {
+        let ((lq, lr), j0, _) = current?;
+        let mut new: Vec<Point> = Vec::new();
+        for (dq, dr) in [(step, 0), (-step, 0), (0, step), (0, -step)] {
+            let p = (
+                (lq + dq).clamp(LOG_MIN, LOG_MAX),
+                (lr + dr).clamp(LOG_MIN, LOG_MAX),
+            );
+            if p != (lq, lr) && !new.contains(&p) && !seen.contains_key(&p) {
+                new.push(p);
+            }
         }
-        if best.is_some_and(|b| b.1 >= j0) {
-            step /= 2.0;
+        evaluations += new.len();
+        current = take(&mut seen, &new);
+        if current.is_some_and(|b| b.1 >= j0) {
+            step /= 2;
         }
     }
-    let ((lq, lr), _, s) = best?;
-    Some((
-        NoiseScales {
-            q: 10f64.powf(lq),
-            r: 10f64.powf(lr),
-            std: s,
-        },
+    let (at, _, std) = current?;
+    let mut run_at = |p: Point| seen.remove(&p).flatten().map(|(_, _, run)| run);
+    let best = run_at(at)?;
+    let untuned = run_at((0, 0));
+    Some(Found {
+        at,
+        std,
         evaluations,
-    ))
+        best,
+        untuned,
+    })
 }
 
 /// Tunes every mode on the folds: `trials` pairs each fold's model (GPs refitted on the fold's
@@ -605,14 +640,28 @@ pub(crate) fn tune(
         .sum();
     let mut tuning = FilterTuning::default();
     let mut rows = Vec::new();
-    let mut first_optimum: Option<(f64, f64)> = None;
+    let mut first_optimum: Option<Point> = None;
     for mode in Mode::ALL {
-        let Some((scales, evaluations)) = search(&trials, mode, first_optimum) else {
+        let Some(found) =
+            pattern_search(first_optimum, |points| evaluate_many(&trials, mode, points))
+        else {
             return Ok(None);
         };
-        first_optimum.get_or_insert((scales.q.log10(), scales.r.log10()));
-        let untuned = scores(&trials, mode, &NoiseScales::default())?;
-        let tuned = scores(&trials, mode, &scales)?;
+        first_optimum.get_or_insert(found.at);
+        let (q, r) = scales_at(found.at);
+        let scales = NoiseScales {
+            q,
+            r,
+            std: found.std,
+        };
+        // The untuned point is the optimum, or failed in the search: run it again (for the
+        // error it gives, if it fails).
+        let untuned = match &found.untuned {
+            Some(run) => run.scores(1.0),
+            None if found.at == (0, 0) => found.best.scores(1.0),
+            None => Run::of(&trials, mode, 1.0, 1.0)?.scores(1.0),
+        };
+        let tuned = found.best.scores(scales.std);
         let finite = |s: &HeldOutScores| s.nrmse.is_finite() && s.calibration.nlpd.is_finite();
         if !(finite(&tuned) && finite(&untuned)) {
             return Ok(None);
@@ -623,7 +672,7 @@ pub(crate) fn tune(
             scales,
             untuned,
             tuned,
-            evaluations,
+            evaluations: found.evaluations,
         });
     }
     let default_mode = rows
@@ -761,5 +810,79 @@ mod tests {
         let direct = 0.5 * (2.0 * std::f64::consts::PI * 4.0).ln() + 0.5;
         assert!((j - direct).abs() < 1e-12);
         assert!(Sums::default().profile().is_none());
+    }
+
+    /// Runs the pattern search on `objective` and returns what it found and every batch it
+    /// asked for.
+    fn searched(
+        start: Option<Point>,
+        objective: impl Fn(Point) -> Option<f64>,
+    ) -> (Option<Found<Point>>, Vec<Vec<Point>>) {
+        let mut batches = Vec::new();
+        let found = pattern_search(start, |points| {
+            batches.push(points.to_vec());
+            points
+                .iter()
+                .map(|&p| objective(p).map(|j| (j, 1.0, p)))
+                .collect()
+        });
+        (found, batches)
+    }
+
+    #[test]
+    fn the_search_finds_a_bowls_floor_and_runs_no_point_twice() {
+        let floor = (13, -7);
+        let bowl = |(q, r): Point| {
+            Some(f64::from((q - floor.0).pow(2)) + 0.5 * f64::from((r - floor.1).pow(2)))
+        };
+        let (found, batches) = searched(None, bowl);
+        let found = found.expect("found");
+        // The compass search ends where no neighbour at the last step (2 units) is lower:
+        // within one unit of the floor in each direction.
+        assert!(
+            (found.at.0 - floor.0).abs() <= 1 && (found.at.1 - floor.1).abs() <= 1,
+            "{:?}",
+            found.at
+        );
+        assert_eq!(found.best, found.at, "the run returned is the optimum's");
+        assert_eq!(found.untuned, Some((0, 0)));
+        let all: Vec<Point> = batches.concat();
+        let mut distinct = all.clone();
+        distinct.sort_unstable();
+        distinct.dedup();
+        assert_eq!(distinct.len(), all.len(), "a point ran twice: {all:?}");
+        assert_eq!(found.evaluations, all.len());
+        assert!(found.evaluations <= MAX_EVALUATIONS + 3);
+        // The grid comes first, in one batch.
+        assert_eq!(batches[0].len(), 10);
+    }
+
+    #[test]
+    fn from_a_start_the_search_only_refines_and_failed_points_never_win() {
+        // Every point with q above 1 fails (as a filter that diverges would); the untuned
+        // point fails too.
+        let objective = |(q, r): Point| {
+            (q <= 20 && (q, r) != (0, 0)).then(|| f64::from((q - 30).pow(2) + (r - 8).pow(2)))
+        };
+        let (found, batches) = searched(Some((16, 8)), objective);
+        let found = found.expect("found");
+        assert_eq!(batches[0], vec![(0, 0), (16, 8)]);
+        // The first ring is 8 units (0.4 decades) from the start.
+        assert!(batches[1].contains(&(24, 8)) && batches[1].contains(&(16, 0)));
+        // The best point that did not fail: q as high as allowed.
+        assert_eq!(found.at, (20, 8));
+        assert_eq!(found.untuned, None, "the untuned point failed");
+        assert!(found.evaluations <= MAX_EVALUATIONS_FROM_START + 3);
+        // Nothing runs at all: nothing found.
+        assert!(searched(None, |_| None).0.is_none());
+    }
+
+    #[test]
+    fn lattice_points_are_the_decades_they_name() {
+        assert_eq!(scales_at((0, 0)), (1.0, 1.0));
+        let (q, r) = scales_at((GRID[0], GRID[2]));
+        assert!((q.log10() + 1.5).abs() < 1e-12 && (r.log10() - 2.0).abs() < 1e-12);
+        assert!((f64::from(LAST_STEP) * LATTICE - 0.1).abs() < 1e-12);
+        assert!((f64::from(LOG_MIN) * LATTICE + 3.0).abs() < 1e-12);
     }
 }
