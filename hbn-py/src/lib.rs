@@ -1192,7 +1192,7 @@ impl ExplorerCore {
     #[new]
     #[pyo3(signature = (u_min, u_max, max_step, rate, seed, u_start, random_samples,
         alpha_start, alpha_end, alpha_ramp, refit_every, optimize_every, candidates, horizon,
-        strategy, pool, params))]
+        strategy, pool, lag, params))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -1212,6 +1212,7 @@ impl ExplorerCore {
         horizon: Option<usize>,
         strategy: Option<&str>,
         pool: Option<usize>,
+        lag: Option<usize>,
         params: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         let mut p = ExploreParams::new(u_min, u_max, max_step);
@@ -1233,6 +1234,7 @@ impl ExplorerCore {
         p.candidates = candidates.unwrap_or(p.candidates);
         p.horizon = horizon.unwrap_or(p.horizon);
         p.pool = pool.unwrap_or(p.pool);
+        p.lag = lag.unwrap_or(p.lag);
         if let Some(s) = strategy {
             p.strategy =
                 Strategy::from_str(s).map_err(|e| raise(py, Fail::config("strategy", e)))?;
@@ -1326,6 +1328,7 @@ fn explore_dict<'py>(py: Python<'py>, p: &ExploreParams) -> PyResult<Bound<'py, 
     d.set_item("candidates", p.candidates)?;
     d.set_item("pool", p.pool)?;
     d.set_item("horizon", p.horizon)?;
+    d.set_item("lag", p.lag)?;
     d.set_item("strategy", p.strategy.name())?;
     d.set_item("seed", p.seed)?;
     Ok(d)

@@ -46,6 +46,19 @@ def test_equal_seeds_give_equal_proposals():
     assert np.array_equal(a, b) and not np.array_equal(a, c)
 
 
+def test_with_a_lag_refits_run_beside_the_loop_and_stay_deterministic():
+    # The first GP starts fitting when the random phase ends and is used 25 samples later.
+    e = hbn.Explorer(0.0, 1.0, 0.02, seed=5, lag=25, **QUICK)
+    assert e.settings["lag"] == 25
+    drive(e, steps=QUICK["random_samples"] + 24)
+    assert e.phase == "random"
+    drive(e, steps=1)
+    assert e.phase == "seeking"
+    a = drive(hbn.Explorer(0.0, 1.0, 0.02, seed=5, lag=25, **QUICK), steps=160)
+    b = drive(hbn.Explorer(0.0, 1.0, 0.02, seed=5, lag=25, **QUICK), steps=160)
+    assert np.array_equal(a, b)
+
+
 def test_the_model_estimates_and_the_runs_are_kept():
     e = hbn.Explorer(0.0, 1.0, 0.02, **QUICK)
     drive(e, steps=150)
@@ -92,6 +105,7 @@ def test_a_plan_keeps_the_bounds_and_leaves_the_explorer_unchanged():
         (dict(horizon=0), "horizon"),
         (dict(pool=1), "pool"),
         (dict(pool=-2), "pool"),
+        (dict(lag=-1), "lag"),
         (dict(strategy="zigzag"), "strategy"),
         (dict(max_points=1), "max_points"),
         (dict(rate=-1.0), "rate"),
@@ -127,6 +141,7 @@ def test_defaults_come_from_the_library():
     assert d["strategy"] == "ramps" and d["horizon"] == 50 and d["random_samples"] == 200
     assert d["pool"] == 8
     assert hbn.Explorer(0.0, 1.0, 0.02, pool=3).settings["pool"] == 3
+    assert d["lag"] == 0
 
 
 def test_the_simulator_gives_what_simulate_gives():

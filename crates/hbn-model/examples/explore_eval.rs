@@ -9,7 +9,8 @@
 //! METHODS (default all): random-ramps, random-walk (the thesis' random inputs: a bounded
 //! random walk, `hbn_sim::InputKind::RandomWalk`), explore-ramps, explore-steps, and
 //! explore-ramps-poolN (the ramps strategy with a pool of N random ramps instead of the
-//! default's `ExploreParams::pool`).
+//! default's `ExploreParams::pool`), explore-ramps-lagN (the default with its refits beside
+//! the loop, `ExploreParams::lag` = N).
 use hbn_model::explore::{ExploreParams, Explorer, Strategy};
 use hbn_model::{HbnModel, HbnParams, Sequence, metrics::nrmse};
 use hbn_sim::{
@@ -75,16 +76,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             println!("{system},{seed},{n},{method},{s},{t:.1}");
                             continue;
                         }
-                        "explore-steps" => (Strategy::Steps, None),
-                        "explore-ramps" => (Strategy::Ramps, None),
-                        other => match other.strip_prefix("explore-ramps-pool") {
-                            Some(size) => (Strategy::Ramps, Some(size.parse()?)),
-                            None => return Err(format!("unknown method {other}").into()),
+                        "explore-steps" => (Strategy::Steps, None, 0),
+                        "explore-ramps" => (Strategy::Ramps, None, 0),
+                        other => match (
+                            other.strip_prefix("explore-ramps-pool"),
+                            other.strip_prefix("explore-ramps-lag"),
+                        ) {
+                            (Some(size), _) => (Strategy::Ramps, Some(size.parse()?), 0),
+                            (_, Some(lag)) => (Strategy::Ramps, None, lag.parse()?),
+                            _ => return Err(format!("unknown method {other}").into()),
                         },
                     };
                     let mut p = ExploreParams::new(0.0, 1.0, hbn_sim::DEFAULT_MAX_INCREMENT);
                     p.seed = seed;
                     (p.strategy, p.pool) = (choice.0, choice.1.unwrap_or(p.pool));
+                    p.lag = choice.2;
                     let mut explorer = Explorer::new(p)?;
                     let mut robot = Simulator::new(&cfg)?;
                     for _ in 0..n {

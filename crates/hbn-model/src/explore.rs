@@ -134,6 +134,16 @@ pub struct ExploreParams {
     /// and `-eta` once the variance is flat across one step (measured: 400 samples of pure
     /// seeking stayed within 0.024 of where they began). Default 50.
     pub horizon: usize,
+    /// Samples a refit may take. `0` (default): every refit of the transition GP runs inside
+    /// [`Explorer::observe`], which then blocks for it (about 3 ms per sample on average over
+    /// 2000 samples, 0.44 s at worst when hyperparameters are re-learned;
+    /// docs/exploration.md). `lag > 0`: each refit runs on a thread beside the loop, on the
+    /// data observed when it starts, and its GP is used from `lag` samples later on;
+    /// `observe()` waits only if the refit has not finished by then. One refit runs at a
+    /// time, so refits come every `max(refit_every, lag)` samples. The explorer stays
+    /// deterministic: equal seeds and observations give equal proposals, however fast the
+    /// machine. For a loop faster than the refits (a robot at 100 Hz: set `lag` to 50).
+    pub lag: usize,
     /// How the input moves ([`Strategy::Ramps`] by default).
     pub strategy: Strategy,
     /// Seed of the random steps and ramps.
@@ -179,6 +189,7 @@ impl ExploreParams {
             candidates: Self::DEFAULT_CANDIDATES,
             pool: Self::DEFAULT_POOL,
             horizon: Self::DEFAULT_HORIZON,
+            lag: 0,
             strategy: Strategy::Ramps,
             seed: 0,
             model: HbnParams::default(),
@@ -426,6 +437,82 @@ pub struct Explorer {
     /// of the model an explorer resumes from): the explorer's GP reads the same inputs as the
     /// model trained from its data.
     plays: Plays,
+    /// The re-learning of the hyperparameters running beside the loop
+    /// ([`ExploreParams::lag`] > 0), if any.
+    relearning: Option<Pending>,
+    /// The refit with the current hyperparameters running beside the loop, if any.
+    refitting: Option<Pending>,
+}
+
+/// A refit of the transition GP running on a thread beside the exploration loop.
+#[derive(Clone, Debug)]
+struct Pending {
+    /// Samples observed when it started (the data it fits).
+    started: usize,
+    /// It is applied once this many samples are observed.
+    apply_at: usize,
+    /// Where the thread leaves its result (shared by clones of the explorer: the result
+    /// depends only on the data and settings it started from).
+    slot: std::sync::Arc<Slot>,
+}
+
+/// A refit's result, once its thread has finished.
+#[derive(Default)]
+struct Slot {
+    result: std::sync::Mutex<Option<Result<GaussianProcess, String>>>,
+    done: std::sync::Condvar,
+}
+
+impl std::fmt::Debug for Slot {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Slot")
+    }
+}
+
+impl Slot {
+    fn put(&self, result: Result<GaussianProcess, String>) {
+        let mut guard = self
+            .result
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        *guard = Some(result);
+        self.done.notify_all();
+    }
+
+    /// Waits for the result.
+    fn wait(&self) -> Result<GaussianProcess, String> {
+        let mut guard = self
+            .result
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        loop {
+            if let Some(r) = guard.as_ref() {
+                return r.clone();
+            }
+            guard = self
+                .done
+                .wait(guard)
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+        }
+    }
+}
+
+/// One refit to run: the GP's settings and the table it fits.
+struct RefitJob {
+    gp_params: hbn_gp::GpParams,
+    table: Table,
+}
+
+impl RefitJob {
+    /// Fits the GP (a panic in the fit is reported as an error, so that a thread never
+    /// leaves its slot empty).
+    fn run(&self) -> Result<GaussianProcess, String> {
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            hbn_gp::fit(&self.gp_params, &self.table.inputs, &self.table.targets)
+        }))
+        .map_err(|_| "the fit panicked".to_owned())
+        .and_then(|r| r.map_err(|e| e.to_string()))
+    }
 }
 
 impl Explorer {
@@ -449,6 +536,8 @@ impl Explorer {
             learn: true,
             ramp: None,
             warnings: Vec::new(),
+            relearning: None,
+            refitting: None,
         })
     }
 
@@ -481,6 +570,7 @@ impl Explorer {
             theta: gp.theta().to_vec(),
             noise_variance: gp.noise_variance_std(),
         };
+        // At once, whatever the lag: the explorer starts from the model it resumes.
         explorer.refit(Some(warm), false);
         explorer.optimized_at = explorer.observed;
         if explorer.transition.is_some() {
@@ -783,6 +873,10 @@ impl Explorer {
     }
 
     fn after_sample(&mut self) {
+        if self.params.lag > 0 {
+            self.after_sample_beside();
+            return;
+        }
         let p = &*self.params;
         let (n, every, opt_every) = (self.observed, p.refit_every, p.optimize_every);
         if self.transition.is_none() {
@@ -791,17 +885,11 @@ impl Explorer {
                 self.optimized_at = n;
             }
         } else if self.learn && n >= self.optimized_at + opt_every {
-            let warm = self.transition.as_ref().map(|gp| Hyperparameters {
-                theta: gp.theta().to_vec(),
-                noise_variance: gp.noise_variance_std(),
-            });
+            let warm = self.current_hyperparameters();
             self.refit(warm, true);
             self.optimized_at = n;
         } else if n >= self.fitted_at + every {
-            let fixed = self.transition.as_ref().map(|gp| Hyperparameters {
-                theta: gp.theta().to_vec(),
-                noise_variance: gp.noise_variance_std(),
-            });
+            let fixed = self.current_hyperparameters();
             self.refit(fixed, false);
         }
         if self.transition.is_some() && self.seeking_from.is_none() {
@@ -809,16 +897,103 @@ impl Explorer {
         }
     }
 
-    /// Fits the transition GP on every sample so far: from `init` (or the defaults), with
-    /// the optimiser when `optimize` (one start when warm-started).
+    /// [`Explorer::after_sample`] with the refits beside the loop ([`ExploreParams::lag`] >
+    /// 0): a re-learning (or the first fit) is used `lag` samples after it starts; refits with
+    /// the current hyperparameters go on meanwhile, each used `min(lag, refit_every)` samples
+    /// after it starts. Re-learned hyperparameters replace the GP when they are used, and a
+    /// refit on every sample with them starts then (one still running with the old ones is
+    /// dropped).
+    fn after_sample_beside(&mut self) {
+        let n = self.observed;
+        if let Some(job) = self.relearning.take_if(|j| n >= j.apply_at) {
+            let result = job.slot.wait();
+            if result.is_ok() {
+                self.refitting = None;
+                self.fitted_at = 0;
+            }
+            self.apply(result, job.started);
+        }
+        if let Some(job) = self.refitting.take_if(|j| n >= j.apply_at) {
+            let result = job.slot.wait();
+            self.apply(result, job.started);
+        }
+        let p = &*self.params;
+        let (lag, every, opt_every) = (p.lag, p.refit_every, p.optimize_every);
+        let learn_due = self.learn && n >= self.optimized_at + opt_every;
+        if self.transition.is_none() {
+            if n >= p.random_samples && self.relearning.is_none() {
+                self.relearning = self.start_beside(None, true, lag);
+                self.optimized_at = n;
+            }
+        } else {
+            if learn_due && self.relearning.is_none() {
+                let warm = self.current_hyperparameters();
+                self.relearning = self.start_beside(warm, true, lag);
+                self.optimized_at = n;
+            }
+            if n >= self.fitted_at + every && self.refitting.is_none() {
+                let fixed = self.current_hyperparameters();
+                self.fitted_at = n;
+                self.refitting = self.start_beside(fixed, false, lag.min(every));
+            }
+        }
+        if self.transition.is_some() && self.seeking_from.is_none() {
+            self.seeking_from = Some(n);
+        }
+    }
+
+    /// The hyperparameters of the transition GP in use.
+    fn current_hyperparameters(&self) -> Option<Hyperparameters> {
+        self.transition.as_ref().map(|gp| Hyperparameters {
+            theta: gp.theta().to_vec(),
+            noise_variance: gp.noise_variance_std(),
+        })
+    }
+
+    /// Fits the transition GP on every sample so far, now: from `init` (or the defaults),
+    /// with the optimiser when `optimize` (one start when warm-started).
     fn refit(&mut self, init: Option<Hyperparameters>, optimize: bool) {
         self.fitted_at = self.observed;
+        if let Some(job) = self.job(init, optimize) {
+            let result = job.run();
+            self.apply(result, self.observed);
+        }
+    }
+
+    /// Starts the fit of [`Explorer::refit`] on a thread beside the loop; it is to be applied
+    /// `lag` samples later.
+    fn start_beside(
+        &mut self,
+        init: Option<Hyperparameters>,
+        optimize: bool,
+        lag: usize,
+    ) -> Option<Pending> {
+        let job = self.job(init, optimize)?;
+        let slot = std::sync::Arc::new(Slot::default());
+        let worker = std::sync::Arc::clone(&slot);
+        let spawned = std::thread::Builder::new()
+            .name("hbn-explore-refit".into())
+            .spawn(move || worker.put(job.run()));
+        if let Err(e) = spawned {
+            // No thread to be had: the refit is reported as failed, as a failed fit is.
+            slot.put(Err(format!("no thread for the refit ({e})")));
+        }
+        Some(Pending {
+            started: self.observed,
+            apply_at: self.observed.saturating_add(lag),
+            slot,
+        })
+    }
+
+    /// The fit of the transition GP on every sample so far (`None`, with a warning, when the
+    /// samples make no table).
+    fn job(&mut self, init: Option<Hyperparameters>, optimize: bool) -> Option<RefitJob> {
         let table = match self.transition_table() {
             Ok(t) => t,
             Err(e) => {
                 self.warnings
                     .push(format!("transition GP not refitted: {e}"));
-                return;
+                return None;
             }
         };
         let m = &self.params.model;
@@ -838,11 +1013,15 @@ impl Explorer {
             // here.
             gp_params.max_iters = gp_params.max_iters.min(RELEARN_MAX_ITERS);
         }
-        match hbn_gp::fit(&gp_params, &table.inputs, &table.targets) {
+        Some(RefitJob { gp_params, table })
+    }
+
+    /// Uses a refit's GP from now on (a failed one keeps the previous GP, with a warning).
+    fn apply(&mut self, result: Result<GaussianProcess, String>, started: usize) {
+        match result {
             Ok(gp) => self.transition = Some(gp),
             Err(e) => self.warnings.push(format!(
-                "transition GP refit at {} samples failed ({e}); {}",
-                self.observed,
+                "transition GP refit at {started} samples failed ({e}); {}",
                 if self.transition.is_some() {
                     "the previous one is kept"
                 } else {

@@ -340,3 +340,61 @@ fn a_non_finite_observation_is_rejected_and_not_recorded() {
     assert!(err.to_string().contains("x is NaN"), "{err}");
     assert_eq!(e.n_observed(), 1);
 }
+
+#[test]
+fn refits_beside_the_loop_are_used_lag_samples_after_they_start_however_fast_they_run() {
+    let lag = 30;
+    let params = || {
+        let mut p = quick(ExploreParams::new(0.0, 1.0, 0.05));
+        p.random_samples = 60;
+        p.refit_every = 10;
+        p.optimize_every = 80;
+        p.seed = 3;
+        p.lag = lag;
+        p
+    };
+    let cfg = SimConfig {
+        noise_gain: 1.0,
+        seed: 4,
+        ..SimConfig::new(SystemKind::Duhem)
+    };
+    // Two loops, one slow (every refit has finished long before it is applied) and one as
+    // fast as it goes (refits are still running when they are due, so `observe()` waits):
+    // the proposals are the same, bit for bit.
+    let run = |pause: std::time::Duration| {
+        let mut explorer = Explorer::new(params()).unwrap();
+        let mut robot = Simulator::new(&cfg).unwrap();
+        let mut applied = Vec::new();
+        let mut first_gp_at = None;
+        for k in 0..260 {
+            let u = explorer.propose();
+            let (x, y) = robot.step(u).unwrap();
+            explorer.observe(u, x, y).unwrap();
+            applied.push(u);
+            if first_gp_at.is_none() && explorer.transition().is_some() {
+                first_gp_at = Some(k + 1);
+                // The first GP started at the end of the random phase, on the data then.
+                let rows = explorer.transition().unwrap().report().n_samples;
+                assert!(rows < 60, "fitted on {rows} rows, started at 60 samples");
+            }
+            std::thread::sleep(pause);
+        }
+        (applied, first_gp_at, explorer.warnings().to_vec())
+    };
+    let (fast, first_fast, warnings) = run(std::time::Duration::ZERO);
+    let (slow, first_slow, _) = run(std::time::Duration::from_millis(3));
+    assert!(warnings.is_empty(), "{warnings:?}");
+    assert_eq!(
+        first_fast,
+        Some(60 + lag),
+        "the first GP is applied lag samples late"
+    );
+    assert_eq!(first_slow, first_fast);
+    assert_eq!(fast, slow);
+    assert_within(&fast, 0.0, 1.0, 0.05);
+    // The lag changes the data behind each proposal, so the inputs differ from those of a
+    // loop that refits inside `observe()`.
+    let mut sync = Explorer::new(ExploreParams { lag: 0, ..params() }).unwrap();
+    let inline = drive(&mut sync, SystemKind::Duhem, 4, 260);
+    assert_ne!(inline, fast);
+}

@@ -972,7 +972,11 @@ class Explorer:
     :func:`simulate` drives its systems, the next ramp being, with probability ``alpha``, the
     most uncertain of ``pool`` such random ramps; ``"steps"``: the thesis' per-sample rule
     ``u += alpha * eps + (1 - alpha) * w``, ``eps`` the best of ``candidates`` steps) and
-    ``pool`` (random ramps drawn per seeking choice; more seeks harder). ``**params``:
+    ``pool`` (random ramps drawn per seeking choice; more seeks harder) and ``lag`` (0: every
+    refit runs inside :meth:`observe`, which blocks for it; ``lag > 0``: refits run on a thread
+    beside the loop and are used ``lag`` samples after they start, so that a loop faster than
+    the refits, such as a robot at 100 Hz with ``lag=50``, is not held up; the proposals stay
+    deterministic). ``**params``:
     training parameters of :meth:`HysteresisModel.fit` (``max_points``, ``n_inducing``,
     ``kernel``, ...), used by the explorer's transition GP and by :meth:`model`. A bad value
     raises :class:`ConfigError` whose ``keyword`` names it. docs/exploration.md says what it
@@ -1008,6 +1012,7 @@ class Explorer:
         horizon: Optional[int] = None,
         strategy: Optional[str] = None,
         pool: Optional[int] = None,
+        lag: Optional[int] = None,
         **params: Any,
     ) -> None:
         count = GaussianProcess._count
@@ -1028,6 +1033,7 @@ class Explorer:
             count(horizon, "horizon"),
             _opt_str(strategy),
             count(pool, "pool"),
+            count(lag, "lag"),
             params,
         )
 

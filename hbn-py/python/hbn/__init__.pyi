@@ -240,6 +240,7 @@ class Explorer:
         horizon: Optional[int] = None,
         strategy: Optional[str] = None,
         pool: Optional[int] = None,
+        lag: Optional[int] = None,
         **params: Any,
     ) -> None: ...
     def propose(self) -> float: ...

@@ -116,6 +116,7 @@ class ExplorerCore:
         horizon: Optional[int],
         strategy: Optional[str],
         pool: Optional[int],
+        lag: Optional[int],
         params: Optional[Dict[str, Any]],
     ) -> None: ...
     def propose(self) -> float: ...
