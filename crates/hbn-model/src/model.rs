@@ -176,6 +176,16 @@ struct ModelFile {
     model: HbnModel,
 }
 
+/// Where a candidate's training starts ([`HbnModel::fit_candidates`]).
+enum Start<'a> {
+    /// From nothing: its GPs are fitted first.
+    Fresh,
+    /// From its GPs, already fitted on every run.
+    Fitted(Box<HbnModel>),
+    /// From the exact GPs (same kernels) that its sparse searches start from.
+    FromExact(&'a HbnModel),
+}
+
 impl HbnModel {
     /// Learns both relations from trajectories at `params.rate_hz`: checks the parameters
     /// ([`HbnParams::check`]), then [`HbnModel::fit_checked`].
@@ -318,6 +328,10 @@ impl HbnModel {
     /// candidate's GP search leaves cores idle); each is deterministic, so the results do not
     /// depend on the thread count. Progress of every candidate reaches `observe` on this
     /// thread.
+    ///
+    /// When the first candidate has exact GPs and another has sparse GPs with the same
+    /// kernels, the first one's GPs are fitted before the rest start: the sparse searches
+    /// start from their optimum ([`Self::fit_gps`]), which they would otherwise fit again.
     fn fit_candidates(
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
@@ -328,23 +342,68 @@ impl HbnModel {
             .map(|n| n.get())
             .unwrap_or(1)
             .max(1);
+        let warms = |c: &crate::Candidate, first: &crate::Candidate| {
+            first.n_inducing.is_none()
+                && c.n_inducing.is_some()
+                && (c.transition_kernel, c.sensor_kernel)
+                    == (first.transition_kernel, first.sensor_kernel)
+        };
         let mut out = Vec::with_capacity(candidates.len());
-        for group in candidates.chunks(threads) {
+        let mut results: Vec<Option<(Result<Self, ModelError>, f64)>> =
+            (0..candidates.len()).map(|_| None).collect();
+        // The first candidate's GPs, fitted first when another candidate starts from them.
+        let mut exact: Option<(Self, f64)> = None;
+        if let Some(first) = candidates.first()
+            && candidates.iter().skip(1).any(|c| warms(c, first))
+        {
+            let t = Instant::now();
+            let p = params.for_candidate(*first);
+            let fitted = Self::plays_for(trajectories, &p)
+                .and_then(|plays| Self::fit_gps(trajectories, &p, &plays, None, None, observe));
+            let seconds = t.elapsed().as_secs_f64();
+            match fitted {
+                Ok(model) => exact = Some((model, seconds)),
+                // The first candidate failed while fitting its GPs: that is its result.
+                Err(e) => results[0] = Some((Err(e), seconds)),
+            }
+        }
+        let mut todo: Vec<(usize, Start<'_>, f64)> = Vec::new();
+        for (i, c) in candidates.iter().enumerate() {
+            if results[i].is_some() {
+                continue;
+            }
+            let first = candidates.first().unwrap_or(c);
+            todo.push(match &exact {
+                Some((model, seconds)) if i == 0 => {
+                    (i, Start::Fitted(Box::new(model.clone())), *seconds)
+                }
+                Some((model, _)) if warms(c, first) => (i, Start::FromExact(model), 0.0),
+                _ => (i, Start::Fresh, 0.0),
+            });
+        }
+        let mut todo = todo.into_iter().peekable();
+        while todo.peek().is_some() {
+            let group: Vec<(usize, Start<'_>, f64)> = todo.by_ref().take(threads).collect();
             let (tx, rx) = std::sync::mpsc::channel::<(GpRole, FitProgress)>();
-            let results = std::thread::scope(|scope| {
+            let done = std::thread::scope(|scope| {
                 let handles: Vec<_> = group
-                    .iter()
-                    .map(|&candidate| {
+                    .into_iter()
+                    .map(|(i, start, before)| {
                         let tx = tx.clone();
-                        let p = params.for_candidate(candidate);
-                        scope.spawn(move || {
+                        let p = match start {
+                            Start::FromExact(_) => params.starting_from_exact(candidates[i]),
+                            _ => params.for_candidate(candidates[i]),
+                        };
+                        let handle = scope.spawn(move || {
                             let t = Instant::now();
-                            let fitted = Self::fit_tuned(trajectories, &p, &mut |role, prog| {
-                                // The receiver lives until every sender is gone.
-                                let _ = tx.send((role, prog.clone()));
-                            });
-                            (fitted, t.elapsed().as_secs_f64())
-                        })
+                            let fitted =
+                                Self::fit_tuned_from(trajectories, &p, start, &mut |role, prog| {
+                                    // The receiver lives until every sender is gone.
+                                    let _ = tx.send((role, prog.clone()));
+                                });
+                            (fitted, before + t.elapsed().as_secs_f64())
+                        });
+                        (i, handle)
                     })
                     .collect();
                 drop(tx);
@@ -354,11 +413,19 @@ impl HbnModel {
                 handles
                     .into_iter()
                     // A panic is a bug: it propagates, as it would without the threads.
-                    .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                    .map(|(i, h)| (i, h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))))
                     .collect::<Vec<_>>()
             });
-            out.extend(results);
+            for (i, r) in done {
+                results[i] = Some(r);
+            }
         }
+        // Every candidate ran above, or failed first (the fallback is never used).
+        out.extend(
+            results.into_iter().map(|r| {
+                r.unwrap_or((Err(ModelError::Data(crate::DataError::NoTrajectories)), 0.0))
+            }),
+        );
         out
     }
 
@@ -369,8 +436,30 @@ impl HbnModel {
         params: &CheckedHbnParams,
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
+        Self::fit_tuned_from(trajectories, params, Start::Fresh, observe)
+    }
+
+    /// [`Self::fit_tuned`] from GPs already fitted, or with the exact GPs a sparse search
+    /// starts from ([`Start`]).
+    fn fit_tuned_from(
+        trajectories: &[Sequence<'_>],
+        params: &CheckedHbnParams,
+        start: Start<'_>,
+        observe: &mut dyn FnMut(GpRole, &FitProgress),
+    ) -> Result<Self, ModelError> {
         let plays = Self::plays_for(trajectories, params)?;
-        let mut model = Self::fit_gps(trajectories, params, &plays, None, observe)?;
+        let mut model = match start {
+            Start::Fitted(model) => *model,
+            Start::Fresh => Self::fit_gps(trajectories, params, &plays, None, None, observe)?,
+            Start::FromExact(exact) => Self::fit_gps(
+                trajectories,
+                params,
+                &plays,
+                None,
+                Some((&exact.transition, &exact.sensor)),
+                observe,
+            )?,
+        };
         match crate::tuning::split(trajectories, params.validation) {
             Some(split) => {
                 // Per fold, the GPs of its training part with the hyperparameters learned on
@@ -385,6 +474,7 @@ impl HbnModel {
                             params,
                             &plays,
                             Some((&model.transition, &model.sensor)),
+                            None,
                             &mut |_, _| {},
                         )?;
                         Ok(crate::tuning::Trial {
@@ -437,11 +527,17 @@ impl HbnModel {
 
     /// Fits both GPs and the local data on `trajectories`; with `fixed`, every GP keeps the
     /// hyperparameters of the given one (no optimisation: a refit on more data).
+    ///
+    /// With [`HbnParams::sparse_from_exact`], a sparse GP's hyperparameter search starts from
+    /// the optimum of the exact GP with the same settings (one start): `exact`, when the
+    /// caller has those GPs already (the primary candidate of model selection), else fitted
+    /// here on the same data.
     fn fit_gps(
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
         plays: &Plays,
         fixed: Option<(&GaussianProcess, &GaussianProcess)>,
+        exact: Option<(&GaussianProcess, &GaussianProcess)>,
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
         let t0 = Instant::now();
@@ -463,6 +559,26 @@ impl HbnModel {
                     noise_variance: gp.noise_variance_std(),
                 });
                 gp_params.optimize = false;
+            } else if gp_params.sparse.is_some() && params.sparse_from_exact {
+                // The sparse GP's search starts from the exact GP's optimum on the subset
+                // (`max_points`), one start: docs/sparse.md, "Where the search starts". An
+                // exact GP that cannot be fitted leaves the sparse search its own starts.
+                let given = exact.map(|pair| match which {
+                    GpRole::Transition => pair.0.clone(),
+                    GpRole::Sensor => pair.1.clone(),
+                });
+                let exact_gp = given.or_else(|| {
+                    let mut p = gp_params.clone();
+                    p.sparse = None;
+                    hbn_gp::fit(&p, &table.inputs, &table.targets).ok()
+                });
+                if let Some(gp) = exact_gp {
+                    gp_params.init = Some(Hyperparameters {
+                        theta: gp.theta().to_vec(),
+                        noise_variance: gp.noise_variance_std(),
+                    });
+                    gp_params.n_starts = 1;
+                }
             }
             let mut gp =
                 hbn_gp::fit_observed(&gp_params, &table.inputs, &table.targets, &mut |p| {
@@ -841,5 +957,75 @@ mod selection_tests {
             choose_candidate(&[(0, -2.5, 0.02), (1, -2.5, 0.02)]),
             Some(0)
         );
+    }
+}
+
+#[cfg(test)]
+mod sparse_start_tests {
+    use super::*;
+    use crate::params::{HbnParams, Selection};
+    use hbn_sim::{SimConfig, Simulator, SystemKind};
+
+    /// Two runs of Duhem under slow triangles of different heights.
+    fn runs() -> Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> {
+        [0.8, 0.6]
+            .iter()
+            .map(|&top| {
+                let mut robot = Simulator::new(&SimConfig::new(SystemKind::Duhem)).unwrap();
+                let u: Vec<f64> = (0..300)
+                    .map(|k| top * (1.0 - ((k % 100) as f64 / 50.0 - 1.0).abs()))
+                    .collect();
+                let (x, y): (Vec<f64>, Vec<f64>) =
+                    u.iter().map(|&v| robot.step(v).unwrap()).unzip();
+                (u, x, y)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_sparse_candidate_starts_from_the_primary_exact_gps_as_it_would_alone() {
+        let data = runs();
+        let seqs: Vec<Sequence<'_>> = data
+            .iter()
+            .map(|(u, x, y)| Sequence::new(u, x, y))
+            .collect();
+        let params = HbnParams {
+            max_points: 60,
+            n_starts: 2,
+            max_iters: 30,
+            select: Selection {
+                kernels: Vec::new(),
+                inducing: vec![Some(16)],
+            },
+            ..HbnParams::default()
+        }
+        .check()
+        .unwrap();
+        let candidates = params.candidates();
+        assert_eq!(candidates.len(), 2);
+        let trained = HbnModel::fit_candidates(&seqs, &params, &candidates, &mut |_, _| {});
+        let sparse = trained[1].0.as_ref().unwrap();
+        assert!(sparse.params().sparse_from_exact);
+        for gp in [&sparse.transition, &sparse.sensor] {
+            assert_eq!(
+                gp.report().starts.len(),
+                1,
+                "one start, from the exact optimum"
+            );
+        }
+        // From its recorded parameters alone (the exact GPs fitted again) it is the same
+        // model, bit for bit: what a model file says it was trained with reproduces it.
+        let alone = HbnModel::fit_tuned(
+            &seqs,
+            &params.starting_from_exact(candidates[1]),
+            &mut |_, _| {},
+        )
+        .unwrap();
+        assert_eq!(sparse.to_json().unwrap(), alone.to_json().unwrap());
+        // Without the setting, the sparse searches make their own starts: another model.
+        let own = HbnModel::fit_tuned(&seqs, &params.for_candidate(candidates[1]), &mut |_, _| {})
+            .unwrap();
+        assert_eq!(own.transition.report().starts.len(), 2);
+        assert_ne!(own.to_json().unwrap(), alone.to_json().unwrap());
     }
 }

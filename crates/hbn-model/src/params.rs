@@ -393,6 +393,16 @@ pub struct HbnParams {
     /// existed read as empty).
     #[serde(default)]
     pub select: Selection,
+    /// Sparse GPs start their hyperparameter search from the optimum of the exact GPs with
+    /// the same settings (one optimiser start), instead of [`HbnParams::n_starts`] starts of
+    /// their own. Model selection sets it for a sparse candidate whose kernels are those of
+    /// the primary, exact configuration: it has those exact GPs already, and the sparse
+    /// search then takes a third of the likelihood evaluations (docs/sparse.md, "Where the
+    /// search starts"). Set by itself, training fits the exact GPs first, which on 5000
+    /// samples cost more than it saves. Default `false`; model files written before it read
+    /// as `false`.
+    #[serde(default)]
+    pub sparse_from_exact: bool,
     /// Signal names, paths and units.
     pub signals: Signals,
 }
@@ -476,6 +486,7 @@ impl Default for HbnParams {
                 kernels: Vec::new(),
                 inducing: vec![Some(DEFAULT_INDUCING)],
             },
+            sparse_from_exact: false,
             signals: Signals::default(),
         }
     }
@@ -711,6 +722,14 @@ impl CheckedHbnParams {
     /// alternative was).
     pub(crate) fn for_candidate(&self, c: Candidate) -> CheckedHbnParams {
         CheckedHbnParams(self.0.with_candidate(c))
+    }
+
+    /// [`Self::for_candidate`] for a sparse candidate whose searches start from the primary
+    /// exact GPs ([`HbnParams::sparse_from_exact`]).
+    pub(crate) fn starting_from_exact(&self, c: Candidate) -> CheckedHbnParams {
+        let mut p = self.0.with_candidate(c);
+        p.sparse_from_exact = true;
+        CheckedHbnParams(p)
     }
 
     /// GP parameters for one kernel structure (valid by construction).
