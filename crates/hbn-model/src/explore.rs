@@ -136,13 +136,15 @@ pub struct ExploreParams {
     pub horizon: usize,
     /// Samples a refit may take. `0` (default): every refit of the transition GP runs inside
     /// [`Explorer::observe`], which then blocks for it (about 3 ms per sample on average over
-    /// 2000 samples, 0.44 s at worst when hyperparameters are re-learned;
-    /// docs/exploration.md). `lag > 0`: each refit runs on a thread beside the loop, on the
+    /// 2000 samples, up to 0.8 s when hyperparameters are re-learned; docs/benchmarks.md). `lag > 0`: each refit runs on a thread beside the loop, on the
     /// data observed when it starts, and its GP is used from `lag` samples later on;
     /// `observe()` waits only if the refit has not finished by then. One refit runs at a
     /// time, so refits come every `max(refit_every, lag)` samples. The explorer stays
     /// deterministic: equal seeds and observations give equal proposals, however fast the
-    /// machine. For a loop faster than the refits (a robot at 100 Hz: set `lag` to 50).
+    /// machine. The model steered by is older, which costs accuracy: `lag = 200` gave 1.07x
+    /// the default's nRMSE over 16 cells, most of it at 500 samples (docs/exploration.md).
+    /// For a loop that cannot wait for a refit: at 100 Hz, `lag = 200` left 1 sample of 2000
+    /// over the 10 ms period, `lag = 0` 161.
     pub lag: usize,
     /// How the input moves ([`Strategy::Ramps`] by default).
     pub strategy: Strategy,

@@ -975,8 +975,8 @@ class Explorer:
     ``pool`` (random ramps drawn per seeking choice; more seeks harder) and ``lag`` (0: every
     refit runs inside :meth:`observe`, which blocks for it; ``lag > 0``: refits run on a thread
     beside the loop and are used ``lag`` samples after they start, so that a loop faster than
-    the refits, such as a robot at 100 Hz with ``lag=50``, is not held up; the proposals stay
-    deterministic). ``**params``:
+    the refits, such as a robot at 100 Hz with ``lag=200``, is not held up; the proposals stay
+    deterministic, and the older model costs some accuracy, docs/exploration.md). ``**params``:
     training parameters of :meth:`HysteresisModel.fit` (``max_points``, ``n_inducing``,
     ``kernel``, ...), used by the explorer's transition GP and by :meth:`model`. A bad value
     raises :class:`ConfigError` whose ``keyword`` names it. docs/exploration.md says what it
