@@ -2,7 +2,7 @@
 //! in small, and the CLI run in-process.
 #![allow(dead_code)]
 
-use hbn::model::{HbnModel, HbnParams};
+use hbn::model::{HbnModel, HbnParams, Selection};
 use hbn::pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
 use hbn::pipeline::sequences;
 use hbn::sim::{SystemKind, Trajectory};
@@ -35,24 +35,19 @@ fn config(max_points: usize, seed: u64, test_steps: usize) -> ExperimentConfig {
     }
 }
 
-/// One training input repeated with fresh noise, fitted with the default GP kind.
+/// One training input repeated with fresh noise, fitted with the default parameters (model
+/// selection included).
 pub fn train_model(
     system: SystemKind,
     noise_gain: f64,
     max_points: usize,
     seed: u64,
 ) -> (HbnModel, Vec<Trajectory>) {
-    train_model_kind(
-        system,
-        noise_gain,
-        max_points,
-        HbnParams::default().n_inducing,
-        seed,
-    )
+    train_model_with(system, noise_gain, max_points, seed, |_| {})
 }
 
-/// [`train_model`] with the GP kind given: `Some(m)` inducing points, or `None` for exact GPs
-/// on `max_points` support points.
+/// [`train_model`] with the GP kind given and no model selection: `Some(m)` inducing points,
+/// or `None` for exact GPs on `max_points` support points.
 pub fn train_model_kind(
     system: SystemKind,
     noise_gain: f64,
@@ -62,6 +57,8 @@ pub fn train_model_kind(
 ) -> (HbnModel, Vec<Trajectory>) {
     let mut cfg = config(max_points, seed, 0);
     cfg.params.n_inducing = n_inducing;
+    // This kind only: no model selection between exact and sparse GPs.
+    cfg.params.select = Selection::default();
     let runs = training_set(system, noise_gain, seed, &cfg).unwrap();
     (HbnModel::fit(&sequences(&runs), &cfg.params).unwrap(), runs)
 }
