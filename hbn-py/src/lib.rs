@@ -460,7 +460,9 @@ fn hbn_params(py: Python<'_>, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Hb
     };
     for (k, v) in kwargs.iter() {
         let key: String = k.extract()?;
-        if v.is_none() {
+        // `None` keeps a parameter's default, except `n_inducing=None`, which asks for exact
+        // GPs (and no model selection), as documented.
+        if v.is_none() && key != param_keyword(Param::Inducing) {
             continue;
         }
         let Some(param) = keyword_params().find(|&p| param_keyword(p) == key) else {
@@ -470,7 +472,12 @@ fn hbn_params(py: Python<'_>, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Hb
                 known.join(", ")
             )));
         };
-        let value = param_value(&v).ok_or_else(|| {
+        let value = if v.is_none() {
+            Some(ParamValue::Text("exact".to_owned()))
+        } else {
+            param_value(&v)
+        };
+        let value = value.ok_or_else(|| {
             raise(
                 py,
                 Fail::config(

@@ -157,3 +157,16 @@ def test_model_selection_among_inducing_settings():
     with pytest.raises(hbn.ConfigError) as e:
         hbn.HysteresisModel.fit(u, x, y, kernel=["matern52", "rbf"])
     assert e.value.keyword == "kernel"
+
+
+def test_n_inducing_none_trains_exact_gps_without_selection():
+    """``n_inducing=None`` asks for exact GPs, as documented (other keywords set to None keep
+    their default); leaving it out keeps the default choice between exact and sparse GPs."""
+    tr = hbn.simulate("duhem", 300, seed=1, noise_gain=1.0)
+    quick = dict(max_points=80, n_restarts=1, seed=1)
+    exact = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], n_inducing=None, **quick)
+    assert not exact.transition.is_sparse and not exact.sensor.is_sparse
+    assert exact.summary["validation"]["candidates"] == []
+    default = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], **quick)
+    rows = default.summary["validation"]["candidates"]
+    assert [r["candidate"]["n_inducing"] for r in rows] == [None, hbn.DEFAULT_INDUCING]
