@@ -47,10 +47,11 @@ def test_equal_seeds_give_equal_proposals():
 
 
 def test_with_a_lag_refits_run_beside_the_loop_and_stay_deterministic():
-    # The first GP starts fitting when the random phase ends and is used 25 samples later.
+    # The first GP starts fitting when the random phase ends and is used a refit's lag (10
+    # samples, as refit_every) later, not the whole lag.
     e = hbn.Explorer(0.0, 1.0, 0.02, seed=5, lag=25, **QUICK)
     assert e.settings["lag"] == 25
-    drive(e, steps=QUICK["random_samples"] + 24)
+    drive(e, steps=QUICK["random_samples"] + 9)
     assert e.phase == "random"
     drive(e, steps=1)
     assert e.phase == "seeking"

@@ -136,15 +136,16 @@ pub struct ExploreParams {
     pub horizon: usize,
     /// Samples a refit may take. `0` (default): every refit of the transition GP runs inside
     /// [`Explorer::observe`], which then blocks for it (about 3 ms per sample on average over
-    /// 2000 samples, up to 0.8 s when hyperparameters are re-learned; docs/benchmarks.md). `lag > 0`: each refit runs on a thread beside the loop, on the
-    /// data observed when it starts, and its GP is used from `lag` samples later on;
-    /// `observe()` waits only if the refit has not finished by then. One refit runs at a
-    /// time, so refits come every `max(refit_every, lag)` samples. The explorer stays
-    /// deterministic: equal seeds and observations give equal proposals, however fast the
-    /// machine. The model steered by is older, which costs accuracy: `lag = 200` gave 1.07x
-    /// the default's nRMSE over 16 cells, most of it at 500 samples (docs/exploration.md).
-    /// For a loop that cannot wait for a refit: at 100 Hz, `lag = 200` left 1 sample of 2000
-    /// over the 10 ms period, `lag = 0` 161.
+    /// 2000 samples, up to 0.8 s when hyperparameters are re-learned; docs/benchmarks.md).
+    /// `lag > 0`: each refit runs on a thread beside the loop, on the data observed when it
+    /// starts, and `observe()` waits only if it has not finished when its GP is due: a
+    /// re-learning of the hyperparameters is used `lag` samples after it starts; the first
+    /// fit, at the end of the random phase, and the refits with the current hyperparameters
+    /// (which go on while a re-learning runs) `min(lag, refit_every)` samples after. The
+    /// explorer stays deterministic: equal seeds and observations give equal proposals,
+    /// however fast the machine. The model steered by is older, which costs some accuracy
+    /// (docs/exploration.md). For a loop that cannot wait for a refit: at 100 Hz,
+    /// `lag = 200` left 1 sample of 2000 over the 10 ms period, `lag = 0` 161.
     pub lag: usize,
     /// How the input moves ([`Strategy::Ramps`] by default).
     pub strategy: Strategy,
@@ -900,9 +901,9 @@ impl Explorer {
     }
 
     /// [`Explorer::after_sample`] with the refits beside the loop ([`ExploreParams::lag`] >
-    /// 0): a re-learning (or the first fit) is used `lag` samples after it starts; refits with
-    /// the current hyperparameters go on meanwhile, each used `min(lag, refit_every)` samples
-    /// after it starts. Re-learned hyperparameters replace the GP when they are used, and a
+    /// 0): a re-learning is used `lag` samples after it starts; the first fit and the refits
+    /// with the current hyperparameters (which go on meanwhile) `min(lag, refit_every)`
+    /// samples after. Re-learned hyperparameters replace the GP when they are used, and a
     /// refit on every sample with them starts then (one still running with the old ones is
     /// dropped).
     fn after_sample_beside(&mut self) {
@@ -924,7 +925,9 @@ impl Explorer {
         let learn_due = self.learn && n >= self.optimized_at + opt_every;
         if self.transition.is_none() {
             if n >= p.random_samples && self.relearning.is_none() {
-                self.relearning = self.start_beside(None, true, lag);
+                // The first fit is on the random phase's few samples and quick (0.16 s on
+                // 200): it waits only as long as a refit, so that seeking starts on time.
+                self.relearning = self.start_beside(None, true, lag.min(every));
                 self.optimized_at = n;
             }
         } else {

@@ -365,36 +365,51 @@ fn refits_beside_the_loop_are_used_lag_samples_after_they_start_however_fast_the
         let mut explorer = Explorer::new(params()).unwrap();
         let mut robot = Simulator::new(&cfg).unwrap();
         let mut applied = Vec::new();
-        let mut first_gp_at = None;
+        // When the GP's hyperparameters changed (a fit or re-learning was applied).
+        let mut learned_at = Vec::new();
+        let mut theta: Option<Vec<f64>> = None;
         for k in 0..260 {
             let u = explorer.propose();
             let (x, y) = robot.step(u).unwrap();
             explorer.observe(u, x, y).unwrap();
             applied.push(u);
-            if first_gp_at.is_none() && explorer.transition().is_some() {
-                first_gp_at = Some(k + 1);
-                // The first GP started at the end of the random phase, on the data then.
-                let rows = explorer.transition().unwrap().report().n_samples;
-                assert!(rows < 60, "fitted on {rows} rows, started at 60 samples");
+            let now = explorer.transition().map(|gp| gp.theta().to_vec());
+            if now != theta {
+                if theta.is_none() {
+                    // The first GP started at the end of the random phase, on the data then.
+                    let rows = explorer.transition().unwrap().report().n_samples;
+                    assert!(rows < 60, "fitted on {rows} rows, started at 60 samples");
+                }
+                learned_at.push(k + 1);
+                theta = now;
             }
             std::thread::sleep(pause);
         }
-        (applied, first_gp_at, explorer.warnings().to_vec())
+        (applied, learned_at, explorer.warnings().to_vec())
     };
-    let (fast, first_fast, warnings) = run(std::time::Duration::ZERO);
-    let (slow, first_slow, _) = run(std::time::Duration::from_millis(3));
+    let (fast, learned_fast, warnings) = run(std::time::Duration::ZERO);
+    let (slow, learned_slow, _) = run(std::time::Duration::from_millis(3));
     assert!(warnings.is_empty(), "{warnings:?}");
-    assert_eq!(
-        first_fast,
-        Some(60 + lag),
-        "the first GP is applied lag samples late"
-    );
-    assert_eq!(first_slow, first_fast);
+    // The first fit (at 60 samples) waits as long as a refit, 10 samples; the re-learnings,
+    // due every 80 samples from there (at 140 and 220), wait the whole lag.
+    assert_eq!(learned_fast, vec![60 + 10, 140 + lag, 220 + lag]);
+    assert_eq!(learned_slow, learned_fast);
     assert_eq!(fast, slow);
     assert_within(&fast, 0.0, 1.0, 0.05);
-    // The lag changes the data behind each proposal, so the inputs differ from those of a
-    // loop that refits inside `observe()`.
+    // Refitting inside `observe()`, the same fits are used the sample they start.
     let mut sync = Explorer::new(ExploreParams { lag: 0, ..params() }).unwrap();
-    let inline = drive(&mut sync, SystemKind::Duhem, 4, 260);
-    assert_ne!(inline, fast);
+    let mut robot = Simulator::new(&cfg).unwrap();
+    let mut learned_inline = Vec::new();
+    let mut theta: Option<Vec<f64>> = None;
+    for k in 0..260 {
+        let u = sync.propose();
+        let (x, y) = robot.step(u).unwrap();
+        sync.observe(u, x, y).unwrap();
+        let now = sync.transition().map(|gp| gp.theta().to_vec());
+        if now != theta {
+            learned_inline.push(k + 1);
+            theta = now;
+        }
+    }
+    assert_eq!(learned_inline, vec![60, 140, 220]);
 }
