@@ -350,7 +350,6 @@ fn refits_beside_the_loop_are_used_lag_samples_after_they_start_however_fast_the
         p.refit_every = 10;
         p.optimize_every = 80;
         p.seed = 3;
-        p.lag = lag;
         p
     };
     let cfg = SimConfig {
@@ -358,15 +357,13 @@ fn refits_beside_the_loop_are_used_lag_samples_after_they_start_however_fast_the
         seed: 4,
         ..SimConfig::new(SystemKind::Duhem)
     };
-    // Two loops, one slow (every refit has finished long before it is applied) and one as
-    // fast as it goes (refits are still running when they are due, so `observe()` waits):
-    // the proposals are the same, bit for bit.
-    let run = |pause: std::time::Duration| {
-        let mut explorer = Explorer::new(params()).unwrap();
+    // Drives the simulator with `lag` (pausing `pause` per sample); returns the inputs, the
+    // samples after which the GP's hyperparameters changed (a fit or re-learning was used),
+    // and the warnings.
+    let run = |lag: usize, pause: std::time::Duration| {
+        let mut explorer = Explorer::new(ExploreParams { lag, ..params() }).unwrap();
         let mut robot = Simulator::new(&cfg).unwrap();
-        let mut applied = Vec::new();
-        // When the GP's hyperparameters changed (a fit or re-learning was applied).
-        let mut learned_at = Vec::new();
+        let (mut applied, mut learned_at) = (Vec::new(), Vec::new());
         let mut theta: Option<Vec<f64>> = None;
         for k in 0..260 {
             let u = explorer.propose();
@@ -387,8 +384,11 @@ fn refits_beside_the_loop_are_used_lag_samples_after_they_start_however_fast_the
         }
         (applied, learned_at, explorer.warnings().to_vec())
     };
-    let (fast, learned_fast, warnings) = run(std::time::Duration::ZERO);
-    let (slow, learned_slow, _) = run(std::time::Duration::from_millis(3));
+    // Two loops, one slow (every refit has finished long before it is applied) and one as
+    // fast as it goes (refits are still running when they are due, so `observe()` waits):
+    // the proposals are the same, bit for bit.
+    let (fast, learned_fast, warnings) = run(lag, std::time::Duration::ZERO);
+    let (slow, learned_slow, _) = run(lag, std::time::Duration::from_millis(3));
     assert!(warnings.is_empty(), "{warnings:?}");
     // The first fit (at 60 samples) waits as long as a refit, 10 samples; the re-learnings,
     // due every 80 samples from there (at 140 and 220), wait the whole lag.
@@ -397,19 +397,6 @@ fn refits_beside_the_loop_are_used_lag_samples_after_they_start_however_fast_the
     assert_eq!(fast, slow);
     assert_within(&fast, 0.0, 1.0, 0.05);
     // Refitting inside `observe()`, the same fits are used the sample they start.
-    let mut sync = Explorer::new(ExploreParams { lag: 0, ..params() }).unwrap();
-    let mut robot = Simulator::new(&cfg).unwrap();
-    let mut learned_inline = Vec::new();
-    let mut theta: Option<Vec<f64>> = None;
-    for k in 0..260 {
-        let u = sync.propose();
-        let (x, y) = robot.step(u).unwrap();
-        sync.observe(u, x, y).unwrap();
-        let now = sync.transition().map(|gp| gp.theta().to_vec());
-        if now != theta {
-            learned_inline.push(k + 1);
-            theta = now;
-        }
-    }
+    let (_, learned_inline, _) = run(0, std::time::Duration::ZERO);
     assert_eq!(learned_inline, vec![60, 140, 220]);
 }
