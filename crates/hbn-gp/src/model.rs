@@ -270,6 +270,14 @@ impl GaussianProcess {
     pub fn noise_variance_std(&self) -> f64 {
         self.noise_variance
     }
+    /// The kernel hyperparameters and noise variance, as a fit takes them to start from or
+    /// to keep ([`crate::GpParams::init`]).
+    pub fn hyperparameters(&self) -> crate::Hyperparameters {
+        crate::Hyperparameters {
+            theta: self.theta.clone(),
+            noise_variance: self.noise_variance,
+        }
+    }
     /// Noise variance in raw output units.
     pub fn noise_variance(&self) -> f64 {
         self.noise_variance * self.output_scale * self.output_scale

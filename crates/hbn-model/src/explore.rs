@@ -570,10 +570,7 @@ impl Explorer {
             .collect();
         explorer.observed = explorer.runs.iter().map(|r| r.u.len()).sum();
         let gp = model.transition();
-        let warm = Hyperparameters {
-            theta: gp.theta().to_vec(),
-            noise_variance: gp.noise_variance_std(),
-        };
+        let warm = gp.hyperparameters();
         // At once, whatever the lag: the explorer starts from the model it resumes.
         explorer.refit(Some(warm), false);
         explorer.optimized_at = explorer.observed;
@@ -950,10 +947,9 @@ impl Explorer {
 
     /// The hyperparameters of the transition GP in use.
     fn current_hyperparameters(&self) -> Option<Hyperparameters> {
-        self.transition.as_ref().map(|gp| Hyperparameters {
-            theta: gp.theta().to_vec(),
-            noise_variance: gp.noise_variance_std(),
-        })
+        self.transition
+            .as_ref()
+            .map(hbn_gp::GaussianProcess::hyperparameters)
     }
 
     /// Fits the transition GP on every sample so far, now: from `init` (or the defaults),

@@ -182,8 +182,9 @@ enum Start<'a> {
     Fresh,
     /// From its GPs, already fitted on every run.
     Fitted(Box<HbnModel>),
-    /// From the exact GPs (same kernels) that its sparse searches start from.
-    FromExact(&'a HbnModel),
+    /// From the hyperparameters of the exact GPs (same kernels) that its sparse searches
+    /// start from: transition, sensor.
+    FromExact(&'a (Hyperparameters, Hyperparameters)),
 }
 
 impl HbnModel {
@@ -367,17 +368,21 @@ impl HbnModel {
                 Err(e) => results[0] = Some((Err(e), seconds)),
             }
         }
+        let exact_start = exact.as_ref().map(|(model, _)| {
+            (
+                model.transition.hyperparameters(),
+                model.sensor.hyperparameters(),
+            )
+        });
         let mut todo: Vec<(usize, Start<'_>, f64)> = Vec::new();
         for (i, c) in candidates.iter().enumerate() {
             if results[i].is_some() {
                 continue;
             }
             let first = candidates.first().unwrap_or(c);
-            todo.push(match &exact {
-                Some((model, seconds)) if i == 0 => {
-                    (i, Start::Fitted(Box::new(model.clone())), *seconds)
-                }
-                Some((model, _)) if warms(c, first) => (i, Start::FromExact(model), 0.0),
+            todo.push(match (exact.take_if(|_| i == 0), &exact_start) {
+                (Some((model, seconds)), _) => (i, Start::Fitted(Box::new(model)), seconds),
+                (None, Some(start)) if warms(c, first) => (i, Start::FromExact(start), 0.0),
                 _ => (i, Start::Fresh, 0.0),
             });
         }
@@ -451,14 +456,9 @@ impl HbnModel {
         let mut model = match start {
             Start::Fitted(model) => *model,
             Start::Fresh => Self::fit_gps(trajectories, params, &plays, None, None, observe)?,
-            Start::FromExact(exact) => Self::fit_gps(
-                trajectories,
-                params,
-                &plays,
-                None,
-                Some((&exact.transition, &exact.sensor)),
-                observe,
-            )?,
+            Start::FromExact(exact) => {
+                Self::fit_gps(trajectories, params, &plays, None, Some(exact), observe)?
+            }
         };
         match crate::tuning::split(trajectories, params.validation) {
             Some(split) => {
@@ -529,15 +529,15 @@ impl HbnModel {
     /// hyperparameters of the given one (no optimisation: a refit on more data).
     ///
     /// With [`HbnParams::sparse_from_exact`], a sparse GP's hyperparameter search starts from
-    /// the optimum of the exact GP with the same settings (one start): `exact`, when the
-    /// caller has those GPs already (the primary candidate of model selection), else fitted
-    /// here on the same data.
+    /// the optimum of the exact GP with the same settings (one start): `exact` (transition,
+    /// sensor), when the caller has those GPs already (the primary candidate of model
+    /// selection), else fitted here on the same data.
     fn fit_gps(
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
         plays: &Plays,
         fixed: Option<(&GaussianProcess, &GaussianProcess)>,
-        exact: Option<(&GaussianProcess, &GaussianProcess)>,
+        exact: Option<&(Hyperparameters, Hyperparameters)>,
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
         let t0 = Instant::now();
@@ -550,13 +550,9 @@ impl HbnModel {
         let mut fit_gp = |which: GpRole, spec, table: &crate::dataset::Table| {
             let mut gp_params = params.gp_params(spec, which);
             if let Some(pair) = fixed {
-                let gp = match which {
-                    GpRole::Transition => pair.0,
-                    GpRole::Sensor => pair.1,
-                };
-                gp_params.init = Some(Hyperparameters {
-                    theta: gp.theta().to_vec(),
-                    noise_variance: gp.noise_variance_std(),
+                gp_params.init = Some(match which {
+                    GpRole::Transition => pair.0.hyperparameters(),
+                    GpRole::Sensor => pair.1.hyperparameters(),
                 });
                 gp_params.optimize = false;
             } else if gp_params.sparse.is_some() && params.sparse_from_exact {
@@ -567,16 +563,15 @@ impl HbnModel {
                     GpRole::Transition => pair.0.clone(),
                     GpRole::Sensor => pair.1.clone(),
                 });
-                let exact_gp = given.or_else(|| {
+                let start = given.or_else(|| {
                     let mut p = gp_params.clone();
                     p.sparse = None;
-                    hbn_gp::fit(&p, &table.inputs, &table.targets).ok()
+                    hbn_gp::fit(&p, &table.inputs, &table.targets)
+                        .ok()
+                        .map(|gp| gp.hyperparameters())
                 });
-                if let Some(gp) = exact_gp {
-                    gp_params.init = Some(Hyperparameters {
-                        theta: gp.theta().to_vec(),
-                        noise_variance: gp.noise_variance_std(),
-                    });
+                if let Some(h) = start {
+                    gp_params.init = Some(h);
                     gp_params.n_starts = 1;
                 }
             }
