@@ -89,6 +89,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             max_signal_variance,
                             max_points,
                             subset_policy,
+                            sparse_from_exact: std::env::var_os("SPARSE_FROM_EXACT").is_some(),
                             select: hbn_model::Selection {
                                 inducing: alternative.map(Some).into_iter().collect(),
                                 ..Default::default()
