@@ -528,22 +528,42 @@ fn model_selection_lists_print_their_table() {
         "exact,4",
         "--verbose",
     ];
-    hbn_cli::run_with(args, &mut out, &mut err).expect("train with two candidates");
+    hbn_cli::run_with(args, &mut out, &mut err).expect("train with three candidates");
     let (out, err) = (String::from_utf8_lossy(&out), String::from_utf8_lossy(&err));
     assert!(
-        err.contains("model selection: training 2 candidates"),
+        err.contains("model selection: training 3 candidates"),
         "announced on stderr: {err}"
     );
+    // The sparse GPs also with the default lag set.
     assert!(
-        out.contains("model selection, 2 candidates")
+        out.contains("model selection, 3 candidates")
             && out.contains("matern52 exact")
-            && out.contains("matern52 m=4"),
+            && out.contains("matern52 m=4 ")
+            && out.contains("matern52 m=4 lags=1"),
         "{out}"
     );
     assert_eq!(out.matches("* chosen").count(), 1, "{out}");
     let (e, out) = hbn(&["inspect", &m2]);
     assert!(e.is_none(), "{e:?}");
+    assert!(out.contains("model selection, 3 candidates"), "{out}");
+    // `--lags` given once trains that set alone; given again, the others are tried.
+    let (e, out) = train(&["--inducing", "exact,4", "--lags", "none", "--verbose"]);
+    assert!(e.is_none(), "{e:?}");
     assert!(out.contains("model selection, 2 candidates"), "{out}");
+    let (e, out) = train(&[
+        "--inducing",
+        "4",
+        "--lags",
+        "none",
+        "--lags",
+        "0.5",
+        "--verbose",
+    ]);
+    assert!(e.is_none(), "{e:?}");
+    assert!(
+        out.contains("model selection, 2 candidates") && out.contains("matern52 m=4 lags=0.5"),
+        "{out}"
+    );
     // Without held-out data nothing is chosen: the first candidate is trained, and the
     // summary says why.
     let (e, out) = train(&["--inducing", "exact,4", "--validation", "0"]);

@@ -175,6 +175,7 @@ fn selection_returns_the_candidate_with_the_best_held_out_score() {
             select: Selection {
                 kernels: vec![],
                 inducing: vec![alternative],
+                lags: vec![],
             },
             ..base.clone()
         };

@@ -204,10 +204,13 @@ def run_hbn(
 
 def _config(model: Any) -> str:
     """The trained configuration (the chosen one under model selection), e.g. ``"matern52
-    exact"`` or ``"se-ard m=64"``."""
+    exact"``, ``"se-ard m=64"`` or ``"matern52 m=64 lags=1"`` (as ``hbn train`` names
+    candidates)."""
     p = model.params
     m = p["n_inducing"]
-    return f"{p['transition_kernel']} {'exact' if m == 'exact' else f'm={m}'}"
+    lags = p.get("lags") or []
+    tail = f" lags={','.join(f'{t:g}' for t in lags)}" if lags else ""
+    return f"{p['transition_kernel']} {'exact' if m == 'exact' else f'm={m}'}{tail}"
 
 
 def _finite_or_none(v: Any) -> Any:

@@ -252,6 +252,18 @@ impl std::fmt::Display for Memory {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Lags(pub Vec<f64>);
 
+/// The primary lag set and the alternatives model selection tries: the first given and the
+/// rest, else the library's defaults (no lags, with [`hbn_model::DEFAULT_LAGS`] tried).
+pub fn lags_choice(given: &[Lags]) -> (Vec<f64>, Vec<Vec<f64>>) {
+    match given.split_first() {
+        Some((first, rest)) => (first.0.clone(), rest.iter().map(|l| l.0.clone()).collect()),
+        None => {
+            let d = params();
+            (d.lags, d.select.lags)
+        }
+    }
+}
+
 fn parse_lags(s: &str) -> Result<Lags, String> {
     number_list(s, |v| v > 0.0, "time constants in seconds (> 0)").map(Lags)
 }
@@ -496,9 +508,11 @@ pub struct TrainArgs {
     /// The input's recent past: time constants in seconds of first-order low-pass filters
     /// (lags) of u whose outputs the transition GP reads after the plays, comma-separated
     /// (plays and lags at most 4 in all), or `none`. For creep and viscoelastic relaxation
-    /// (soft actuators). docs/memory.md.
-    #[arg(long, value_parser = parse_lags, default_value_t = Lags(params().lags), value_name = "TAU[,..]|none")]
-    pub lags: Lags,
+    /// (soft actuators). Given more than once, the first is the primary set and the others
+    /// are tried on held-out data with the sparse candidates (default: `none`, with `1` tried;
+    /// `--lags none` alone trains without lags and tries none). docs/memory.md.
+    #[arg(long, value_parser = parse_lags, value_name = "TAU[,..]|none")]
+    pub lags: Vec<Lags>,
     /// Which GPs have a linear prior mean (the targets' least-squares plane on the GP's inputs,
     /// the kernel modelling the rest): `none`, `transition` or `both`. On the sensor GP it can
     /// cost observability. docs/sparse.md.
@@ -841,9 +855,10 @@ pub struct ExperimentArgs {
     /// Play operators' radii as fractions of the input's range, or `none` (as `hbn train`).
     #[arg(long, value_parser = parse_memory, default_value_t = Memory(params().memory), value_name = "R[,..]|none")]
     pub memory: Memory,
-    /// Lags' time constants in seconds, or `none` (as `hbn train`).
-    #[arg(long, value_parser = parse_lags, default_value_t = Lags(params().lags), value_name = "TAU[,..]|none")]
-    pub lags: Lags,
+    /// Lags' time constants in seconds, or `none`; repeat to choose on held-out data (as `hbn
+    /// train`).
+    #[arg(long, value_parser = parse_lags, value_name = "TAU[,..]|none")]
+    pub lags: Vec<Lags>,
     /// Which GPs have a linear prior mean: `none`, `transition` or `both` (as `hbn train`).
     #[arg(long, value_parser = parse_linear_mean, default_value_t = params().linear_mean, value_name = "none|transition|both")]
     pub linear_mean: LinearMean,

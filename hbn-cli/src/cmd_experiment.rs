@@ -80,15 +80,17 @@ pub fn run(ui: &mut Ui<'_>, args: &ExperimentArgs) -> anyhow::Result<Vec<Experim
         max_increment: hbn_sim::DEFAULT_MAX_INCREMENT,
         params: {
             let (n_inducing, inducing) = crate::cli::inducing_choice(&args.inducing);
+            let (lags, select_lags) = crate::cli::lags_choice(&args.lags);
             HbnParams {
                 n_inducing,
                 select: hbn_model::Selection {
                     kernels: Vec::new(),
                     inducing,
+                    lags: select_lags,
                 },
                 max_points: args.max_points,
                 memory: args.memory.0.clone(),
-                lags: args.lags.0.clone(),
+                lags,
                 linear_mean: args.linear_mean,
                 ..HbnParams::default()
             }

@@ -16,6 +16,7 @@ impl TrainArgs {
         let d = HbnParams::default();
         let kernel = self.kernel.first().copied();
         let (n_inducing, inducing) = crate::cli::inducing_choice(&self.inducing);
+        let (lags, select_lags) = crate::cli::lags_choice(&self.lags);
         HbnParams {
             transition_kernel: self
                 .transition_kernel
@@ -26,6 +27,7 @@ impl TrainArgs {
             select: Selection {
                 kernels: self.kernel.iter().skip(1).copied().collect(),
                 inducing,
+                lags: select_lags,
             },
             max_points: self.max_points,
             subset_policy: self.subset.into(),
@@ -37,7 +39,7 @@ impl TrainArgs {
             blr_window: self.blr_window,
             validation: self.validation,
             memory: self.memory.0.clone(),
-            lags: self.lags.0.clone(),
+            lags,
             linear_mean: self.linear_mean,
             max_signal_variance: self.max_signal_variance.0,
             ..d

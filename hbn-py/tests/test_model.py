@@ -135,7 +135,9 @@ def test_model_selection_among_inducing_settings():
     accurate as the first), and params hold it."""
     runs = [hbn.simulate("duhem", 400, seed=s, noise_gain=1.0) for s in (1, 2, 3)]
     u, x, y = ([r[k] for r in runs] for k in "uxy")
-    model = hbn.HysteresisModel.fit(u, x, y, n_inducing=[3, None], max_points=120, n_restarts=1)
+    model = hbn.HysteresisModel.fit(
+        u, x, y, n_inducing=[3, None], lags=[], max_points=120, n_restarts=1
+    )
     rows = model.summary["validation"]["candidates"]
     assert [r["candidate"]["n_inducing"] for r in rows] == [3, None]
     nlpd = [r["scored"][1]["calibration"]["nlpd"] for r in rows]
@@ -169,4 +171,7 @@ def test_n_inducing_none_trains_exact_gps_without_selection():
     assert exact.summary["validation"]["candidates"] == []
     default = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], **quick)
     rows = default.summary["validation"]["candidates"]
-    assert [r["candidate"]["n_inducing"] for r in rows] == [None, hbn.DEFAULT_INDUCING]
+    assert [r["candidate"]["n_inducing"] for r in rows] == [None] + [hbn.DEFAULT_INDUCING] * 2
+    # The sparse GPs also with the default lag set, which ``lags=[[], [1.0]]`` spells out.
+    assert [r["candidate"].get("lags", []) for r in rows] == [[], [], [1.0]]
+    assert hbn.default_params()["lags"] == [[], [1.0]]

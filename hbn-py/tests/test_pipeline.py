@@ -108,13 +108,15 @@ def test_defaults_come_from_the_library():
     m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=60)
     got = m.params
     for k, v in p.items():
-        if k not in ("max_points", "signals", "n_inducing"):
+        if k not in ("max_points", "signals", "n_inducing", "lags"):
             assert got[k] == v, k
     assert got["max_points"] == 60
     # The default lists the inducing settings chosen among on held-out data (exact GPs first);
     # the model holds the one chosen.
     assert p["n_inducing"] == ["exact", hbn.DEFAULT_INDUCING]
     assert got["n_inducing"] in p["n_inducing"]
+    # Likewise the lag sets (the primary one first).
+    assert p["lags"] == [[], [1.0]] and got["lags"] in p["lags"]
     o = hbn.default_log_options()
     assert o["rate"] is None and o["max_gap"] > 0 and o["time_source"] == "log"
     assert hbn.default_gp_params()["n_restarts"] >= 1
@@ -178,8 +180,10 @@ def test_memory_sets_the_play_operators():
 def test_lags_set_low_pass_inputs_of_the_transition():
     d = hbn.simulate("soft-actuator", 300, seed=1, noise_gain=1.0)
     fast = dict(max_points=80, n_restarts=1, max_iter=30, validation=0.0)
-    assert hbn.default_params()["lags"] == []
+    # The default trains none and tries one 1 s lag on held-out data (none here: validation=0).
+    assert hbn.default_params()["lags"] == [[], [1.0]]
     plain = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], **fast)
+    assert plain.params["lags"] == []
     lagged = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], lags=[1.0], **fast)
     assert lagged.params["lags"] == [1.0]
     assert lagged.params["memory"] == [0.05, 0.2]

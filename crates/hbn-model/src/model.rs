@@ -183,8 +183,33 @@ enum Start<'a> {
     /// From its GPs, already fitted on every run.
     Fitted(Box<HbnModel>),
     /// From the hyperparameters of the exact GPs (same kernels) that its sparse searches
-    /// start from: transition, sensor.
-    FromExact(&'a (Hyperparameters, Hyperparameters)),
+    /// start from, those the caller has ([`ExactStart`]).
+    FromExact(&'a ExactStart),
+}
+
+/// The optimum of the exact GP with the settings of `gp_params` (its sparse setting aside) on
+/// `table`: where a sparse search with [`HbnParams::sparse_from_exact`] starts. `None` when it
+/// cannot be fitted (the sparse search then makes its own starts).
+fn exact_optimum(
+    gp_params: &hbn_gp::GpParams,
+    table: &crate::dataset::Table,
+) -> Option<Hyperparameters> {
+    let mut p = gp_params.clone();
+    p.sparse = None;
+    hbn_gp::fit(&p, &table.inputs, &table.targets)
+        .ok()
+        .map(|gp| gp.hyperparameters())
+}
+
+/// The optimum of the exact GPs a sparse search starts from ([`HbnParams::sparse_from_exact`]),
+/// per GP, when the caller has them; a GP without one is fitted exactly first, as training
+/// alone would.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct ExactStart {
+    /// The exact transition GP's hyperparameters (same inputs: kernel, plays and lags).
+    pub transition: Option<Hyperparameters>,
+    /// The exact sensor GP's hyperparameters (same kernel).
+    pub sensor: Option<Hyperparameters>,
 }
 
 impl HbnModel {
@@ -221,13 +246,21 @@ impl HbnModel {
         let selecting =
             candidates.len() > 1 && crate::tuning::split(trajectories, params.validation).is_some();
         if !selecting {
-            let primary = params.for_candidate(params.candidate());
+            let primary = params.for_candidate(&params.candidate());
             let mut model = Self::fit_tuned(trajectories, &primary, observe)?;
-            // The default's alternative (sparse GPs) is the library's offer, not the user's
-            // request: with nothing held out it is dropped silently (`validation = 0` says
+            // The default's alternatives (sparse GPs, a lag) are the library's offer, not the
+            // user's request: with nothing held out they are dropped silently (`validation = 0` says
             // so, and too little data has its own warning below). Alternatives the user listed
             // are warned about.
-            if candidates.len() > 1 && params.select != HbnParams::default().select {
+            let offered = HbnParams::default().select;
+            let listed = !params.select.kernels.is_empty()
+                || params
+                    .select
+                    .inducing
+                    .iter()
+                    .any(|m| !offered.inducing.contains(m))
+                || params.select.lags.iter().any(|l| !offered.lags.contains(l));
+            if candidates.len() > 1 && listed {
                 let why = if params.validation > 0.0 {
                     format!(
                         "too little data to hold out {:.0}% for validation",
@@ -325,14 +358,19 @@ impl HbnModel {
     }
 
     /// Trains every candidate ([`Self::fit_tuned`]) and returns each one's result and wall
-    /// seconds, in the order given. As many run side by side as the machine has cores (one
-    /// candidate's GP search leaves cores idle); each is deterministic, so the results do not
-    /// depend on the thread count. Progress of every candidate reaches `observe` on this
-    /// thread.
+    /// seconds, in the order given. Each is deterministic, so the results do not depend on
+    /// the thread count or on which runs when. Progress of the candidates that run after the
+    /// first one's GPs reaches `observe` on this thread.
     ///
     /// When the first candidate has exact GPs and another has sparse GPs with the same
-    /// kernels, the first one's GPs are fitted before the rest start: the sparse searches
-    /// start from their optimum ([`Self::fit_gps`]), which they would otherwise fit again.
+    /// kernels, the first one's GPs are fitted before those start: their searches start from
+    /// exact optima ([`Self::fit_gps`], [`HbnParams::sparse_from_exact`]), which they would
+    /// otherwise fit again. One with other lags starts from the first one's sensor GP (which
+    /// does not read the lags) and from an exact transition GP with its own lags, fitted on
+    /// a second thread meanwhile. A third trains the candidates that start from nothing
+    /// (other kernels), one after the other, without progress reports. Then as many
+    /// workers as the machine has cores take the rest (the first one's tuning, the warm
+    /// candidates) from a queue, so that a core whose candidate finished goes on to the next.
     fn fit_candidates(
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
@@ -343,95 +381,162 @@ impl HbnModel {
             .map(|n| n.get())
             .unwrap_or(1)
             .max(1);
-        let warms = |c: &crate::Candidate, first: &crate::Candidate| {
+        let Some(first) = candidates.first() else {
+            return Vec::new();
+        };
+        // A sparse candidate with the first one's kernels starts from exact GPs: the first
+        // one's when its lags are the same; else the first one's sensor GP (which does not
+        // read the lags) and an exact transition GP with its own lags.
+        let warms = |c: &crate::Candidate| {
             first.n_inducing.is_none()
                 && c.n_inducing.is_some()
                 && (c.transition_kernel, c.sensor_kernel)
                     == (first.transition_kernel, first.sensor_kernel)
         };
-        let mut out = Vec::with_capacity(candidates.len());
+        let phase_one = candidates.iter().skip(1).any(warms);
+        // Trained beside the first one's GPs: the candidates that start from nothing, and
+        // the exact transition GPs of the warm ones with other lags.
+        let (fresh, other_lags): (Vec<usize>, Vec<usize>) = if phase_one {
+            (
+                (1..candidates.len())
+                    .filter(|&i| !warms(&candidates[i]))
+                    .collect(),
+                (1..candidates.len())
+                    .filter(|&i| warms(&candidates[i]) && candidates[i].lags != first.lags)
+                    .collect(),
+            )
+        } else {
+            (Vec::new(), Vec::new())
+        };
         let mut results: Vec<Option<(Result<Self, ModelError>, f64)>> =
             (0..candidates.len()).map(|_| None).collect();
-        // The first candidate's GPs, fitted first when another candidate starts from them.
-        let mut exact: Option<(Self, f64)> = None;
-        if let Some(first) = candidates.first()
-            && candidates.iter().skip(1).any(|c| warms(c, first))
-        {
+        let timed = |i: usize,
+                     start: Start<'_>,
+                     before: f64,
+                     observe: &mut dyn FnMut(GpRole, &FitProgress)| {
+            let p = match start {
+                Start::FromExact(_) => params.starting_from_exact(&candidates[i]),
+                _ => params.for_candidate(&candidates[i]),
+            };
             let t = Instant::now();
-            let p = params.for_candidate(*first);
-            let fitted = Self::plays_for(trajectories, &p)
-                .and_then(|plays| Self::fit_gps(trajectories, &p, &plays, None, None, observe));
-            let seconds = t.elapsed().as_secs_f64();
-            match fitted {
-                Ok(model) => exact = Some((model, seconds)),
-                // The first candidate failed while fitting its GPs: that is its result.
-                Err(e) => results[0] = Some((Err(e), seconds)),
-            }
-        }
-        let exact_start = exact.as_ref().map(|(model, _)| {
-            (
-                model.transition.hyperparameters(),
-                model.sensor.hyperparameters(),
-            )
-        });
-        let mut todo: Vec<(usize, Start<'_>, f64)> = Vec::new();
-        for (i, c) in candidates.iter().enumerate() {
-            if results[i].is_some() {
-                continue;
-            }
-            let first = candidates.first().unwrap_or(c);
-            todo.push(match (exact.take_if(|_| i == 0), &exact_start) {
-                (Some((model, seconds)), _) => (i, Start::Fitted(Box::new(model)), seconds),
-                (None, Some(start)) if warms(c, first) => (i, Start::FromExact(start), 0.0),
-                _ => (i, Start::Fresh, 0.0),
-            });
-        }
-        let mut todo = todo.into_iter().peekable();
-        while todo.peek().is_some() {
-            let group: Vec<(usize, Start<'_>, f64)> = todo.by_ref().take(threads).collect();
-            let (tx, rx) = std::sync::mpsc::channel::<(GpRole, FitProgress)>();
-            let done = std::thread::scope(|scope| {
-                let handles: Vec<_> = group
-                    .into_iter()
-                    .map(|(i, start, before)| {
-                        let tx = tx.clone();
-                        let p = match start {
-                            Start::FromExact(_) => params.starting_from_exact(candidates[i]),
-                            _ => params.for_candidate(candidates[i]),
-                        };
-                        let handle = scope.spawn(move || {
+            let fitted = Self::fit_tuned_from(trajectories, &p, start, observe);
+            (i, (fitted, before + t.elapsed().as_secs_f64()))
+        };
+        let done = std::thread::scope(|scope| {
+            let side_transitions = (!other_lags.is_empty()).then(|| {
+                scope.spawn(|| {
+                    other_lags
+                        .iter()
+                        .map(|&i| {
                             let t = Instant::now();
-                            let fitted =
-                                Self::fit_tuned_from(trajectories, &p, start, &mut |role, prog| {
+                            let p = params.starting_from_exact(&candidates[i]);
+                            let h = Self::exact_transition_optimum(trajectories, &p);
+                            (i, h, t.elapsed().as_secs_f64())
+                        })
+                        .collect::<Vec<_>>()
+                })
+            });
+            let side = (!fresh.is_empty()).then(|| {
+                scope.spawn(|| {
+                    fresh
+                        .iter()
+                        .map(|&i| timed(i, Start::Fresh, 0.0, &mut |_, _| {}))
+                        .collect::<Vec<_>>()
+                })
+            });
+            // Phase one: the first candidate's GPs, when warm candidates start from them.
+            let mut exact: Option<(Self, f64)> = None;
+            let mut first_failed = None;
+            if phase_one {
+                let t = Instant::now();
+                let p = params.for_candidate(first);
+                let fitted = Self::plays_for(trajectories, &p)
+                    .and_then(|plays| Self::fit_gps(trajectories, &p, &plays, None, None, observe));
+                let seconds = t.elapsed().as_secs_f64();
+                match fitted {
+                    Ok(model) => exact = Some((model, seconds)),
+                    // The first candidate failed while fitting its GPs: that is its result.
+                    Err(e) => first_failed = Some((Err(e), seconds)),
+                }
+            }
+            let start = ExactStart {
+                transition: exact.as_ref().map(|(m, _)| m.transition.hyperparameters()),
+                sensor: exact.as_ref().map(|(m, _)| m.sensor.hyperparameters()),
+            };
+            // A panic is a bug: it propagates, as it would without the threads.
+            fn join<T>(h: std::thread::ScopedJoinHandle<'_, T>) -> T {
+                h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))
+            }
+            let starts_other_lags: Vec<(usize, ExactStart, f64)> = side_transitions
+                .map(join)
+                .unwrap_or_default()
+                .into_iter()
+                .map(|(i, transition, seconds)| {
+                    let start = ExactStart {
+                        transition,
+                        sensor: start.sensor.clone(),
+                    };
+                    (i, start, seconds)
+                })
+                .collect();
+            let have_exact = exact.is_some();
+            let mut todo: Vec<(usize, Start<'_>, f64)> = Vec::new();
+            for (i, c) in candidates.iter().enumerate() {
+                if fresh.contains(&i) || (i == 0 && first_failed.is_some()) {
+                    continue;
+                }
+                let other = starts_other_lags.iter().find(|(j, _, _)| *j == i);
+                todo.push(match (exact.take_if(|_| i == 0), other) {
+                    (Some((model, seconds)), _) => (i, Start::Fitted(Box::new(model)), seconds),
+                    (None, Some((_, start, seconds))) if have_exact => {
+                        (i, Start::FromExact(start), *seconds)
+                    }
+                    (None, _) if have_exact && warms(c) => (i, Start::FromExact(&start), 0.0),
+                    (None, _) => (i, Start::Fresh, 0.0),
+                });
+            }
+            let n_jobs = todo.len();
+            let queue = std::sync::Mutex::new(todo.into_iter());
+            let mut done: Vec<_> = std::thread::scope(|inner| {
+                let (tx, rx) = std::sync::mpsc::channel::<(GpRole, FitProgress)>();
+                let workers: Vec<_> = (0..threads.min(n_jobs))
+                    .map(|_| {
+                        let tx = tx.clone();
+                        let (queue, timed) = (&queue, &timed);
+                        inner.spawn(move || {
+                            let mut finished = Vec::new();
+                            // A poisoned lock means another worker panicked: that panic
+                            // propagates below, so this worker just stops.
+                            while let Some((i, start, before)) =
+                                queue.lock().ok().and_then(|mut q| q.next())
+                            {
+                                finished.push(timed(i, start, before, &mut |role, prog| {
                                     // The receiver lives until every sender is gone.
                                     let _ = tx.send((role, prog.clone()));
-                                });
-                            (fitted, before + t.elapsed().as_secs_f64())
-                        });
-                        (i, handle)
+                                }));
+                            }
+                            finished
+                        })
                     })
                     .collect();
                 drop(tx);
                 for (role, prog) in rx {
                     observe(role, &prog);
                 }
-                handles
-                    .into_iter()
-                    // A panic is a bug: it propagates, as it would without the threads.
-                    .map(|(i, h)| (i, h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))))
-                    .collect::<Vec<_>>()
+                workers.into_iter().flat_map(join).collect()
             });
-            for (i, r) in done {
-                results[i] = Some(r);
-            }
+            done.extend(side.into_iter().flat_map(join));
+            done.extend(first_failed.map(|r| (0, r)));
+            done
+        });
+        for (i, r) in done {
+            results[i] = Some(r);
         }
-        // Every candidate ran above, or failed first (the fallback is never used).
-        out.extend(
-            results.into_iter().map(|r| {
-                r.unwrap_or((Err(ModelError::Data(crate::DataError::NoTrajectories)), 0.0))
-            }),
-        );
-        out
+        // Every candidate ran above (the fallback is never used).
+        results
+            .into_iter()
+            .map(|r| r.unwrap_or((Err(ModelError::Data(crate::DataError::NoTrajectories)), 0.0)))
+            .collect()
     }
 
     /// One configuration: its GPs fitted on every run, then (with `params.validation > 0`)
@@ -525,6 +630,23 @@ impl HbnModel {
         Ok(Plays::with_lags(&radii, &lags)?)
     }
 
+    /// The exact transition GP's optimum with `params` ([`exact_optimum`]): what
+    /// [`Self::fit_gps`] fits first for a sparse search that starts from it.
+    fn exact_transition_optimum(
+        trajectories: &[Sequence<'_>],
+        params: &CheckedHbnParams,
+    ) -> Option<Hyperparameters> {
+        let plays = Self::plays_for(trajectories, params).ok()?;
+        let data = build_dataset(trajectories, &plays).ok()?;
+        let spec = params
+            .transition_kernel
+            .spec(TRANSITION_DIM + plays.len(), TRANSITION_DIRECTION);
+        let table = data
+            .transition
+            .increments(params.increments.mean_input(GpRole::Transition));
+        exact_optimum(&params.gp_params(spec, GpRole::Transition), &table)
+    }
+
     /// Fits both GPs and the local data on `trajectories`; with `fixed`, every GP keeps the
     /// hyperparameters of the given one (no optimisation: a refit on more data).
     ///
@@ -537,7 +659,7 @@ impl HbnModel {
         params: &CheckedHbnParams,
         plays: &Plays,
         fixed: Option<(&GaussianProcess, &GaussianProcess)>,
-        exact: Option<&(Hyperparameters, Hyperparameters)>,
+        exact: Option<&ExactStart>,
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
         let t0 = Instant::now();
@@ -559,17 +681,11 @@ impl HbnModel {
                 // The sparse GP's search starts from the exact GP's optimum on the subset
                 // (`max_points`), one start: docs/sparse.md, "Where the search starts". An
                 // exact GP that cannot be fitted leaves the sparse search its own starts.
-                let given = exact.map(|pair| match which {
-                    GpRole::Transition => pair.0.clone(),
-                    GpRole::Sensor => pair.1.clone(),
+                let given = exact.and_then(|e| match which {
+                    GpRole::Transition => e.transition.clone(),
+                    GpRole::Sensor => e.sensor.clone(),
                 });
-                let start = given.or_else(|| {
-                    let mut p = gp_params.clone();
-                    p.sparse = None;
-                    hbn_gp::fit(&p, &table.inputs, &table.targets)
-                        .ok()
-                        .map(|gp| gp.hyperparameters())
-                });
+                let start = given.or_else(|| exact_optimum(&gp_params, table));
                 if let Some(h) = start {
                     gp_params.init = Some(h);
                     gp_params.n_starts = 1;
@@ -977,25 +1093,35 @@ mod sparse_start_tests {
             .collect()
     }
 
-    #[test]
-    fn a_sparse_candidate_starts_from_the_primary_exact_gps_as_it_would_alone() {
-        let data = runs();
-        let seqs: Vec<Sequence<'_>> = data
-            .iter()
-            .map(|(u, x, y)| Sequence::new(u, x, y))
-            .collect();
-        let params = HbnParams {
+    /// Small, quick parameters choosing between exact GPs and 16 inducing points, with the
+    /// lag sets `lags` tried besides.
+    fn small_selection(lags: Vec<Vec<f64>>) -> CheckedHbnParams {
+        HbnParams {
             max_points: 60,
             n_starts: 2,
             max_iters: 30,
             select: Selection {
                 kernels: Vec::new(),
                 inducing: vec![Some(16)],
+                lags,
             },
             ..HbnParams::default()
         }
         .check()
-        .unwrap();
+        .unwrap()
+    }
+
+    fn sequences(data: &[(Vec<f64>, Vec<f64>, Vec<f64>)]) -> Vec<Sequence<'_>> {
+        data.iter()
+            .map(|(u, x, y)| Sequence::new(u, x, y))
+            .collect()
+    }
+
+    #[test]
+    fn a_sparse_candidate_starts_from_the_primary_exact_gps_as_it_would_alone() {
+        let data = runs();
+        let seqs = sequences(&data);
+        let params = small_selection(Vec::new());
         let candidates = params.candidates();
         assert_eq!(candidates.len(), 2);
         let trained = HbnModel::fit_candidates(&seqs, &params, &candidates, &mut |_, _| {});
@@ -1012,15 +1138,60 @@ mod sparse_start_tests {
         // model, bit for bit: what a model file says it was trained with reproduces it.
         let alone = HbnModel::fit_tuned(
             &seqs,
-            &params.starting_from_exact(candidates[1]),
+            &params.starting_from_exact(&candidates[1]),
             &mut |_, _| {},
         )
         .unwrap();
         assert_eq!(sparse.to_json().unwrap(), alone.to_json().unwrap());
         // Without the setting, the sparse searches make their own starts: another model.
-        let own = HbnModel::fit_tuned(&seqs, &params.for_candidate(candidates[1]), &mut |_, _| {})
+        let own = HbnModel::fit_tuned(&seqs, &params.for_candidate(&candidates[1]), &mut |_, _| {})
             .unwrap();
         assert_eq!(own.transition.report().starts.len(), 2);
         assert_ne!(own.to_json().unwrap(), alone.to_json().unwrap());
+    }
+
+    #[test]
+    fn a_lag_candidate_starts_from_exact_gps_and_is_the_model_its_parameters_train() {
+        let data = runs();
+        let seqs = sequences(&data);
+        let params = small_selection(vec![vec![0.5]]);
+        let candidates = params.candidates();
+        assert_eq!(candidates.len(), 3);
+        assert_eq!(
+            (candidates[2].n_inducing, candidates[2].lags.as_slice()),
+            (Some(16), &[0.5][..])
+        );
+        let trained = HbnModel::fit_candidates(&seqs, &params, &candidates, &mut |_, _| {});
+        let with_lag = trained[2].0.as_ref().unwrap();
+        assert_eq!(with_lag.params().lags, vec![0.5]);
+        assert_eq!(
+            with_lag.transition.kernel().dim,
+            TRANSITION_DIM + with_lag.params().memory.len() + 1,
+            "the transition reads the lag"
+        );
+        // One start per GP: from the first candidate's exact sensor GP and from an exact
+        // transition GP with the lag, fitted beside the first one's. Its recorded parameters
+        // train the same model alone (both exact GPs fitted first).
+        assert!(with_lag.params().sparse_from_exact);
+        for gp in [&with_lag.transition, &with_lag.sensor] {
+            assert_eq!(gp.report().starts.len(), 1);
+        }
+        let alone = HbnModel::fit_tuned(
+            &seqs,
+            &params.starting_from_exact(&candidates[2]),
+            &mut |_, _| {},
+        )
+        .unwrap();
+        assert_eq!(with_lag.to_json().unwrap(), alone.to_json().unwrap());
+        // The other two are as they are without the lag candidate.
+        let without = small_selection(Vec::new());
+        let before =
+            HbnModel::fit_candidates(&seqs, &without, &without.candidates(), &mut |_, _| {});
+        for i in 0..2 {
+            assert_eq!(
+                trained[i].0.as_ref().unwrap().to_json().unwrap(),
+                before[i].0.as_ref().unwrap().to_json().unwrap()
+            );
+        }
     }
 }

@@ -189,6 +189,10 @@ pub const DEFAULT_INDUCING: usize = 64;
 /// (`docs/memory.md` has the measurements).
 pub const DEFAULT_MEMORY: [f64; 2] = [0.05, 0.2];
 
+/// The lag set that model selection tries by default besides none ([`Selection::lags`]): one
+/// low-pass filter of the input with a time constant of 1 s (`docs/memory.md`, "Lags").
+pub const DEFAULT_LAGS: [f64; 1] = [1.0];
+
 /// What the GPs learn: the signal itself, or its change from the previous sample.
 ///
 /// With increments, the transition GP is fitted to `x_k - x_{k-1}` and predicts
@@ -417,7 +421,7 @@ pub struct HbnParams {
 /// those whose held-out nRMSE is no higher than the primary configuration's, becomes the model.
 /// Each candidate costs one training, so `k` candidates take about `k` times as long. Without
 /// held-out data (`validation = 0`, too little data) the primary configuration is trained.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Selection {
     /// Kernels (each for both GPs) to try besides the primary pair.
     #[serde(default)]
@@ -425,17 +429,25 @@ pub struct Selection {
     /// Inducing settings to try besides the primary one (`None` is the exact GP).
     #[serde(default)]
     pub inducing: Vec<Option<usize>>,
+    /// Lag sets ([`HbnParams::lags`], time constants in seconds) to try besides the primary
+    /// one, each with every sparse configuration of the kernels and inducing settings above
+    /// (none when every one is exact): a sparse candidate's filter tuning runs a step twenty
+    /// times cheaper than an exact one's (docs/tuning.md, "Lags chosen on held-out data"). The default has one, [`DEFAULT_LAGS`]: creep and relaxation over
+    /// about a second. Older files read as empty (and an empty list is not written, so files
+    /// without lag choices are as before).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub lags: Vec<Vec<f64>>,
 }
 
 impl Selection {
     /// No alternatives.
     pub fn is_empty(&self) -> bool {
-        self.kernels.is_empty() && self.inducing.is_empty()
+        self.kernels.is_empty() && self.inducing.is_empty() && self.lags.is_empty()
     }
 }
 
-/// One configuration model selection trains: both kernels and the inducing setting.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+/// One configuration model selection trains: both kernels, the inducing setting and the lags.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Candidate {
     /// Kernel of the transition GP.
     pub transition_kernel: KernelChoice,
@@ -443,9 +455,14 @@ pub struct Candidate {
     pub sensor_kernel: KernelChoice,
     /// Inducing points per GP, `None` for exact GPs.
     pub n_inducing: Option<usize>,
+    /// Time constants of the transition's lags ([`HbnParams::lags`]). Rows written before
+    /// lags were chosen read as empty (and empty lags are not written).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub lags: Vec<f64>,
 }
 
-/// `matern52 exact`, `se-ard m=64`; both kernels when they differ (`se,matern52 exact`).
+/// `matern52 exact`, `se-ard m=64`; both kernels when they differ (`se,matern52 exact`); lags
+/// last (`matern52 m=64 lags=1`).
 impl std::fmt::Display for Candidate {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         if self.transition_kernel == self.sensor_kernel {
@@ -454,9 +471,14 @@ impl std::fmt::Display for Candidate {
             write!(f, "{},{}", self.transition_kernel, self.sensor_kernel)?;
         }
         match self.n_inducing {
-            Some(m) => write!(f, " m={m}"),
-            None => f.write_str(" exact"),
+            Some(m) => write!(f, " m={m}")?,
+            None => f.write_str(" exact")?,
         }
+        if !self.lags.is_empty() {
+            let taus: Vec<String> = self.lags.iter().map(|t| t.to_string()).collect();
+            write!(f, " lags={}", taus.join(","))?;
+        }
+        Ok(())
     }
 }
 
@@ -485,6 +507,7 @@ impl Default for HbnParams {
             select: Selection {
                 kernels: Vec::new(),
                 inducing: vec![Some(DEFAULT_INDUCING)],
+                lags: vec![DEFAULT_LAGS.to_vec()],
             },
             sparse_from_exact: false,
             signals: Signals::default(),
@@ -720,13 +743,13 @@ impl CheckedHbnParams {
 
     /// The parameters of one of [`HbnParams::candidates`] (checked with the rest: every
     /// alternative was).
-    pub(crate) fn for_candidate(&self, c: Candidate) -> CheckedHbnParams {
+    pub(crate) fn for_candidate(&self, c: &Candidate) -> CheckedHbnParams {
         CheckedHbnParams(self.0.with_candidate(c))
     }
 
     /// [`Self::for_candidate`] for a sparse candidate whose searches start from the primary
     /// exact GPs ([`HbnParams::sparse_from_exact`]).
-    pub(crate) fn starting_from_exact(&self, c: Candidate) -> CheckedHbnParams {
+    pub(crate) fn starting_from_exact(&self, c: &Candidate) -> CheckedHbnParams {
         let mut p = self.0.with_candidate(c);
         p.sparse_from_exact = true;
         CheckedHbnParams(p)
@@ -769,6 +792,9 @@ fn numbers(
 
 const SUBSET_NAMES: &str = "farthest-point, random";
 
+const LAG_SETS: &str =
+    "lag sets: lists of numbers (time constants in seconds), the first the primary one";
+
 fn subset_name(p: SubsetPolicy) -> &'static str {
     match p {
         SubsetPolicy::FarthestPoint => "farthest-point",
@@ -791,11 +817,13 @@ impl HbnParams {
             transition_kernel: self.transition_kernel,
             sensor_kernel: self.sensor_kernel,
             n_inducing: self.n_inducing,
+            lags: self.lags.clone(),
         }
     }
 
     /// Every configuration model selection trains ([`Selection`]), the primary one first, then
-    /// kernel by kernel, each with every inducing setting; no configuration twice.
+    /// kernel by kernel, each with every inducing setting (with the primary lags), then the
+    /// alternative lag sets with every sparse one of those; no configuration twice.
     pub fn candidates(&self) -> Vec<Candidate> {
         let kernels = std::iter::once((self.transition_kernel, self.sensor_kernel))
             .chain(self.select.kernels.iter().map(|&k| (k, k)));
@@ -808,6 +836,24 @@ impl HbnParams {
                     transition_kernel,
                     sensor_kernel,
                     n_inducing,
+                    lags: self.lags.clone(),
+                };
+                if !out.contains(&c) {
+                    out.push(c);
+                }
+            }
+        }
+        // Lag sets go with the sparse configurations only.
+        let sparse: Vec<Candidate> = out
+            .iter()
+            .filter(|c| c.n_inducing.is_some())
+            .cloned()
+            .collect();
+        for lags in &self.select.lags {
+            for c in &sparse {
+                let c = Candidate {
+                    lags: lags.clone(),
+                    ..c.clone()
                 };
                 if !out.contains(&c) {
                     out.push(c);
@@ -819,11 +865,12 @@ impl HbnParams {
 
     /// These parameters with `c` as the configuration and no alternatives: what a model trained
     /// as candidate `c` records (training with them again trains the same model).
-    pub fn with_candidate(&self, c: Candidate) -> HbnParams {
+    pub fn with_candidate(&self, c: &Candidate) -> HbnParams {
         HbnParams {
             transition_kernel: c.transition_kernel,
             sensor_kernel: c.sensor_kernel,
             n_inducing: c.n_inducing,
+            lags: c.lags.clone(),
             select: Selection::default(),
             ..self.clone()
         }
@@ -901,8 +948,18 @@ impl HbnParams {
                 },
             ));
         }
-        for &tau in &self.lags {
-            positive(Param::Lags, tau)?;
+        for lags in std::iter::once(&self.lags).chain(&self.select.lags) {
+            if self.memory.len() + lags.len() > hbn_core::MAX_PLAYS {
+                return Err(ConfigError::new(
+                    Param::Lags,
+                    Problem::Invalid {
+                        reason: "at most 4 play operators and lags in all",
+                    },
+                ));
+            }
+            for &tau in lags {
+                positive(Param::Lags, tau)?;
+            }
         }
         for &r in &self.memory {
             if !(r.is_finite() && r > 0.0 && r <= 1.0) {
@@ -1118,13 +1175,38 @@ impl HbnParams {
             (Param::Memory, _) => {
                 return wrong("a list of numbers (fractions of the input's range), or none");
             }
+            // A list of lag sets: the primary one, then those model selection tries.
+            (Param::Lags, ParamValue::List(v))
+                if v.iter().any(|x| matches!(x, ParamValue::List(_))) =>
+            {
+                let mut sets = v.into_iter().map(|set| match set {
+                    ParamValue::List(taus) => numbers(param, taus, LAG_SETS),
+                    ParamValue::Text(t) if t.trim().eq_ignore_ascii_case("none") => Ok(Vec::new()),
+                    ParamValue::Real(r) => Ok(vec![r]),
+                    ParamValue::Int(r) => Ok(vec![r as f64]),
+                    _ => Err(ConfigError::new(
+                        param,
+                        Problem::WrongType { expected: LAG_SETS },
+                    )),
+                });
+                self.lags = sets.next().transpose()?.unwrap_or_default();
+                self.select.lags = sets.collect::<Result<_, _>>()?;
+            }
             (Param::Lags, ParamValue::List(v)) => {
                 self.lags = numbers(param, v, "a list of numbers (time constants in seconds)")?;
+                self.select.lags.clear();
             }
-            (Param::Lags, ParamValue::Real(r)) => self.lags = vec![r],
-            (Param::Lags, ParamValue::Int(r)) => self.lags = vec![r as f64],
+            (Param::Lags, ParamValue::Real(r)) => {
+                self.lags = vec![r];
+                self.select.lags.clear();
+            }
+            (Param::Lags, ParamValue::Int(r)) => {
+                self.lags = vec![r as f64];
+                self.select.lags.clear();
+            }
             (Param::Lags, ParamValue::Text(t)) if t.trim().eq_ignore_ascii_case("none") => {
                 self.lags.clear();
+                self.select.lags.clear();
             }
             (Param::Lags, _) => {
                 return wrong("a list of numbers (time constants in seconds), or none");
@@ -1202,6 +1284,12 @@ impl HbnParams {
             Param::Memory => {
                 ParamValue::List(self.memory.iter().map(|&r| ParamValue::Real(r)).collect())
             }
+            Param::Lags if !self.select.lags.is_empty() => ParamValue::List(
+                std::iter::once(&self.lags)
+                    .chain(&self.select.lags)
+                    .map(|set| ParamValue::List(set.iter().map(|&r| ParamValue::Real(r)).collect()))
+                    .collect(),
+            ),
             Param::Lags => {
                 ParamValue::List(self.lags.iter().map(|&r| ParamValue::Real(r)).collect())
             }
@@ -1318,12 +1406,16 @@ mod tests {
     }
 
     /// The default model is chosen on held-out data between exact GPs (the primary, trained
-    /// alone when nothing is held out) and sparse GPs of `DEFAULT_INDUCING` points.
+    /// alone when nothing is held out) and sparse GPs of `DEFAULT_INDUCING` points, without
+    /// and with the `DEFAULT_LAGS`.
     #[test]
     fn the_default_chooses_between_exact_and_sparse_gps() {
         let p = HbnParams::default();
         let names: Vec<String> = p.candidates().iter().map(|c| c.to_string()).collect();
-        assert_eq!(names, ["matern52 exact", "matern52 m=64"]);
+        assert_eq!(
+            names,
+            ["matern52 exact", "matern52 m=64", "matern52 m=64 lags=1"]
+        );
         assert_eq!(p.candidate().n_inducing, None);
         assert!(p.validation > 0.0);
         // Read back as the list the CLI and Python show.
@@ -1361,13 +1453,15 @@ mod tests {
                 "se-ard m=32",
                 "se-ard exact",
                 "matern52 m=32",
-                "matern52 exact"
+                "matern52 exact",
+                "se-ard m=32 lags=1",
+                "matern52 m=32 lags=1"
             ]
         );
         assert!(p.check_ref().is_ok());
         // A candidate's parameters have no alternatives left.
-        let c = p.candidates()[3];
-        let q = p.with_candidate(c);
+        let c = p.candidates()[3].clone();
+        let q = p.with_candidate(&c);
         assert_eq!(q.candidates(), vec![c]);
         // A repeated value is one candidate; a bad one names the parameter.
         p.set(
@@ -1389,7 +1483,74 @@ mod tests {
         assert_eq!(e.param, Param::Inducing);
         p.set(Param::Kernel, text("se")).unwrap();
         p.set(Param::Inducing, ParamValue::Int(8)).unwrap();
+        p.set(Param::Lags, text("none")).unwrap();
         assert!(p.select.is_empty());
         assert_eq!(p.candidates().len(), 1);
+    }
+
+    #[test]
+    fn lag_sets_are_tried_with_the_sparse_configurations_and_set_as_lists_of_lists() {
+        let d = HbnParams::default();
+        let names: Vec<String> = d.candidates().iter().map(|c| c.to_string()).collect();
+        assert_eq!(
+            names,
+            ["matern52 exact", "matern52 m=64", "matern52 m=64 lags=1"]
+        );
+        // Every configuration exact: no lag set is tried (`n_inducing=None` in Python trains
+        // exact GPs without a choice).
+        let exact = HbnParams {
+            select: Selection {
+                inducing: Vec::new(),
+                ..d.select.clone()
+            },
+            ..d.clone()
+        };
+        assert_eq!(exact.candidates(), vec![exact.candidate()]);
+        // A list of lists: the primary set, then the alternatives; read back the same way.
+        let mut p = HbnParams::default();
+        let set =
+            |taus: &[f64]| ParamValue::List(taus.iter().map(|&t| ParamValue::Real(t)).collect());
+        p.set(
+            Param::Lags,
+            ParamValue::List(vec![set(&[0.5]), set(&[]), set(&[2.0, 3.0])]),
+        )
+        .unwrap();
+        assert_eq!(
+            (p.lags.clone(), p.select.lags.clone()),
+            (vec![0.5], vec![vec![], vec![2.0, 3.0]])
+        );
+        assert_eq!(
+            p.get(Param::Lags),
+            Some(ParamValue::List(vec![
+                set(&[0.5]),
+                set(&[]),
+                set(&[2.0, 3.0])
+            ]))
+        );
+        // One set: no alternatives.
+        p.set(Param::Lags, set(&[1.0])).unwrap();
+        assert_eq!(
+            (p.lags.clone(), p.select.lags.is_empty()),
+            (vec![1.0], true)
+        );
+        p.set(Param::Lags, ParamValue::Text("none".into())).unwrap();
+        assert_eq!((p.lags.is_empty(), p.select.lags.is_empty()), (true, true));
+        // Alternatives are checked like the primary set.
+        let bad = HbnParams {
+            select: Selection {
+                lags: vec![vec![0.0]],
+                ..Selection::default()
+            },
+            ..HbnParams::default()
+        };
+        assert_eq!(bad.check().unwrap_err().param, Param::Lags);
+        let too_many = HbnParams {
+            select: Selection {
+                lags: vec![vec![1.0; 3]],
+                ..Selection::default()
+            },
+            ..HbnParams::default()
+        };
+        assert_eq!(too_many.check().unwrap_err().param, Param::Lags);
     }
 }

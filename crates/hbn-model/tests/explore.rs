@@ -228,7 +228,7 @@ fn resuming_from_a_first_batch_continues_its_last_run() {
     assert!(matches!(e.phase(), Phase::Seeking { .. }));
     // The model's own parameters: the configuration it was trained as (with `validation = 0`
     // the primary one; model files keep no alternatives).
-    assert_eq!(e.params().model, params.with_candidate(params.candidate()));
+    assert_eq!(e.params().model, params.with_candidate(&params.candidate()));
     let (u_plan, _) = e.plan(200);
     let mut all = vec![*batch.u.last().unwrap()];
     all.extend(&u_plan);

@@ -632,8 +632,10 @@ class HysteresisModel:
     input's range, at most 4; ``[]`` for the thesis' four inputs; default ``[0.05, 0.2]``, see
     ``docs/memory.md``), ``lags`` (time constants in seconds of first-order low-pass filters of
     the input whose outputs the transition GP reads after the plays, for creep and
-    viscoelastic relaxation; plays and lags at most 4 in all; default ``[]``, see
-    ``docs/memory.md``), ``linear_mean`` (which GPs have a linear prior mean: ``"none"``,
+    viscoelastic relaxation; plays and lags at most 4 in all; a list of such lists is chosen
+    among on held-out data, see below; default ``[[], [1.0]]``: none, with one 1 s lag tried
+    with the sparse GPs; ``[]`` trains without lags and tries none; see ``docs/memory.md``),
+    ``linear_mean`` (which GPs have a linear prior mean: ``"none"``,
     ``"transition"`` or ``"both"``; see :class:`GaussianProcess` and ``docs/sparse.md``),
     ``max_signal_variance`` (largest GP signal variance, as a multiple
     of the variance each kernel models, or ``"none"`` for only the ``1e5`` box). They are
@@ -641,10 +643,12 @@ class HysteresisModel:
     raises :class:`ConfigError` whose ``keyword`` names it.
 
     Model selection: ``kernel`` and ``n_inducing`` also take a list (``kernel=["matern52",
-    "se-ard"]``, ``n_inducing=[None, 64]``, ``None`` being the exact GP). Every combination is
-    trained and its filter tuned on the same held-out data, and the one whose default mode has
-    the lowest held-out NLPD among those at least as accurate held out (nRMSE) as the first
-    becomes the model; each candidate costs one training. The table is
+    "se-ard"]``, ``n_inducing=[None, 64]``, ``None`` being the exact GP), and ``lags`` a list of
+    lag sets (``lags=[[], [1.0]]``, the first the primary one). Every combination of kernel and
+    inducing setting is trained, each sparse one also with every further lag set, and its
+    filter tuned on the same held-out data; the one whose default mode has the lowest held-out
+    NLPD among those at least as accurate held out (nRMSE) as the first becomes the model; each
+    candidate costs one training. The table is
     ``summary["validation"]["candidates"]``, and :attr:`params` holds the chosen configuration.
 
     >>> import hbn
