@@ -1183,6 +1183,12 @@ mod sparse_start_tests {
         )
         .unwrap();
         assert_eq!(with_lag.to_json().unwrap(), alone.to_json().unwrap());
+        // Its sensor GP, which does not read the lags, is the other sparse candidate's.
+        let sparse = trained[1].0.as_ref().unwrap();
+        assert_eq!(
+            serde_json::to_string(&with_lag.sensor).unwrap(),
+            serde_json::to_string(&sparse.sensor).unwrap()
+        );
         // The other two are as they are without the lag candidate.
         let without = small_selection(Vec::new());
         let before =
