@@ -184,7 +184,7 @@ enum Start<'a> {
     Fitted(Box<HbnModel>),
     /// From the hyperparameters of the exact GPs (same kernels) that its sparse searches
     /// start from, those the caller has ([`ExactStart`]).
-    FromExact(&'a ExactStart),
+    FromExact(&'a ExactStart<'a>),
 }
 
 /// The optimum of the exact GP with the settings of `gp_params` (its sparse setting aside) on
@@ -205,12 +205,22 @@ fn exact_optimum(
 /// per GP, when the caller has them; a GP without one is fitted exactly first, as training
 /// alone would.
 #[derive(Clone, Debug, Default)]
-pub(crate) struct ExactStart {
+pub(crate) struct ExactStart<'a> {
     /// The exact transition GP's hyperparameters (same inputs: kernel, plays and lags).
     pub transition: Option<Hyperparameters>,
     /// The exact sensor GP's hyperparameters (same kernel).
     pub sensor: Option<Hyperparameters>,
+    /// Where the sparse sensor GP that starts from `sensor` is kept for the other candidates
+    /// that fit the same one ([`SharedSensor`]).
+    pub sensor_fit: Option<&'a SharedSensor>,
 }
+
+/// A sparse sensor GP fitted once for every candidate that would fit the same one, with its
+/// optimiser starts: the sparse candidates that start from the same exact GPs with the same
+/// inducing setting and differ only in the transition's lags (the sensor reads no plays or
+/// lags, so their data and settings are the same). `None` inside: the fit failed, and each
+/// candidate fits it again to report its own error.
+pub(crate) type SharedSensor = std::sync::OnceLock<Option<(GaussianProcess, Vec<StartSummary>)>>;
 
 impl HbnModel {
     /// Learns both relations from trajectories at `params.rate_hz`: checks the parameters
@@ -459,24 +469,49 @@ impl HbnModel {
                     Err(e) => first_failed = Some((Err(e), seconds)),
                 }
             }
+            // One sparse sensor GP per inducing setting of the warm candidates.
+            let mut settings: Vec<Option<usize>> = Vec::new();
+            for c in candidates.iter().filter(|c| warms(c)) {
+                if !settings.contains(&c.n_inducing) {
+                    settings.push(c.n_inducing);
+                }
+            }
+            let cells: Vec<(Option<usize>, SharedSensor)> = settings
+                .into_iter()
+                .map(|m| (m, SharedSensor::new()))
+                .collect();
+            let cell = |c: &crate::Candidate| {
+                cells
+                    .iter()
+                    .find(|(m, _)| *m == c.n_inducing)
+                    .map(|(_, cell)| cell)
+            };
             let start = ExactStart {
                 transition: exact.as_ref().map(|(m, _)| m.transition.hyperparameters()),
                 sensor: exact.as_ref().map(|(m, _)| m.sensor.hyperparameters()),
+                sensor_fit: None,
             };
             // A panic is a bug: it propagates, as it would without the threads.
             fn join<T>(h: std::thread::ScopedJoinHandle<'_, T>) -> T {
                 h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))
             }
-            let starts_other_lags: Vec<(usize, ExactStart, f64)> = side_transitions
-                .map(join)
-                .unwrap_or_default()
-                .into_iter()
-                .map(|(i, transition, seconds)| {
-                    let start = ExactStart {
+            let other_transitions = side_transitions.map(join).unwrap_or_default();
+            // Every warm candidate's start: the first one's exact GPs, or with other lags its
+            // own exact transition GP (fitted beside them).
+            let warm_starts: Vec<(usize, ExactStart<'_>, f64)> = (1..candidates.len())
+                .filter(|&i| warms(&candidates[i]))
+                .map(|i| {
+                    let (transition, seconds) =
+                        match other_transitions.iter().find(|(j, _, _)| *j == i) {
+                            Some((_, h, seconds)) => (h.clone(), *seconds),
+                            None => (start.transition.clone(), 0.0),
+                        };
+                    let warm = ExactStart {
                         transition,
-                        sensor: start.sensor.clone(),
+                        sensor_fit: cell(&candidates[i]),
+                        ..start.clone()
                     };
-                    (i, start, seconds)
+                    (i, warm, seconds)
                 })
                 .collect();
             let have_exact = exact.is_some();
@@ -485,13 +520,12 @@ impl HbnModel {
                 if fresh.contains(&i) || (i == 0 && first_failed.is_some()) {
                     continue;
                 }
-                let other = starts_other_lags.iter().find(|(j, _, _)| *j == i);
-                todo.push(match (exact.take_if(|_| i == 0), other) {
+                let warm = warm_starts.iter().find(|(j, _, _)| *j == i);
+                todo.push(match (exact.take_if(|_| i == 0), warm) {
                     (Some((model, seconds)), _) => (i, Start::Fitted(Box::new(model)), seconds),
-                    (None, Some((_, start, seconds))) if have_exact => {
+                    (None, Some((_, start, seconds))) if have_exact && warms(c) => {
                         (i, Start::FromExact(start), *seconds)
                     }
-                    (None, _) if have_exact && warms(c) => (i, Start::FromExact(&start), 0.0),
                     (None, _) => (i, Start::Fresh, 0.0),
                 });
             }
@@ -659,7 +693,7 @@ impl HbnModel {
         params: &CheckedHbnParams,
         plays: &Plays,
         fixed: Option<(&GaussianProcess, &GaussianProcess)>,
-        exact: Option<&ExactStart>,
+        exact: Option<&ExactStart<'_>>,
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
         let t0 = Instant::now();
@@ -691,18 +725,31 @@ impl HbnModel {
                     gp_params.n_starts = 1;
                 }
             }
-            let mut gp =
-                hbn_gp::fit_observed(&gp_params, &table.inputs, &table.targets, &mut |p| {
-                    starts.push(StartSummary {
-                        gp: which,
-                        start: p.start,
-                        lml: p.lml,
-                        termination: p.termination.clone(),
-                    });
-                    observe(which, &p);
-                })
-                .map_err(|source| ModelError::Gp { which, source })?;
-            gp.forget_timing();
+            let mut fit_one = || {
+                let mut own = Vec::new();
+                let mut gp =
+                    hbn_gp::fit_observed(&gp_params, &table.inputs, &table.targets, &mut |p| {
+                        own.push(StartSummary {
+                            gp: which,
+                            start: p.start,
+                            lml: p.lml,
+                            termination: p.termination.clone(),
+                        });
+                        observe(which, &p);
+                    })
+                    .map_err(|source| ModelError::Gp { which, source })?;
+                gp.forget_timing();
+                Ok::<_, ModelError>((gp, own))
+            };
+            // A sparse sensor GP another candidate fits the same: fitted once.
+            let shared = exact.and_then(|e| e.sensor_fit).filter(|_| {
+                which == GpRole::Sensor && fixed.is_none() && gp_params.sparse.is_some()
+            });
+            let (gp, own) = match shared.map(|cell| cell.get_or_init(|| fit_one().ok())) {
+                Some(Some((gp, own))) => (gp.clone(), own.clone()),
+                _ => fit_one()?,
+            };
+            starts.extend(own);
             Ok::<_, ModelError>(gp)
         };
         let transition = fit_gp(
