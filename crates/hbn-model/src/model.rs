@@ -432,6 +432,15 @@ impl HbnModel {
             let fitted = Self::fit_tuned_from(trajectories, &p, start, observe);
             (i, (fitted, before + t.elapsed().as_secs_f64()))
         };
+        // Progress of the candidates on other threads, passed on to `observe` on this one.
+        let (tx, rx) = std::sync::mpsc::channel::<(GpRole, FitProgress)>();
+        let report = |tx: &std::sync::mpsc::Sender<(GpRole, FitProgress)>| {
+            let tx = tx.clone();
+            move |role: GpRole, prog: &FitProgress| {
+                // The receiver lives until every sender is gone.
+                let _ = tx.send((role, prog.clone()));
+            }
+        };
         let done = std::thread::scope(|scope| {
             let side_transitions = (!other_lags.is_empty()).then(|| {
                 scope.spawn(|| {
@@ -447,10 +456,12 @@ impl HbnModel {
                 })
             });
             let side = (!fresh.is_empty()).then(|| {
-                scope.spawn(|| {
+                let mut progress = report(&tx);
+                let (fresh, timed) = (&fresh, &timed);
+                scope.spawn(move || {
                     fresh
                         .iter()
-                        .map(|&i| timed(i, Start::Fresh, 0.0, &mut |_, _| {}))
+                        .map(|&i| timed(i, Start::Fresh, 0.0, &mut progress))
                         .collect::<Vec<_>>()
                 })
             });
@@ -532,10 +543,9 @@ impl HbnModel {
             let n_jobs = todo.len();
             let queue = std::sync::Mutex::new(todo.into_iter());
             let mut done: Vec<_> = std::thread::scope(|inner| {
-                let (tx, rx) = std::sync::mpsc::channel::<(GpRole, FitProgress)>();
                 let workers: Vec<_> = (0..threads.min(n_jobs))
                     .map(|_| {
-                        let tx = tx.clone();
+                        let mut progress = report(&tx);
                         let (queue, timed) = (&queue, &timed);
                         inner.spawn(move || {
                             let mut finished = Vec::new();
@@ -544,15 +554,13 @@ impl HbnModel {
                             while let Some((i, start, before)) =
                                 queue.lock().ok().and_then(|mut q| q.next())
                             {
-                                finished.push(timed(i, start, before, &mut |role, prog| {
-                                    // The receiver lives until every sender is gone.
-                                    let _ = tx.send((role, prog.clone()));
-                                }));
+                                finished.push(timed(i, start, before, &mut progress));
                             }
                             finished
                         })
                     })
                     .collect();
+                // Every sender is gone once the workers and the side thread are done.
                 drop(tx);
                 for (role, prog) in rx {
                     observe(role, &prog);
@@ -672,13 +680,33 @@ impl HbnModel {
     ) -> Option<Hyperparameters> {
         let plays = Self::plays_for(trajectories, params).ok()?;
         let data = build_dataset(trajectories, &plays).ok()?;
-        let spec = params
-            .transition_kernel
-            .spec(TRANSITION_DIM + plays.len(), TRANSITION_DIRECTION);
-        let table = data
-            .transition
-            .increments(params.increments.mean_input(GpRole::Transition));
+        let (spec, table) = Self::gp_problem(params, &plays, &data, GpRole::Transition);
         exact_optimum(&params.gp_params(spec, GpRole::Transition), &table)
+    }
+
+    /// What one GP learns: its kernel structure and its table (inputs, targets: levels or
+    /// increments), from the dataset of `plays`. [`Self::fit_gps`] and the exact optimum a
+    /// sparse search starts from ([`Self::exact_transition_optimum`]) read it here, so that
+    /// the two fit the same problem.
+    fn gp_problem(
+        params: &CheckedHbnParams,
+        plays: &Plays,
+        data: &crate::dataset::Dataset,
+        which: GpRole,
+    ) -> (hbn_core::KernelSpec, crate::dataset::Table) {
+        let mean_input = params.increments.mean_input(which);
+        match which {
+            GpRole::Transition => (
+                params
+                    .transition_kernel
+                    .spec(TRANSITION_DIM + plays.len(), TRANSITION_DIRECTION),
+                data.transition.increments(mean_input),
+            ),
+            GpRole::Sensor => (
+                params.sensor_kernel.spec(SENSOR_DIM, SENSOR_DIRECTION),
+                data.sensor.increments(mean_input),
+            ),
+        }
     }
 
     /// Fits both GPs and the local data on `trajectories`; with `fixed`, every GP keeps the
@@ -698,12 +726,10 @@ impl HbnModel {
     ) -> Result<Self, ModelError> {
         let t0 = Instant::now();
         let data = build_dataset(trajectories, plays)?;
-        let tr_spec = params
-            .transition_kernel
-            .spec(TRANSITION_DIM + plays.len(), TRANSITION_DIRECTION);
-        let se_spec = params.sensor_kernel.spec(SENSOR_DIM, SENSOR_DIRECTION);
         let mut starts = Vec::new();
-        let mut fit_gp = |which: GpRole, spec, table: &crate::dataset::Table| {
+        let mut fit_gp = |which: GpRole| {
+            let (spec, table) = Self::gp_problem(params, plays, &data, which);
+            let table = &table;
             let mut gp_params = params.gp_params(spec, which);
             if let Some(pair) = fixed {
                 gp_params.init = Some(match which {
@@ -752,20 +778,8 @@ impl HbnModel {
             starts.extend(own);
             Ok::<_, ModelError>(gp)
         };
-        let transition = fit_gp(
-            GpRole::Transition,
-            tr_spec,
-            &data
-                .transition
-                .increments(params.increments.mean_input(GpRole::Transition)),
-        )?;
-        let sensor = fit_gp(
-            GpRole::Sensor,
-            se_spec,
-            &data
-                .sensor
-                .increments(params.increments.mean_input(GpRole::Sensor)),
-        )?;
+        let transition = fit_gp(GpRole::Transition)?;
+        let sensor = fit_gp(GpRole::Sensor)?;
         // The local regression of the transition reads the thesis' four inputs.
         let transition_local = LocalData::build(
             &data.transition.first_columns(TRANSITION_DIM),
@@ -1208,7 +1222,13 @@ mod sparse_start_tests {
             (candidates[2].n_inducing, candidates[2].lags.as_slice()),
             (Some(16), &[0.5][..])
         );
-        let trained = HbnModel::fit_candidates(&seqs, &params, &candidates, &mut |_, _| {});
+        let mut sensor_events = 0;
+        let trained = HbnModel::fit_candidates(&seqs, &params, &candidates, &mut |role, _| {
+            sensor_events += usize::from(role == GpRole::Sensor);
+        });
+        // The sensor's searches: the first candidate's two starts, and one start for the
+        // sparse sensor GP, which both sparse candidates fit the same and which is fitted once.
+        assert_eq!(sensor_events, 3);
         let with_lag = trained[2].0.as_ref().unwrap();
         assert_eq!(with_lag.params().lags, vec![0.5]);
         assert_eq!(
