@@ -268,12 +268,6 @@ fn parse_lags(s: &str) -> Result<Lags, String> {
     number_list(s, |v| v > 0.0, "time constants in seconds (> 0)").map(Lags)
 }
 
-impl std::fmt::Display for Lags {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&memory_text(&self.0))
-    }
-}
-
 /// `--max-signal-variance`: a bound, or `none`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Cap(pub Option<f64>);
