@@ -318,6 +318,93 @@ impl<'a> GpView<'a> {
         self.output_scale * self.output_scale
     }
 
+    /// Number of `f64` scratch values [`GpView::whiten`] needs.
+    pub fn whiten_scratch(&self) -> usize {
+        self.predict_scratch(Want::VARIANCE)
+    }
+
+    /// The whitened cross-covariance of the raw input `x_raw` with the support (inducing)
+    /// points, `len()` values into `w`: `w = L^{-1} k` (exact GP) or `w = R k` (sparse GP),
+    /// in standardised output units. With two such vectors,
+    /// [`GpView::posterior_covariance`] gives the latent posterior covariance of two inputs
+    /// without a solve. Returns the latent variance at `x_raw` (as [`GpView::predict`]).
+    /// Allocation-free; `O(n d + n^2)`. `scratch` must hold [`GpView::whiten_scratch`]
+    /// values.
+    pub fn whiten(
+        &self,
+        x_raw: &[f64],
+        w: &mut [f64],
+        scratch: &mut [f64],
+    ) -> Result<f64, CoreError> {
+        let n = self.len();
+        if w.len() != n {
+            return Err(CoreError::DimensionMismatch {
+                expected: n,
+                got: w.len(),
+            });
+        }
+        let pred = self.predict(x_raw, Want::VARIANCE, scratch)?;
+        // With `Want::VARIANCE` the scratch holds `k` (n values), then the whitened vector
+        // (n values): see `predict` and `predict_scratch`.
+        let whitened = scratch.get(n..2 * n).ok_or(CoreError::ScratchTooSmall {
+            needed: 2 * n,
+            got: scratch.len(),
+        })?;
+        w.copy_from_slice(whitened);
+        Ok(pred.variance)
+    }
+
+    /// Latent posterior covariance (raw output units) of the GP at two raw inputs `a_raw`
+    /// and `b_raw`, from their whitened vectors `w_a`, `w_b` ([`GpView::whiten`]):
+    /// `s^2 (k(a, b) - w_a . w_b)`, `s^2` the [`GpView::output_variance`]. At `a = b` it is
+    /// the latent variance.
+    pub fn posterior_covariance(
+        &self,
+        a_raw: &[f64],
+        w_a: &[f64],
+        b_raw: &[f64],
+        w_b: &[f64],
+    ) -> Result<f64, CoreError> {
+        let d = self.dim();
+        let n = self.len();
+        for (x, w) in [(a_raw, w_a), (b_raw, w_b)] {
+            if x.len() != d {
+                return Err(CoreError::DimensionMismatch {
+                    expected: d,
+                    got: x.len(),
+                });
+            }
+            if w.len() != n {
+                return Err(CoreError::DimensionMismatch {
+                    expected: n,
+                    got: w.len(),
+                });
+            }
+        }
+        let standardise = |x: &[f64]| {
+            let mut z = [0.0; MAX_DIM];
+            let std_in = x.iter().zip(self.input_mean).zip(self.input_scale);
+            for (zj, ((x, m), s)) in z.iter_mut().zip(std_in).take(d) {
+                *zj = (x - m) / s;
+            }
+            z
+        };
+        let (z_a, z_b) = (standardise(a_raw), standardise(b_raw));
+        let spec = self.kernel.spec();
+        let k_ab = self.kernel.eval(
+            z_a.get(..d).unwrap_or(&z_a),
+            spec.direction_of(a_raw),
+            z_b.get(..d).unwrap_or(&z_b),
+            spec.direction_of(b_raw),
+        );
+        let cov = self.output_variance() * (k_ab - dot(w_a, w_b));
+        if cov.is_finite() {
+            Ok(cov)
+        } else {
+            Err(CoreError::NonFinite)
+        }
+    }
+
     /// Number of `f64` scratch values [`GpView::predict`] needs for `want`.
     pub fn predict_scratch(&self, want: Want) -> usize {
         predict_scratch(self.len(), self.is_sparse(), want)
@@ -987,6 +1074,45 @@ mod tests {
     }
 
     #[test]
+    fn posterior_covariance_matches_the_dense_formula() {
+        let std = |x: &[f64; 3]| [(x[0] - 0.1) / 1.5, (x[1] + 0.2) / 0.5, (x[2] - 0.3) / 2.0];
+        for spec in all_specs() {
+            let dense = setup(spec);
+            let owned = dense.build(&W);
+            let gp = view(&owned, spec, &W, dense.noise);
+            let k = Kernel::new(spec, &owned.theta[..spec.n_params()], &W).unwrap();
+            let (a, b) = ([0.4, 0.1, -0.2], [-0.3, 0.6, -0.5]);
+            let (ga, gb) = (spec.direction_of(&a), spec.direction_of(&b));
+            let k_support = |x: &[f64; 3], g: f64| -> [f64; 6] {
+                core::array::from_fn(|i| k.eval(&std(&dense.x[i]), owned.dirs[i], &std(x), g))
+            };
+            // Dense: k(a, b) - k_a^T (K + s I)^{-1} k_b.
+            let (ka, kb) = (k_support(&a, ga), k_support(&b, gb));
+            let mut solved = [0.0; 6];
+            forward_substitute_packed(&owned.packed, &kb, &mut solved).unwrap();
+            back_substitute_packed(&owned.packed, &mut solved).unwrap();
+            let want =
+                k.eval(&std(&a), ga, &std(&b), gb) - (0..6).map(|i| ka[i] * solved[i]).sum::<f64>();
+            let mut scratch = vec![0.0; gp.whiten_scratch()];
+            let (mut w_a, mut w_b) = ([0.0; 6], [0.0; 6]);
+            let var_a = gp.whiten(&a, &mut w_a, &mut scratch).unwrap();
+            gp.whiten(&b, &mut w_b, &mut scratch).unwrap();
+            let got = gp.posterior_covariance(&a, &w_a, &b, &w_b).unwrap();
+            assert!((got - want).abs() < 1e-12, "{spec:?}: {got} vs {want}");
+            assert!(want.abs() > 1e-3, "{spec:?}: the points are correlated");
+            let own = gp.posterior_covariance(&a, &w_a, &a, &w_a).unwrap();
+            assert!((own - var_a).abs() < 1e-12, "{spec:?}");
+            let p = gp.predict(&a, Want::VARIANCE, &mut scratch).unwrap();
+            assert_eq!(var_a, p.variance);
+            // Wrong lengths are errors, not panics.
+            assert!(gp.whiten(&a, &mut [0.0; 5], &mut scratch).is_err());
+            assert!(gp.whiten(&a, &mut w_a, &mut [0.0; 3]).is_err());
+            assert!(gp.posterior_covariance(&a[..2], &w_a, &b, &w_b).is_err());
+            assert!(gp.posterior_covariance(&a, &w_a[..5], &b, &w_b).is_err());
+        }
+    }
+
+    #[test]
     fn gradients_match_finite_differences() {
         for spec in all_specs() {
             let dense = setup(spec);
@@ -1241,6 +1367,23 @@ mod tests {
                     p.grad_variance[j]
                 );
             }
+            // Posterior covariance with a second input: k(a, b) - k_a^T (K_mm^{-1} - Sigma) k_b.
+            let x1 = [-0.2, 0.7, 0.3];
+            let (z1, g1) = (std(&x1), spec.direction_of(&x1));
+            let k1: [f64; 3] = core::array::from_fn(|a| k.eval(&std(&zx[a]), zg[a], &z1, g1));
+            let want_cov = k.eval(&zs, gs, &z1, g1)
+                - (0..3).map(|a| ks[a] * spd_solve(&kmm, &k1)[a]).sum::<f64>()
+                + (0..3)
+                    .map(|a| ks[a] * spd_solve(&sig_inv, &k1)[a])
+                    .sum::<f64>();
+            let (mut w0, mut w1) = ([0.0; 3], [0.0; 3]);
+            gp.whiten(&x0, &mut w0, &mut scratch).unwrap();
+            gp.whiten(&x1, &mut w1, &mut scratch).unwrap();
+            let cov = gp.posterior_covariance(&x0, &w0, &x1, &w1).unwrap();
+            assert!(
+                (cov - want_cov).abs() < 1e-10,
+                "{spec:?}: {cov} vs {want_cov}"
+            );
             // Every `Want` gives the same numbers as `Want::ALL` where it computes them.
             let e = gp.predict(&x0, Want::EKF, &mut scratch).unwrap();
             assert_eq!(e.variance, p.variance);

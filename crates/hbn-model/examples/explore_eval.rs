@@ -10,8 +10,9 @@
 //! random walk, `hbn_sim::InputKind::RandomWalk`), explore-ramps, explore-steps, and
 //! explore-ramps-poolN (the ramps strategy with a pool of N random ramps instead of the
 //! default's `ExploreParams::pool`), explore-ramps-lagN (the default with its refits beside
-//! the loop, `ExploreParams::lag` = N).
-use hbn_model::explore::{ExploreParams, Explorer, Strategy};
+//! the loop, `ExploreParams::lag` = N), explore-ramps-reduction (the default with
+//! `ExploreParams::criterion` = `Criterion::Reduction`).
+use hbn_model::explore::{Criterion, ExploreParams, Explorer, Strategy};
 use hbn_model::{HbnModel, HbnParams, Sequence, metrics::nrmse};
 use hbn_sim::{
     InputKind, SimConfig, Simulator, SystemKind, generate_input, simulate, simulate_random,
@@ -77,7 +78,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             continue;
                         }
                         "explore-steps" => (Strategy::Steps, None, 0),
-                        "explore-ramps" => (Strategy::Ramps, None, 0),
+                        "explore-ramps" | "explore-ramps-reduction" => (Strategy::Ramps, None, 0),
                         other => match (
                             other.strip_prefix("explore-ramps-pool"),
                             other.strip_prefix("explore-ramps-lag"),
@@ -91,6 +92,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     p.seed = seed;
                     (p.strategy, p.pool) = (choice.0, choice.1.unwrap_or(p.pool));
                     p.lag = choice.2;
+                    if method == "explore-ramps-reduction" {
+                        p.criterion = Criterion::Reduction;
+                    }
                     let mut explorer = Explorer::new(p)?;
                     let mut robot = Simulator::new(&cfg)?;
                     for _ in 0..n {

@@ -150,6 +150,9 @@ pub struct ExploreParams {
     pub lag: usize,
     /// How the input moves ([`Strategy::Ramps`] by default).
     pub strategy: Strategy,
+    /// [`Strategy::Ramps`]: how a seeking choice scores the ramps of the pool
+    /// ([`Criterion::Variance`] by default).
+    pub criterion: Criterion,
     /// Seed of the random steps and ramps.
     pub seed: u64,
     /// Training parameters of the HBN: the transition GP of the explorer and
@@ -195,6 +198,7 @@ impl ExploreParams {
             horizon: Self::DEFAULT_HORIZON,
             lag: 0,
             strategy: Strategy::Ramps,
+            criterion: Criterion::Variance,
             seed: 0,
             model: HbnParams::default(),
         }
@@ -362,6 +366,44 @@ impl std::str::FromStr for Strategy {
             "ramps" => Ok(Strategy::Ramps),
             "steps" => Ok(Strategy::Steps),
             _ => Err(format!("unknown strategy `{s}`; choose ramps or steps")),
+        }
+    }
+}
+
+/// How a seeking choice of [`Strategy::Ramps`] scores the ramps of its pool.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Criterion {
+    /// The mean latent variance of the transition GP along the ramp's first `horizon`
+    /// samples: the ramp where the model is least sure (uncertainty sampling).
+    #[default]
+    Variance,
+    /// The reduction of the transition GP's latent variance, summed over the paths of all
+    /// the pool's ramps, that observing the ramp's first `horizon` samples would bring
+    /// (integrated variance reduction, Cohn's criterion). The pool is a draw of the ramps a
+    /// random input takes next, so this is the ramp whose data most lower the variance where
+    /// such inputs go, rather than where the variance is largest.
+    Reduction,
+}
+
+impl Criterion {
+    /// `variance` or `reduction`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Criterion::Variance => "variance",
+            Criterion::Reduction => "reduction",
+        }
+    }
+}
+
+impl std::str::FromStr for Criterion {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "variance" => Ok(Criterion::Variance),
+            "reduction" => Ok(Criterion::Reduction),
+            _ => Err(format!(
+                "unknown criterion `{s}`; choose variance or reduction"
+            )),
         }
     }
 }
@@ -726,10 +768,14 @@ impl Explorer {
             target: u_prev,
             slope: eta,
         });
-        if coin < self.alpha()
-            && let Some(r) = self.most_uncertain(u_prev, pool)
-        {
-            return r;
+        if coin < self.alpha() {
+            let best = match self.params.criterion {
+                Criterion::Variance => self.most_uncertain(u_prev, pool),
+                Criterion::Reduction => self.most_informative(u_prev, pool),
+            };
+            if let Some(r) = best {
+                return r;
+            }
         }
         random
     }
@@ -780,6 +826,104 @@ impl Explorer {
         best.map(|(_, r)| r)
     }
 
+    /// [`Criterion::Reduction`]: the ramp of `pool` whose first `horizon` samples, once
+    /// observed, would lower the transition GP's latent variance most, summed over the
+    /// sampled points of every ramp of the pool ([`Explorer::reductions`]; the first of
+    /// equals); `None` without a GP or history, or when no ramp could be scored.
+    fn most_informative(&self, u_prev: f64, pool: &[Ramp]) -> Option<Ramp> {
+        let mut best: Option<(f64, Ramp)> = None;
+        for (&ramp, reduction) in pool.iter().zip(self.reductions(u_prev, pool)?) {
+            if let Some(v) = reduction
+                && best.is_none_or(|(b, _)| v > b)
+            {
+                best = Some((v, ramp));
+            }
+        }
+        best.map(|(_, r)| r)
+    }
+
+    /// The sampled points along the first `horizon` samples of each ramp of `pool` (as
+    /// [`Explorer::most_uncertain`] samples them) and their latent posterior covariance;
+    /// `None` without a GP or history.
+    fn pool_paths(&self, u_prev: f64, pool: &[Ramp]) -> Option<PoolPaths> {
+        let (mut gp, states, play) = self.start(u_prev)?;
+        let horizon = self.params.horizon;
+        let mut points: Vec<[f64; MAX_DIM]> = Vec::with_capacity(pool.len() * (RAMP_POINTS + 1));
+        let mut spans = Vec::with_capacity(pool.len());
+        for &ramp in pool {
+            let dist = ramp.target - u_prev;
+            // A target within one step is no ramp to score (the random one may still be it).
+            if dist.abs() < ramp.slope {
+                spans.push(None);
+                continue;
+            }
+            let len = ((dist.abs() / ramp.slope).ceil() as usize).min(horizon);
+            let path = |j: usize| u_prev + dist.signum() * (j as f64 * ramp.slope).min(dist.abs());
+            let every = len.div_ceil(RAMP_POINTS);
+            let first = points.len();
+            let rolled = self.path_inputs(
+                &mut gp,
+                (states, u_prev, play),
+                len,
+                every,
+                path,
+                &mut points,
+            );
+            if rolled.is_none() {
+                points.truncate(first);
+                spans.push(None);
+                continue;
+            }
+            spans.push(Some(Span {
+                first,
+                last: points.len(),
+                every,
+            }));
+        }
+        let cov = gp.posterior_covariances(&points)?;
+        Some(PoolPaths {
+            noise: gp.view.noise_variance(),
+            len: points.len(),
+            spans,
+            cov,
+        })
+    }
+
+    /// [`Criterion::Reduction`]'s score of each ramp of `pool` (`None` for a ramp that could
+    /// not be scored): for its sampled points `S` (each standing for the `every` samples
+    /// around it, so with noise variance `s_n^2 / every`) and all the pool's points `P`,
+    /// `sum_{r in P} c_r^T (C_SS + s_n^2 / every I)^{-1} c_r`, `C` the latent posterior
+    /// covariance and `c_r = C_{S r}`: how much observing the ramp lowers the variance
+    /// summed over where the pool's ramps go. `None` without a GP or history.
+    fn reductions(&self, u_prev: f64, pool: &[Ramp]) -> Option<Vec<Option<f64>>> {
+        let paths = self.pool_paths(u_prev, pool)?;
+        let (n_p, cov) = (paths.len, &paths.cov);
+        let score = |span: &Span| -> Option<f64> {
+            let h = span.last - span.first;
+            let at = |i: usize, j: usize| cov.get(i * n_p + j).copied().unwrap_or(0.0);
+            let mut a = nalgebra::DMatrix::from_fn(h, h, |i, j| at(span.first + i, span.first + j));
+            let diag_mean = (0..h).map(|i| a[(i, i)]).sum::<f64>() / h.max(1) as f64;
+            // The noise of `every` samples at one point, and a jitter that keeps near-equal
+            // points of a noise-free GP factorable.
+            let shift =
+                paths.noise / span.every.max(1) as f64 + 1e-10 * diag_mean.max(f64::MIN_POSITIVE);
+            for i in 0..h {
+                a[(i, i)] += shift;
+            }
+            let chol = a.cholesky()?;
+            let b = nalgebra::DMatrix::from_fn(h, n_p, |i, r| at(span.first + i, r));
+            let reduction = b.component_mul(&chol.solve(&b)).sum();
+            reduction.is_finite().then_some(reduction)
+        };
+        Some(
+            paths
+                .spans
+                .iter()
+                .map(|s| s.as_ref().and_then(score))
+                .collect(),
+        )
+    }
+
     /// The step `eps` in `[-eta, eta]` (and inside the bounds) whose ramp of `horizon`
     /// samples ends at the transition input with the largest latent variance of the
     /// transition GP (states along the ramp rolled forward by the GP mean); `None` without a
@@ -812,9 +956,7 @@ impl Explorer {
     }
 
     /// Mean latent variance of the transition GP along a path of inputs `path(j)`,
-    /// `j = 1..=len`, starting (`from`) from the states `[x̂_t, x_{t-1}]`, the last input
-    /// `u_prev` and the plays after it (states rolled forward by the GP mean, plays by the
-    /// path), sampled every `every` samples and at the end.
+    /// `j = 1..=len` ([`Explorer::path_inputs`]), sampled every `every` samples and at the end.
     fn path_variance(
         &self,
         gp: &mut Predictor<'_>,
@@ -823,15 +965,36 @@ impl Explorer {
         every: usize,
         path: impl Fn(usize) -> f64,
     ) -> Option<f64> {
-        let ([mut x_a, mut x_b], mut u_b, mut play) = from;
+        let mut inputs = Vec::with_capacity(len.div_ceil(every.max(1)) + 1);
+        self.path_inputs(gp, from, len, every, path, &mut inputs)?;
         let (mut sum, mut count) = (0.0, 0usize);
+        for &input in &inputs {
+            sum += gp.variance(input)?;
+            count += 1;
+        }
+        (count > 0).then(|| sum / count as f64)
+    }
+
+    /// The transition inputs along a path of inputs `path(j)`, `j = 1..=len`, starting
+    /// (`from`) from the states `[x̂_t, x_{t-1}]`, the last input `u_prev` and the plays after
+    /// it (states rolled forward by the GP mean, plays by the path), sampled every `every`
+    /// samples and at the end, appended to `out`; `None` if the mean failed.
+    fn path_inputs(
+        &self,
+        gp: &mut Predictor<'_>,
+        from: ([f64; 2], f64, PlayState),
+        len: usize,
+        every: usize,
+        path: impl Fn(usize) -> f64,
+        out: &mut Vec<[f64; MAX_DIM]>,
+    ) -> Option<()> {
+        let ([mut x_a, mut x_b], mut u_b, mut play) = from;
         for j in 1..=len {
             let u_a = path(j);
             self.plays.advance(&mut play, u_a);
             let input = transition_input(x_a, x_b, u_a, u_b, &play);
             if j == len || j % every.max(1) == 0 {
-                sum += gp.variance(input)?;
-                count += 1;
+                out.push(input);
             }
             if j == len {
                 break;
@@ -839,7 +1002,7 @@ impl Explorer {
             let x_next = gp.state(input)?;
             (x_b, x_a, u_b) = (x_a, x_next, u_a);
         }
-        (count > 0).then(|| sum / count as f64)
+        Some(())
     }
 
     /// Records the sample the robot produced for the last input (`u` as applied, measured
@@ -1154,6 +1317,37 @@ impl<'a> Predictor<'a> {
         x.is_finite().then_some(x)
     }
 
+    /// The latent posterior covariance matrix of a set of transition inputs, row-major
+    /// `len x len`; `None` if a prediction failed.
+    fn posterior_covariances(&mut self, inputs: &[[f64; MAX_DIM]]) -> Option<Vec<f64>> {
+        let n = self.view.len();
+        let mut scratch = vec![0.0; self.view.whiten_scratch()];
+        let mut whitened = vec![0.0; inputs.len() * n];
+        for (input, w) in inputs.iter().zip(whitened.chunks_exact_mut(n)) {
+            self.view
+                .whiten(input.get(..self.dim)?, w, &mut scratch)
+                .ok()?;
+        }
+        let p = inputs.len();
+        let mut cov = vec![0.0; p * p];
+        for (i, (a, w_a)) in inputs.iter().zip(whitened.chunks_exact(n)).enumerate() {
+            for (j, (b, w_b)) in inputs
+                .iter()
+                .zip(whitened.chunks_exact(n))
+                .enumerate()
+                .skip(i)
+            {
+                let c = self
+                    .view
+                    .posterior_covariance(a.get(..self.dim)?, w_a, b.get(..self.dim)?, w_b)
+                    .ok()?;
+                cov[i * p + j] = c;
+                cov[j * p + i] = c;
+            }
+        }
+        Some(cov)
+    }
+
     /// The latent variance at one transition input.
     fn variance(&mut self, input: [f64; MAX_DIM]) -> Option<f64> {
         let pred = self
@@ -1162,6 +1356,25 @@ impl<'a> Predictor<'a> {
             .ok()?;
         pred.variance.is_finite().then_some(pred.variance)
     }
+}
+
+/// The sampled points of a pool's ramps ([`Explorer::pool_paths`]).
+struct PoolPaths {
+    /// The transition GP's noise variance (raw units).
+    noise: f64,
+    /// Points in all.
+    len: usize,
+    /// Each ramp's points (`None` for a ramp not scored).
+    spans: Vec<Option<Span>>,
+    /// Latent posterior covariance of the points, row-major `len x len`.
+    cov: Vec<f64>,
+}
+
+/// One ramp's points in [`PoolPaths`]: `first..last`, each standing for `every` samples.
+struct Span {
+    first: usize,
+    last: usize,
+    every: usize,
 }
 
 /// Most samples a plan reserves memory for up front (a huge `steps` grows as it runs instead
@@ -1226,6 +1439,61 @@ mod tests {
         // Without the outlier, one of the inside ramps (there is always an answer).
         let chosen = explorer.most_uncertain(u_prev, &inside).unwrap();
         assert!(inside.contains(&chosen));
+    }
+
+    #[test]
+    fn a_ramps_reduction_is_the_variance_its_points_take_from_the_whole_pools_paths() {
+        // Conditioning the GP on a ramp's points one at a time (rank-one updates of the
+        // posterior covariance, each point with the noise of the `every` samples it stands
+        // for) removes, summed over every point of every ramp of the pool, what
+        // `reductions` says in one solve. A score over the ramp's own points only, or with
+        // the noise of one sample, differs.
+        let explorer = trained_on_low_inputs();
+        let u_prev = explorer
+            .runs
+            .last()
+            .and_then(|r| r.u.last())
+            .copied()
+            .unwrap();
+        let pool = [(0.05, 0.02), (0.25, 0.01), (0.9, 0.02), (0.15, 0.005)]
+            .map(|(target, slope)| Ramp { target, slope });
+        let paths = explorer.pool_paths(u_prev, &pool).unwrap();
+        let got = explorer.reductions(u_prev, &pool).unwrap();
+        let n = paths.len;
+        assert!(n > 4 * 4, "every ramp is sampled at several points");
+        let spans = paths.spans.iter().flatten();
+        assert!(
+            spans.clone().any(|s| s.every > 1),
+            "some point stands for several samples"
+        );
+        let mut best = (f64::NEG_INFINITY, pool[0]);
+        for ((span, got), ramp) in paths.spans.iter().zip(&got).zip(pool) {
+            let span = span.as_ref().unwrap();
+            let mut c = paths.cov.clone();
+            for s in span.first..span.last {
+                let d = c[s * n + s] + paths.noise / span.every as f64;
+                let col: Vec<f64> = (0..n).map(|i| c[i * n + s]).collect();
+                for i in 0..n {
+                    for j in 0..n {
+                        c[i * n + j] -= col[i] * col[j] / d;
+                    }
+                }
+            }
+            let want: f64 = (0..n).map(|r| paths.cov[r * n + r] - c[r * n + r]).sum();
+            let own: f64 = (span.first..span.last)
+                .map(|r| paths.cov[r * n + r] - c[r * n + r])
+                .sum();
+            let got = got.unwrap();
+            assert!(want > own && own > 0.0, "the other ramps' paths count");
+            assert!(
+                (got - want).abs() <= 1e-6 * want,
+                "{ramp:?}: {got} vs {want}"
+            );
+            if got > best.0 {
+                best = (got, ramp);
+            }
+        }
+        assert_eq!(explorer.most_informative(u_prev, &pool), Some(best.1));
     }
 
     #[test]
