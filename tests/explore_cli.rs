@@ -139,6 +139,50 @@ fn bounds_left_out_come_from_the_logs() {
 }
 
 #[test]
+fn the_criterion_flag_scores_the_seeking_ramps() {
+    // Same model, log and seed: the plans differ once a seeking choice is scored, and both
+    // keep the bounds.
+    let (d, log, model) = first_batch();
+    let plan = |criterion: &str| {
+        let csv = d.path().join(format!("plan-{criterion}.csv"));
+        let (e, _) = hbn(&[
+            "explore",
+            "--model",
+            &model,
+            "--log",
+            &log,
+            "--samples",
+            "400",
+            "--alpha-start",
+            "1",
+            "--alpha-end",
+            "1",
+            "--criterion",
+            criterion,
+            "--out",
+            csv.to_str().expect("utf8"),
+        ]);
+        assert!(e.is_none(), "{criterion}: {e:?}");
+        let text = std::fs::read_to_string(&csv).expect("csv");
+        let u: Vec<f64> = text
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(1).expect("u").parse().expect("number"))
+            .collect();
+        let mut prev = last_logged_input(&log);
+        for &v in &u {
+            assert!(
+                (0.0..=1.0).contains(&v) && (v - prev).abs() <= 0.02,
+                "{prev} -> {v}"
+            );
+            prev = v;
+        }
+        u
+    };
+    assert_ne!(plan("variance"), plan("reduction"));
+}
+
+#[test]
 fn bad_flags_are_named_and_nothing_is_written() {
     let (d, log, model) = first_batch();
     let csv = d.path().join("plan.csv");
@@ -166,6 +210,7 @@ fn bad_flags_are_named_and_nothing_is_written() {
         (&["--candidates", "1"][..], "invalid --candidates"),
         (&["--pool", "1"][..], "invalid --pool"),
         (&["--refit-every", "0"][..], "invalid --refit-every"),
+        (&["--criterion", "entropy"][..], "--criterion"),
     ] {
         let (e, _) = base(extra);
         let e = e.unwrap_or_else(|| panic!("{extra:?} must fail"));

@@ -750,6 +750,12 @@ pub struct ExploreArgs {
     #[arg(long, default_value_t = explore().strategy.name().to_owned(),
           value_parser = ["ramps", "steps"])]
     pub strategy: String,
+    /// How a seeking choice of --strategy ramps scores the pool: `variance` (the ramp along
+    /// which the transition GP is most uncertain) or `reduction` (the ramp whose samples would
+    /// lower its variance most, summed over where all the pool's ramps go).
+    #[arg(long, default_value_t = explore().criterion.name().to_owned(),
+          value_parser = ["variance", "reduction"])]
+    pub criterion: String,
     /// Seed of the random steps.
     #[arg(long, default_value_t = explore().seed)]
     pub seed: u64,

@@ -37,6 +37,10 @@ pub fn run(ui: &mut Ui<'_>, args: &ExploreArgs) -> anyhow::Result<Schedule> {
         .strategy
         .parse()
         .map_err(|e: String| anyhow::anyhow!("invalid --strategy: {e}"))?;
+    params.criterion = args
+        .criterion
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!("invalid --criterion: {e}"))?;
     params.seed = args.seed;
     let request = PlanRequest {
         logs: args.logs.clone(),

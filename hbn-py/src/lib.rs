@@ -21,7 +21,7 @@ use std::sync::Arc;
 use hbn_core::{Flags, Mode, Want};
 use hbn_gp::{GaussianProcess, GpError, GpParams, RawHyperparameters, SparseParams};
 use hbn_io::{IoError, SignalPath};
-use hbn_model::explore::{ExploreError, ExploreParams, Explorer, Phase, Strategy};
+use hbn_model::explore::{Criterion, ExploreError, ExploreParams, Explorer, Phase, Strategy};
 use hbn_model::{
     Estimate, Filter, FilterOutput, HbnModel, HbnParams, KernelChoice, ModelError, Param,
     ParamValue, Sequence, SignalInfo, Signals,
@@ -1199,7 +1199,7 @@ impl ExplorerCore {
     #[new]
     #[pyo3(signature = (u_min, u_max, max_step, rate, seed, u_start, random_samples,
         alpha_start, alpha_end, alpha_ramp, refit_every, optimize_every, candidates, horizon,
-        strategy, pool, lag, params))]
+        strategy, pool, lag, params, criterion=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -1221,6 +1221,7 @@ impl ExplorerCore {
         pool: Option<usize>,
         lag: Option<usize>,
         params: Option<&Bound<'_, PyDict>>,
+        criterion: Option<&str>,
     ) -> PyResult<Self> {
         let mut p = ExploreParams::new(u_min, u_max, max_step);
         p.model = hbn_params(py, params)?;
@@ -1245,6 +1246,10 @@ impl ExplorerCore {
         if let Some(s) = strategy {
             p.strategy =
                 Strategy::from_str(s).map_err(|e| raise(py, Fail::config("strategy", e)))?;
+        }
+        if let Some(c) = criterion {
+            p.criterion =
+                Criterion::from_str(c).map_err(|e| raise(py, Fail::config("criterion", e)))?;
         }
         let inner = Explorer::new(p).map_err(|e| raise(py, e))?;
         Ok(Self { inner })
@@ -1337,6 +1342,7 @@ fn explore_dict<'py>(py: Python<'py>, p: &ExploreParams) -> PyResult<Bound<'py, 
     d.set_item("horizon", p.horizon)?;
     d.set_item("lag", p.lag)?;
     d.set_item("strategy", p.strategy.name())?;
+    d.set_item("criterion", p.criterion.name())?;
     d.set_item("seed", p.seed)?;
     Ok(d)
 }

@@ -26,11 +26,19 @@ def drive(explorer, system="duhem", steps=200, seed=1):
 
 
 @pytest.mark.parametrize(
-    "lo,hi,eta,strategy",
-    [(0.3, 0.45, 0.05, "ramps"), (0.3, 0.45, 0.05, "steps"), (0.0, 1.0, 0.02, "ramps")],
+    "lo,hi,eta,strategy,criterion",
+    [
+        (0.3, 0.45, 0.05, "ramps", "variance"),
+        (0.3, 0.45, 0.05, "steps", "variance"),
+        (0.0, 1.0, 0.02, "ramps", "variance"),
+        (0.0, 1.0, 0.02, "ramps", "reduction"),
+    ],
 )
-def test_proposals_keep_the_bounds_and_the_increment_bound(lo, hi, eta, strategy):
-    e = hbn.Explorer(lo, hi, eta, strategy=strategy, alpha_start=1.0, alpha_end=1.0, **QUICK)
+def test_proposals_keep_the_bounds_and_the_increment_bound(lo, hi, eta, strategy, criterion):
+    e = hbn.Explorer(
+        lo, hi, eta, strategy=strategy, criterion=criterion, alpha_start=1.0, alpha_end=1.0,
+        **QUICK,
+    )
     u = drive(e, "bouc-wen", 300)
     assert e.phase == "seeking" and e.alpha == 1.0
     assert np.all((u >= lo) & (u <= hi))
@@ -108,6 +116,7 @@ def test_a_plan_keeps_the_bounds_and_leaves_the_explorer_unchanged():
         (dict(pool=-2), "pool"),
         (dict(lag=-1), "lag"),
         (dict(strategy="zigzag"), "strategy"),
+        (dict(criterion="entropy"), "criterion"),
         (dict(max_points=1), "max_points"),
         (dict(rate=-1.0), "rate"),
     ],
@@ -143,6 +152,17 @@ def test_defaults_come_from_the_library():
     assert d["pool"] == 8
     assert hbn.Explorer(0.0, 1.0, 0.02, pool=3).settings["pool"] == 3
     assert d["lag"] == 0
+    assert d["criterion"] == "variance"
+
+
+def test_the_criterion_reaches_the_engine():
+    # Same seed, same robot: the seeking ramps differ once the criterion scores them.
+    seeking = dict(seed=3, alpha_start=1.0, alpha_end=1.0, **QUICK)
+    a = drive(hbn.Explorer(0.0, 1.0, 0.02, criterion="variance", **seeking), steps=300)
+    b = drive(hbn.Explorer(0.0, 1.0, 0.02, criterion="reduction", **seeking), steps=300)
+    n = QUICK["random_samples"]
+    assert np.array_equal(a[:n], b[:n]) and not np.array_equal(a, b)
+    assert hbn.Explorer(0.0, 1.0, 0.02, criterion="reduction").settings["criterion"] == "reduction"
 
 
 def test_the_simulator_gives_what_simulate_gives():

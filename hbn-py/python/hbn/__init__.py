@@ -980,7 +980,10 @@ class Explorer:
     refit runs inside :meth:`observe`, which blocks for it; ``lag > 0``: refits run on a thread
     beside the loop and are used ``lag`` samples after they start, so that a loop faster than
     the refits, such as a robot at 100 Hz with ``lag=200``, is not held up; the proposals stay
-    deterministic, and the older model costs some accuracy, docs/exploration.md). ``**params``:
+    deterministic, and the older model costs some accuracy, docs/exploration.md) and
+    ``criterion`` (how a seeking choice of ``"ramps"`` scores the pool: ``"variance"``, the ramp
+    along which the transition GP is most uncertain, or ``"reduction"``, the ramp whose samples
+    would lower its variance most, summed over where all the pool's ramps go). ``**params``:
     training parameters of :meth:`HysteresisModel.fit` (``max_points``, ``n_inducing``,
     ``kernel``, ...), used by the explorer's transition GP and by :meth:`model`. A bad value
     raises :class:`ConfigError` whose ``keyword`` names it. docs/exploration.md says what it
@@ -1017,6 +1020,7 @@ class Explorer:
         strategy: Optional[str] = None,
         pool: Optional[int] = None,
         lag: Optional[int] = None,
+        criterion: Optional[str] = None,
         **params: Any,
     ) -> None:
         count = GaussianProcess._count
@@ -1039,6 +1043,7 @@ class Explorer:
             count(pool, "pool"),
             count(lag, "lag"),
             params,
+            _opt_str(criterion),
         )
 
     def __repr__(self) -> str:

@@ -241,6 +241,7 @@ class Explorer:
         strategy: Optional[str] = None,
         pool: Optional[int] = None,
         lag: Optional[int] = None,
+        criterion: Optional[str] = None,
         **params: Any,
     ) -> None: ...
     def propose(self) -> float: ...
