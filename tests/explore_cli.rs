@@ -38,6 +38,25 @@ fn last_logged_input(log: &str) -> f64 {
     *raw[0].value.last().expect("samples")
 }
 
+/// The inputs of a schedule's CSV (column `u`).
+fn planned_inputs(csv: &Path) -> Vec<f64> {
+    let text = std::fs::read_to_string(csv).expect("csv");
+    text.lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(1).expect("u").parse().expect("number"))
+        .collect()
+}
+
+/// The bounds of `hbn simulate`'s input ([0, 1], steps up to 0.02), from the log's last input.
+fn assert_within_the_logs_bounds(u: &[f64], log: &str) {
+    let mut prev = last_logged_input(log);
+    for &v in u {
+        assert!((0.0..=1.0).contains(&v), "{v}");
+        assert!((v - prev).abs() <= 0.02, "{prev} -> {v}");
+        prev = v;
+    }
+}
+
 #[test]
 fn a_schedule_keeps_its_bounds_and_is_written_as_csv_and_mcap() {
     let (d, log, model) = first_batch();
@@ -127,14 +146,7 @@ fn bounds_left_out_come_from_the_logs() {
     ]);
     assert!(e.is_none(), "{e:?}");
     // hbn simulate's input lies in [0, 1] with steps below 0.02.
-    let text = std::fs::read_to_string(&csv).expect("csv");
-    let mut prev = last_logged_input(&log);
-    for l in text.lines().skip(1) {
-        let u: f64 = l.split(',').nth(1).expect("u").parse().expect("number");
-        assert!((0.0..=1.0).contains(&u), "{u}");
-        assert!((u - prev).abs() <= 0.02, "{prev} -> {u}");
-        prev = u;
-    }
+    assert_within_the_logs_bounds(&planned_inputs(&csv), &log);
     assert!(out.contains("steps <= 0.01"), "{out}");
 }
 
@@ -163,20 +175,8 @@ fn the_criterion_flag_scores_the_seeking_ramps() {
             csv.to_str().expect("utf8"),
         ]);
         assert!(e.is_none(), "{criterion}: {e:?}");
-        let text = std::fs::read_to_string(&csv).expect("csv");
-        let u: Vec<f64> = text
-            .lines()
-            .skip(1)
-            .map(|l| l.split(',').nth(1).expect("u").parse().expect("number"))
-            .collect();
-        let mut prev = last_logged_input(&log);
-        for &v in &u {
-            assert!(
-                (0.0..=1.0).contains(&v) && (v - prev).abs() <= 0.02,
-                "{prev} -> {v}"
-            );
-            prev = v;
-        }
+        let u = planned_inputs(&csv);
+        assert_within_the_logs_bounds(&u, &log);
         u
     };
     assert_ne!(plan("variance"), plan("reduction"));

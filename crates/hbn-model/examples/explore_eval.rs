@@ -78,7 +78,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             continue;
                         }
                         "explore-steps" => (Strategy::Steps, None, 0),
-                        "explore-ramps" | "explore-ramps-reduction" => (Strategy::Ramps, None, 0),
+                        "explore-ramps"
+                        | "explore-ramps-reduction"
+                        | "explore-ramps-reduction-wide" => (Strategy::Ramps, None, 0),
                         other => match (
                             other.strip_prefix("explore-ramps-pool"),
                             other.strip_prefix("explore-ramps-lag"),
@@ -92,8 +94,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     p.seed = seed;
                     (p.strategy, p.pool) = (choice.0, choice.1.unwrap_or(p.pool));
                     p.lag = choice.2;
-                    if method == "explore-ramps-reduction" {
-                        p.criterion = Criterion::Reduction;
+                    if let Some(c) = method.strip_prefix("explore-ramps-") {
+                        p.criterion = c.parse::<Criterion>().unwrap_or(p.criterion);
                     }
                     let mut explorer = Explorer::new(p)?;
                     let mut robot = Simulator::new(&cfg)?;

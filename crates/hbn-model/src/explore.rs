@@ -383,6 +383,9 @@ pub enum Criterion {
     /// random input takes next, so this is the ramp whose data most lower the variance where
     /// such inputs go, rather than where the variance is largest.
     Reduction,
+    /// [`Criterion::Reduction`] summed also over the transition inputs of the random phase
+    /// (where a random-ramp input goes in general, not only from here). Under study.
+    ReductionWide,
 }
 
 impl Criterion {
@@ -391,6 +394,7 @@ impl Criterion {
         match self {
             Criterion::Variance => "variance",
             Criterion::Reduction => "reduction",
+            Criterion::ReductionWide => "reduction-wide",
         }
     }
 }
@@ -401,6 +405,7 @@ impl std::str::FromStr for Criterion {
         match s.trim().to_ascii_lowercase().as_str() {
             "variance" => Ok(Criterion::Variance),
             "reduction" => Ok(Criterion::Reduction),
+            "reduction-wide" => Ok(Criterion::ReductionWide),
             _ => Err(format!(
                 "unknown criterion `{s}`; choose variance or reduction"
             )),
@@ -427,6 +432,26 @@ const RAMP_POINTS: usize = 8;
 struct Ramp {
     target: f64,
     slope: f64,
+}
+
+impl Ramp {
+    /// The input `j` samples along the ramp from `u_prev`.
+    fn at(self, u_prev: f64, j: usize) -> f64 {
+        let dist = self.target - u_prev;
+        u_prev + dist.signum() * (j as f64 * self.slope).min(dist.abs())
+    }
+
+    /// How a ramp from `u_prev` is scored: over its first `len` samples (at most `horizon`),
+    /// sampled every `every` samples and at the end ([`RAMP_POINTS`] points); `None` for a
+    /// target within one step, which is no ramp to score (the random one may still be it).
+    fn sampling(self, u_prev: f64, horizon: usize) -> Option<(usize, usize)> {
+        let dist = (self.target - u_prev).abs();
+        if dist < self.slope {
+            return None;
+        }
+        let len = ((dist / self.slope).ceil() as usize).min(horizon);
+        Some((len, len.div_ceil(RAMP_POINTS)))
+    }
 }
 
 /// Where the explorer is in its schedule.
@@ -771,7 +796,9 @@ impl Explorer {
         if coin < self.alpha() {
             let best = match self.params.criterion {
                 Criterion::Variance => self.most_uncertain(u_prev, pool),
-                Criterion::Reduction => self.most_informative(u_prev, pool),
+                Criterion::Reduction | Criterion::ReductionWide => {
+                    self.most_informative(u_prev, pool)
+                }
             };
             if let Some(r) = best {
                 return r;
@@ -807,14 +834,10 @@ impl Explorer {
         let horizon = self.params.horizon;
         let mut best: Option<(f64, Ramp)> = None;
         for &ramp in pool {
-            let dist = ramp.target - u_prev;
-            // A target within one step is no ramp to score (the random one may still be it).
-            if dist.abs() < ramp.slope {
+            let Some((len, every)) = ramp.sampling(u_prev, horizon) else {
                 continue;
-            }
-            let len = ((dist.abs() / ramp.slope).ceil() as usize).min(horizon);
-            let path = |j: usize| u_prev + dist.signum() * (j as f64 * ramp.slope).min(dist.abs());
-            let every = len.div_ceil(RAMP_POINTS);
+            };
+            let path = |j: usize| ramp.at(u_prev, j);
             let Some(v) = self.path_variance(&mut gp, (states, u_prev, play), len, every, path)
             else {
                 continue;
@@ -851,15 +874,11 @@ impl Explorer {
         let mut points: Vec<[f64; MAX_DIM]> = Vec::with_capacity(pool.len() * (RAMP_POINTS + 1));
         let mut spans = Vec::with_capacity(pool.len());
         for &ramp in pool {
-            let dist = ramp.target - u_prev;
-            // A target within one step is no ramp to score (the random one may still be it).
-            if dist.abs() < ramp.slope {
+            let Some((len, every)) = ramp.sampling(u_prev, horizon) else {
                 spans.push(None);
                 continue;
-            }
-            let len = ((dist.abs() / ramp.slope).ceil() as usize).min(horizon);
-            let path = |j: usize| u_prev + dist.signum() * (j as f64 * ramp.slope).min(dist.abs());
-            let every = len.div_ceil(RAMP_POINTS);
+            };
+            let path = |j: usize| ramp.at(u_prev, j);
             let first = points.len();
             let rolled = self.path_inputs(
                 &mut gp,
@@ -879,6 +898,23 @@ impl Explorer {
                 last: points.len(),
                 every,
             }));
+        }
+        if self.params.criterion == Criterion::ReductionWide {
+            // Also where a random-ramp input goes in general: the transition inputs of the
+            // random phase (of the first run), evenly thinned to as many points as the pool has.
+            if let Ok(table) = self.transition_table() {
+                let d = table.dim.max(1);
+                let rows = (table.inputs.len() / d).min(self.params.random_samples);
+                let want = points.len().max(1);
+                let step = rows.div_ceil(want).max(1);
+                for row in table.inputs.chunks_exact(d).take(rows).step_by(step) {
+                    let mut input = [0.0; MAX_DIM];
+                    for (v, r) in input.iter_mut().zip(row) {
+                        *v = *r;
+                    }
+                    points.push(input);
+                }
+            }
         }
         let cov = gp.posterior_covariances(&points)?;
         Some(PoolPaths {
@@ -1413,18 +1449,18 @@ mod tests {
         explorer
     }
 
+    fn last_input(explorer: &Explorer) -> f64 {
+        let run = explorer.runs.last().unwrap();
+        *run.u.last().unwrap()
+    }
+
     #[test]
     fn seeking_follows_the_most_uncertain_ramp_of_the_pool_wherever_it_is_drawn() {
         // The GP knows u in [0, 0.3]. Of ramps to 0.05, 0.15, 0.25 and 0.9 (all at the same
         // slope), the one into the unseen range is the most uncertain, whichever place in
         // the pool it has; a rule that took the first ramp, or the least uncertain, fails.
         let explorer = trained_on_low_inputs();
-        let u_prev = explorer
-            .runs
-            .last()
-            .and_then(|r| r.u.last())
-            .copied()
-            .unwrap();
+        let u_prev = last_input(&explorer);
         let ramp = |target| Ramp {
             target,
             slope: 0.02,
@@ -1449,12 +1485,7 @@ mod tests {
         // `reductions` says in one solve. A score over the ramp's own points only, or with
         // the noise of one sample, differs.
         let explorer = trained_on_low_inputs();
-        let u_prev = explorer
-            .runs
-            .last()
-            .and_then(|r| r.u.last())
-            .copied()
-            .unwrap();
+        let u_prev = last_input(&explorer);
         let pool = [(0.05, 0.02), (0.25, 0.01), (0.9, 0.02), (0.15, 0.005)]
             .map(|(target, slope)| Ramp { target, slope });
         let paths = explorer.pool_paths(u_prev, &pool).unwrap();
