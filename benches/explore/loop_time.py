@@ -5,7 +5,8 @@ Drives ``hbn.Simulator("bouc-wen")`` (noise gain 1, seed 1) with ``hbn.Explorer`
 and ``observe()`` call with ``time.perf_counter``, then ``model()``. Prints one line of means,
 the seeking phase's mean ``propose()``, and the worst sample.
 
-    python benches/explore/loop_time.py [N] [--lag L] [--rate HZ]   # default 1000, 0, unpaced
+    python benches/explore/loop_time.py [N] [--lag L] [--rate HZ] [--criterion C]
+    # defaults: 1000 samples, lag 0, unpaced, the library's criterion
 
 ``--lag L`` runs the refits beside the loop (``hbn.Explorer(lag=L)``); ``--rate HZ`` paces
 the loop as a robot would (each sample starts 1/HZ s after the last) and counts the samples
@@ -25,9 +26,12 @@ def main() -> None:
     ap.add_argument("n", nargs="?", type=int, default=1000)
     ap.add_argument("--lag", type=int, default=0)
     ap.add_argument("--rate", type=float, default=None)
+    ap.add_argument("--criterion", default=None, help="variance or reduction")
     args = ap.parse_args()
     n = args.n
-    explorer = hbn.Explorer(0.0, 1.0, 0.02, rate=100.0, seed=1, lag=args.lag)
+    explorer = hbn.Explorer(
+        0.0, 1.0, 0.02, rate=100.0, seed=1, lag=args.lag, criterion=args.criterion
+    )
     robot = hbn.Simulator("bouc-wen", seed=1, noise_gain=1.0)
     random_samples = hbn.default_explore_params()["random_samples"]
     period = 1.0 / args.rate if args.rate else 0.0

@@ -383,9 +383,6 @@ pub enum Criterion {
     /// random input takes next, so this is the ramp whose data most lower the variance where
     /// such inputs go, rather than where the variance is largest.
     Reduction,
-    /// [`Criterion::Reduction`] summed also over the transition inputs of the random phase
-    /// (where a random-ramp input goes in general, not only from here). Under study.
-    ReductionWide,
 }
 
 impl Criterion {
@@ -394,7 +391,6 @@ impl Criterion {
         match self {
             Criterion::Variance => "variance",
             Criterion::Reduction => "reduction",
-            Criterion::ReductionWide => "reduction-wide",
         }
     }
 }
@@ -405,7 +401,6 @@ impl std::str::FromStr for Criterion {
         match s.trim().to_ascii_lowercase().as_str() {
             "variance" => Ok(Criterion::Variance),
             "reduction" => Ok(Criterion::Reduction),
-            "reduction-wide" => Ok(Criterion::ReductionWide),
             _ => Err(format!(
                 "unknown criterion `{s}`; choose variance or reduction"
             )),
@@ -796,9 +791,7 @@ impl Explorer {
         if coin < self.alpha() {
             let best = match self.params.criterion {
                 Criterion::Variance => self.most_uncertain(u_prev, pool),
-                Criterion::Reduction | Criterion::ReductionWide => {
-                    self.most_informative(u_prev, pool)
-                }
+                Criterion::Reduction => self.most_informative(u_prev, pool),
             };
             if let Some(r) = best {
                 return r;
@@ -898,23 +891,6 @@ impl Explorer {
                 last: points.len(),
                 every,
             }));
-        }
-        if self.params.criterion == Criterion::ReductionWide {
-            // Also where a random-ramp input goes in general: the transition inputs of the
-            // random phase (of the first run), evenly thinned to as many points as the pool has.
-            if let Ok(table) = self.transition_table() {
-                let d = table.dim.max(1);
-                let rows = (table.inputs.len() / d).min(self.params.random_samples);
-                let want = points.len().max(1);
-                let step = rows.div_ceil(want).max(1);
-                for row in table.inputs.chunks_exact(d).take(rows).step_by(step) {
-                    let mut input = [0.0; MAX_DIM];
-                    for (v, r) in input.iter_mut().zip(row) {
-                        *v = *r;
-                    }
-                    points.push(input);
-                }
-            }
         }
         let cov = gp.posterior_covariances(&points)?;
         Some(PoolPaths {
