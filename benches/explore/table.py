@@ -18,6 +18,8 @@ NAMES = {
     "explore-ramps": "explorer (ramps, default)",
     "explore-steps": "explorer (thesis steps)",
     "explore-ramps-grid": "explorer (most uncertain ramp of a grid: the rule until session 17)",
+    "explore-ramps-variance": "explorer (variance criterion: the default until session 21)",
+    "explore-ramps-reduction": "explorer (reduction criterion)",
 }
 
 

@@ -737,8 +737,8 @@ pub struct ExploreArgs {
     /// Candidate steps evaluated per sample (--strategy steps).
     #[arg(long, default_value_t = explore().candidates)]
     pub candidates: usize,
-    /// Random ramps drawn per uncertainty-seeking choice; the most uncertain is followed
-    /// (--strategy ramps). More seeks harder (docs/exploration.md).
+    /// Random ramps drawn per uncertainty-seeking choice; the best by --criterion is
+    /// followed (--strategy ramps). More seeks harder (docs/exploration.md).
     #[arg(long, default_value_t = explore().pool, value_name = "N")]
     pub pool: usize,
     /// Look-ahead (samples) of the uncertainty search: a candidate ramp is scored over its

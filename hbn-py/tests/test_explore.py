@@ -152,7 +152,7 @@ def test_defaults_come_from_the_library():
     assert d["pool"] == 8
     assert hbn.Explorer(0.0, 1.0, 0.02, pool=3).settings["pool"] == 3
     assert d["lag"] == 0
-    assert d["criterion"] == "variance"
+    assert d["criterion"] == "reduction"
 
 
 def test_the_criterion_reaches_the_engine():
@@ -162,7 +162,7 @@ def test_the_criterion_reaches_the_engine():
     b = drive(hbn.Explorer(0.0, 1.0, 0.02, criterion="reduction", **seeking), steps=300)
     n = QUICK["random_samples"]
     assert np.array_equal(a[:n], b[:n]) and not np.array_equal(a, b)
-    assert hbn.Explorer(0.0, 1.0, 0.02, criterion="reduction").settings["criterion"] == "reduction"
+    assert hbn.Explorer(0.0, 1.0, 0.02, criterion="variance").settings["criterion"] == "variance"
 
 
 def test_the_simulator_gives_what_simulate_gives():

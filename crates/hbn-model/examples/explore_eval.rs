@@ -10,8 +10,9 @@
 //! random walk, `hbn_sim::InputKind::RandomWalk`), explore-ramps, explore-steps, and
 //! explore-ramps-poolN (the ramps strategy with a pool of N random ramps instead of the
 //! default's `ExploreParams::pool`), explore-ramps-lagN (the default with its refits beside
-//! the loop, `ExploreParams::lag` = N), explore-ramps-reduction (the default with
-//! `ExploreParams::criterion` = `Criterion::Reduction`).
+//! the loop, `ExploreParams::lag` = N), explore-ramps-reduction and explore-ramps-variance (the
+//! default with `ExploreParams::criterion` = `Criterion::Reduction` or `Criterion::Variance`;
+//! explore-ramps is the library's default: `Reduction` since session 21, `Variance` before).
 use hbn_model::explore::{Criterion, ExploreParams, Explorer, Strategy};
 use hbn_model::{HbnModel, HbnParams, Sequence, metrics::nrmse};
 use hbn_sim::{
@@ -78,9 +79,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             continue;
                         }
                         "explore-steps" => (Strategy::Steps, None, 0),
-                        "explore-ramps"
-                        | "explore-ramps-reduction"
-                        | "explore-ramps-reduction-wide" => (Strategy::Ramps, None, 0),
+                        "explore-ramps" | "explore-ramps-reduction" | "explore-ramps-variance" => {
+                            (Strategy::Ramps, None, 0)
+                        }
                         other => match (
                             other.strip_prefix("explore-ramps-pool"),
                             other.strip_prefix("explore-ramps-lag"),

@@ -974,16 +974,17 @@ class Explorer:
     warm-started, every N samples), ``horizon`` (look-ahead of the uncertainty search, in
     samples), ``strategy`` (``"ramps"``: ramps to random target levels at random slopes, as
     :func:`simulate` drives its systems, the next ramp being, with probability ``alpha``, the
-    most uncertain of ``pool`` such random ramps; ``"steps"``: the thesis' per-sample rule
+    best of ``pool`` such random ramps by ``criterion``; ``"steps"``: the thesis' per-sample rule
     ``u += alpha * eps + (1 - alpha) * w``, ``eps`` the best of ``candidates`` steps) and
     ``pool`` (random ramps drawn per seeking choice; more seeks harder) and ``lag`` (0: every
     refit runs inside :meth:`observe`, which blocks for it; ``lag > 0``: refits run on a thread
     beside the loop and are used ``lag`` samples after they start, so that a loop faster than
     the refits, such as a robot at 100 Hz with ``lag=200``, is not held up; the proposals stay
     deterministic, and the older model costs some accuracy, docs/exploration.md) and
-    ``criterion`` (how a seeking choice of ``"ramps"`` scores the pool: ``"variance"``, the ramp
-    along which the transition GP is most uncertain, or ``"reduction"``, the ramp whose samples
-    would lower its variance most, summed over where all the pool's ramps go). ``**params``:
+    ``criterion`` (how a seeking choice of ``"ramps"`` scores the pool: ``"reduction"``, the
+    default, the ramp whose samples would lower the transition GP's variance most, summed over
+    where all the pool's ramps go; ``"variance"``, the ramp along which it is most
+    uncertain). ``**params``:
     training parameters of :meth:`HysteresisModel.fit` (``max_points``, ``n_inducing``,
     ``kernel``, ...), used by the explorer's transition GP and by :meth:`model`. A bad value
     raises :class:`ConfigError` whose ``keyword`` names it. docs/exploration.md says what it
