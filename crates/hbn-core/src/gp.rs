@@ -328,8 +328,8 @@ impl<'a> GpView<'a> {
     /// in standardised output units. With two such vectors,
     /// [`GpView::posterior_covariance`] gives the latent posterior covariance of two inputs
     /// without a solve. Returns the latent variance at `x_raw` (as [`GpView::predict`]).
-    /// Allocation-free; `O(n d + n^2)`. `scratch` must hold [`GpView::whiten_scratch`]
-    /// values.
+    /// Allocation-free and panic-free; `O(n d + n^2)`. `scratch` must hold
+    /// [`GpView::whiten_scratch`] values.
     pub fn whiten(
         &self,
         x_raw: &[f64],
@@ -350,14 +350,18 @@ impl<'a> GpView<'a> {
             needed: 2 * n,
             got: scratch.len(),
         })?;
-        w.copy_from_slice(whitened);
+        // Equal lengths (checked above); a zip keeps a panic path out.
+        for (o, v) in w.iter_mut().zip(whitened) {
+            *o = *v;
+        }
         Ok(pred.variance)
     }
 
     /// Latent posterior covariance (raw output units) of the GP at two raw inputs `a_raw`
     /// and `b_raw`, from their whitened vectors `w_a`, `w_b` ([`GpView::whiten`]):
     /// `s^2 (k(a, b) - w_a . w_b)`, `s^2` the [`GpView::output_variance`]. At `a = b` it is
-    /// the latent variance.
+    /// the latent variance ([`GpView::predict`] clamps that at zero against rounding; this
+    /// does not). Allocation-free and panic-free (the link-time check covers it).
     pub fn posterior_covariance(
         &self,
         a_raw: &[f64],

@@ -33,6 +33,29 @@ pub fn predict(
     gp.predict(x, want, scratch)
 }
 
+/// The whitened cross-covariance of one input (the explorer's covariances), with any lengths.
+#[no_panic]
+pub fn whiten(
+    gp: &GpView<'_>,
+    x: &[f64],
+    w: &mut [f64],
+    scratch: &mut [f64],
+) -> Result<f64, CoreError> {
+    gp.whiten(x, w, scratch)
+}
+
+/// The latent posterior covariance of two inputs from their whitened vectors, any lengths.
+#[no_panic]
+pub fn posterior_covariance(
+    gp: &GpView<'_>,
+    a: &[f64],
+    w_a: &[f64],
+    b: &[f64],
+    w_b: &[f64],
+) -> Result<f64, CoreError> {
+    gp.posterior_covariance(a, w_a, b, w_b)
+}
+
 /// The local regression of EKF+BLR, with any `max_neighbours` (validated or not).
 #[no_panic]
 pub fn posterior(

@@ -121,7 +121,11 @@ fn step_links_without_panic_paths_and_stays_finite() {
     let pairs = [[0.0, 0.1], [0.5, 0.4], [0.5, 0.6], [1.0, 0.9]];
     let init = InitPrior::new(&pairs, 2, 1e-6).unwrap();
     let views = [false, true].map(|sparse| HbnView {
-        transition: if sparse { tr_plays.view(true) } else { tr.view(false) },
+        transition: if sparse {
+            tr_plays.view(true)
+        } else {
+            tr.view(false)
+        },
         sensor: se.view(sparse),
         transition_local: Some(tl.view(4, &ZERO)),
         sensor_local: Some(sl.view(3, &ZERO)),
@@ -148,6 +152,16 @@ fn step_links_without_panic_paths_and_stays_finite() {
     assert!(hbn_core_nopanic::predict(&gp, &[0.1; 4], Want::ALL, &mut scratch).is_ok());
     assert!(hbn_core_nopanic::predict(&gp, &[0.1; 3], Want::ALL, &mut scratch).is_err());
     assert!(hbn_core_nopanic::predict(&gp, &[0.1; 4], Want::ALL, &mut scratch[..2]).is_err());
+    let (mut w_a, mut w_b) = ([0.0; 2], [0.0; 2]);
+    let var = hbn_core_nopanic::whiten(&gp, &[0.1; 4], &mut w_a, &mut scratch).unwrap();
+    hbn_core_nopanic::whiten(&gp, &[0.3; 4], &mut w_b, &mut scratch).unwrap();
+    let own = hbn_core_nopanic::posterior_covariance(&gp, &[0.1; 4], &w_a, &[0.1; 4], &w_a);
+    // An arbitrary factor: the predicted variance is clamped at 0, the covariance is not.
+    assert!((own.unwrap().max(0.0) - var).abs() < 1e-12);
+    assert!(hbn_core_nopanic::posterior_covariance(&gp, &[0.1; 4], &w_a, &[0.3; 4], &w_b).is_ok());
+    assert!(hbn_core_nopanic::whiten(&gp, &[0.1; 4], &mut [0.0; 3], &mut scratch).is_err());
+    assert!(hbn_core_nopanic::whiten(&gp, &[0.1; 4], &mut w_a, &mut scratch[..3]).is_err());
+    assert!(hbn_core_nopanic::posterior_covariance(&gp, &[0.1; 3], &w_a, &[0.3; 4], &w_b).is_err());
     let nb = tl.view(4, &ZERO);
     for m in [0, 1, 48, 64, usize::MAX] {
         let blr = LocalRegression {
