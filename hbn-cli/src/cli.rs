@@ -750,11 +750,11 @@ pub struct ExploreArgs {
     #[arg(long, default_value_t = explore().strategy.name().to_owned(),
           value_parser = ["ramps", "steps"])]
     pub strategy: String,
-    /// How a seeking choice of --strategy ramps scores the pool: `variance` (the ramp along
-    /// which the transition GP is most uncertain) or `reduction` (the ramp whose samples would
-    /// lower its variance most, summed over where all the pool's ramps go).
+    /// How a seeking choice of --strategy ramps scores the pool: `reduction` (the ramp whose
+    /// samples would lower the transition GP's variance most, summed over where all the pool's
+    /// ramps go) or `variance` (the ramp along which it is most uncertain).
     #[arg(long, default_value_t = explore().criterion.name().to_owned(),
-          value_parser = ["variance", "reduction"])]
+          value_parser = ["reduction", "variance"])]
     pub criterion: String,
     /// Seed of the random steps.
     #[arg(long, default_value_t = explore().seed)]
