@@ -59,8 +59,8 @@ pub use model::{
     SignalStats, StartSummary, TrainingSummary,
 };
 pub use params::{
-    Candidate, CheckedHbnParams, ConfigError, DEFAULT_INDUCING, DEFAULT_MEMORY, HbnParams,
-    Increments, KernelChoice, KernelFamily, LinearMean, Param, ParamValue, Problem, Selection,
-    SignalInfo, Signals, UnknownKernel,
+    Candidate, CheckedHbnParams, ConfigError, DEFAULT_INDUCING, DEFAULT_LAGS, DEFAULT_MEMORY,
+    HbnParams, Increments, KernelChoice, KernelFamily, LinearMean, Param, ParamValue, Problem,
+    Selection, SignalInfo, Signals, UnknownKernel,
 };
 pub use tuning::{CandidateRow, FilterTuning, NoiseScales, ValidationReport};
