@@ -318,6 +318,16 @@ impl<'a> GpView<'a> {
         self.output_scale * self.output_scale
     }
 
+    /// The standardised input `(x - mean) / scale` (the first `dim` values; the rest zero).
+    fn standardise(&self, x_raw: &[f64]) -> [f64; MAX_DIM] {
+        let mut z = [0.0; MAX_DIM];
+        let std_in = x_raw.iter().zip(self.input_mean).zip(self.input_scale);
+        for (zj, ((x, m), s)) in z.iter_mut().zip(std_in).take(self.dim()) {
+            *zj = (x - m) / s;
+        }
+        z
+    }
+
     /// Number of `f64` scratch values [`GpView::whiten`] needs.
     pub fn whiten_scratch(&self) -> usize {
         self.predict_scratch(Want::VARIANCE)
@@ -385,15 +395,7 @@ impl<'a> GpView<'a> {
                 });
             }
         }
-        let standardise = |x: &[f64]| {
-            let mut z = [0.0; MAX_DIM];
-            let std_in = x.iter().zip(self.input_mean).zip(self.input_scale);
-            for (zj, ((x, m), s)) in z.iter_mut().zip(std_in).take(d) {
-                *zj = (x - m) / s;
-            }
-            z
-        };
-        let (z_a, z_b) = (standardise(a_raw), standardise(b_raw));
+        let (z_a, z_b) = (self.standardise(a_raw), self.standardise(b_raw));
         let spec = self.kernel.spec();
         let k_ab = self.kernel.eval(
             z_a.get(..d).unwrap_or(&z_a),
@@ -446,11 +448,7 @@ impl<'a> GpView<'a> {
         }
         let want_var = want.variance || want.grad_variance;
 
-        let mut z = [0.0; MAX_DIM];
-        let std_in = x_raw.iter().zip(self.input_mean).zip(self.input_scale);
-        for (zj, ((x, m), s)) in z.iter_mut().zip(std_in).take(d) {
-            *zj = (x - m) / s;
-        }
+        let z = self.standardise(x_raw);
         let spec = *self.kernel.spec();
         let g_star = spec.direction_of(x_raw);
         let mut u_star = [0.0; MAX_DIM];
