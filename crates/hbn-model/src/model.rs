@@ -710,7 +710,8 @@ impl HbnModel {
     }
 
     /// Fits both GPs and the local data on `trajectories`; with `fixed`, every GP keeps the
-    /// hyperparameters of the given one (no optimisation: a refit on more data).
+    /// hyperparameters of the given one (no optimisation: a refit on more data, a fold's of
+    /// filter-aware training, which also skips the observability diagnostic).
     ///
     /// With [`HbnParams::sparse_from_exact`], a sparse GP's hyperparameter search starts from
     /// the optimum of the exact GP with the same settings (one start): `exact` (transition,
@@ -830,7 +831,7 @@ impl HbnModel {
         };
         // Observability diagnostic (Sec. 4.2) along the first training trajectory. A fold's
         // refit (`fixed`) is only scored by the filter tuning and then dropped, so it skips
-        // this filter run over a whole trajectory (a tenth of the exact GPs' fold refits).
+        // this filter run over a whole trajectory.
         if fixed.is_none() {
             let first = &trajectories[0];
             let run = model.estimate(first.u, first.y, Mode::Ekf)?;
