@@ -1,4 +1,4 @@
-//! One estimator step, variances included, in both modes: sparse GPs with 64 and 128 inducing
+//! One estimator step, variances included, in every mode (EKF, EKF+BLR, UKF): sparse GPs with 64 and 128 inducing
 //! points and exact GPs with 500 and 150 support points, all with the default play operators
 //! (`memory`), and the m = 64 model without them (`sparse_m64_no_memory`).
 //!
@@ -49,7 +49,11 @@ fn bench_step(c: &mut Criterion) {
         assert_eq!(model.sensor().n_support(), n);
         let view = model.view().unwrap();
         let mut g = c.benchmark_group(format!("ekf_step_{label}"));
-        for (name, mode) in [("ekf", Mode::Ekf), ("ekf_blr", Mode::EkfBlr)] {
+        for (name, mode) in [
+            ("ekf", Mode::Ekf),
+            ("ekf_blr", Mode::EkfBlr),
+            ("ukf", Mode::Ukf),
+        ] {
             let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
             let mut est = Estimator::new(view, model.ekf_config(mode), &mut scratch).unwrap();
             let mut k = 0usize;

@@ -20,7 +20,7 @@
 //! quadratic forms (`hbn_gp`'s `fold_sparse_variance` says how `R` is formed without one).
 
 use crate::CoreError;
-use crate::kernel::{Kernel, MAX_DIM, Profile, at, profiles_and_slopes};
+use crate::kernel::{Kernel, MAX_DIM, Profile, at, profiles, profiles_and_slopes};
 
 /// Which outputs of [`GpView::predict`] to compute. The mean is always computed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -491,15 +491,25 @@ impl<'a> GpView<'a> {
         } else {
             None
         };
-        let mean_std = match d {
-            1 => acc.run::<1>(kvec, cslot, &mut grad_u),
-            2 => acc.run::<2>(kvec, cslot, &mut grad_u),
-            3 => acc.run::<3>(kvec, cslot, &mut grad_u),
-            4 => acc.run::<4>(kvec, cslot, &mut grad_u),
-            5 => acc.run::<5>(kvec, cslot, &mut grad_u),
-            6 => acc.run::<6>(kvec, cslot, &mut grad_u),
-            7 => acc.run::<7>(kvec, cslot, &mut grad_u),
-            _ => acc.run::<8>(kvec, cslot, &mut grad_u),
+        // Without a gradient (the unscented mode's sigma points, a mean or variance alone) the
+        // pass skips the profile's slope and the gradient sums.
+        let mean_std = match (d, want.grad_mean || want.grad_variance) {
+            (1, true) => acc.run::<1, true>(kvec, cslot, &mut grad_u),
+            (2, true) => acc.run::<2, true>(kvec, cslot, &mut grad_u),
+            (3, true) => acc.run::<3, true>(kvec, cslot, &mut grad_u),
+            (4, true) => acc.run::<4, true>(kvec, cslot, &mut grad_u),
+            (5, true) => acc.run::<5, true>(kvec, cslot, &mut grad_u),
+            (6, true) => acc.run::<6, true>(kvec, cslot, &mut grad_u),
+            (7, true) => acc.run::<7, true>(kvec, cslot, &mut grad_u),
+            (_, true) => acc.run::<8, true>(kvec, cslot, &mut grad_u),
+            (1, false) => acc.run::<1, false>(kvec, cslot, &mut grad_u),
+            (2, false) => acc.run::<2, false>(kvec, cslot, &mut grad_u),
+            (3, false) => acc.run::<3, false>(kvec, cslot, &mut grad_u),
+            (4, false) => acc.run::<4, false>(kvec, cslot, &mut grad_u),
+            (5, false) => acc.run::<5, false>(kvec, cslot, &mut grad_u),
+            (6, false) => acc.run::<6, false>(kvec, cslot, &mut grad_u),
+            (7, false) => acc.run::<7, false>(kvec, cslot, &mut grad_u),
+            (_, false) => acc.run::<8, false>(kvec, cslot, &mut grad_u),
         };
 
         let mut out = Prediction {
@@ -710,7 +720,7 @@ impl Accum<'_> {
     /// profile and its slope for the whole block, then `k_i` into `kvec`, `dk_i/dr2` into
     /// `cvec`, the mean (returned) and its feature-space gradient.
     #[inline(always)]
-    fn run<const D: usize>(
+    fn run<const D: usize, const GRAD: bool>(
         &self,
         kvec: &mut [f64],
         mut cvec: Option<&mut [f64]>,
@@ -745,7 +755,11 @@ impl Accum<'_> {
                 *r2_i = acc;
             }
             let (mut k, mut c) = ([0.0; BLOCK], [0.0; BLOCK]);
-            profiles_and_slopes(self.profile, &r2, &mut k, &mut c);
+            if GRAD {
+                profiles_and_slopes(self.profile, &r2, &mut k, &mut c);
+            } else {
+                profiles(self.profile, &r2, &mut k);
+            }
             if self.direction {
                 let dirs = self.directions.get(first..).unwrap_or(&[]);
                 for ((k_j, c_j), dir) in k.iter_mut().zip(c.iter_mut()).zip(dirs) {
@@ -775,12 +789,19 @@ impl Accum<'_> {
                     *c_out = *c_j;
                 }
             }
-            // dk/du* = c dr2/du* = -2 c (u_i - u*): the mean's gradient weights.
-            for ((row, (k_j, c_j)), a_j) in rows.chunks_exact(D).zip(k.iter().zip(&c)).zip(&a) {
-                mean += k_j * a_j;
-                let w = -2.0 * c_j * a_j;
-                for ((g, r), u) in gsum.iter_mut().zip(row).zip(&us) {
-                    *g += w * (r - u);
+            if GRAD {
+                // dk/du* = c dr2/du* = -2 c (u_i - u*): the mean's gradient weights.
+                for ((row, (k_j, c_j)), a_j) in rows.chunks_exact(D).zip(k.iter().zip(&c)).zip(&a) {
+                    mean += k_j * a_j;
+                    let w = -2.0 * c_j * a_j;
+                    for ((g, r), u) in gsum.iter_mut().zip(row).zip(&us) {
+                        *g += w * (r - u);
+                    }
+                }
+            } else {
+                // The same sum in the same order: the mean is bit-identical either way.
+                for (k_j, a_j) in k.iter().zip(&a) {
+                    mean += k_j * a_j;
                 }
             }
             first = last;
@@ -1149,6 +1170,89 @@ mod tests {
             let var = k.eval(&zs, gs, &zs, gs) - (0..6).map(|i| kv[i] * w[i]).sum::<f64>();
             assert!((p.mean - mean).abs() < 1e-12, "{spec:?}");
             assert!((p.variance - var).abs() < 1e-12, "{spec:?}");
+        }
+    }
+
+    #[test]
+    fn a_prediction_without_gradients_is_bit_identical_to_one_with_them() {
+        // More points than a block of the kernel pass, and a partial last block; exact and
+        // sparse variance factors; every profile, metric and the direction factor.
+        let n = 37usize;
+        let feats: Vec<f64> = (0..3 * n)
+            .map(|i| 1.3 * libm::sin(0.37 * i as f64 + 0.2))
+            .collect();
+        let dirs: Vec<f64> = (0..n)
+            .map(|i| if i % 3 == 0 { -1.0 } else { 1.0 })
+            .collect();
+        let alpha: Vec<f64> = (0..n).map(|i| libm::cos(0.61 * i as f64)).collect();
+        // A factor with a large diagonal (exact: `L^-1 k` is small) and one with a small
+        // one (sparse: `R k` is small), so that both variances stay positive.
+        let factor = |diag: f64| {
+            let mut packed = vec![0.0; n * (n + 1) / 2];
+            for i in 0..n {
+                for j in 0..=i {
+                    packed[i * (i + 1) / 2 + j] = if i == j {
+                        diag * (1.0 + 0.2 * libm::sin(i as f64))
+                    } else {
+                        0.02 * diag * libm::cos((i * 5 + j) as f64)
+                    };
+                }
+            }
+            packed
+        };
+        let (exact_factor, sparse_factor) = (factor(20.0), factor(0.02));
+        let (mean, scale) = ([0.1, -0.2, 0.3], [1.5, 0.5, 2.0]);
+        for spec in all_specs() {
+            let mut theta = [0.0; 16];
+            for (i, t) in theta.iter_mut().enumerate().take(spec.n_params()) {
+                *t = 0.2 * libm::cos(0.9 * i as f64);
+            }
+            for sparse in [false, true] {
+                let gp = GpView::new(GpParts {
+                    kernel: Kernel::new(spec, &theta[..spec.n_params()], &W).unwrap(),
+                    input_mean: &mean,
+                    input_scale: &scale,
+                    output_mean: 0.3,
+                    output_scale: 2.0,
+                    linear: &[],
+                    features: &feats,
+                    directions: if spec.direction.is_some() { &dirs } else { &[] },
+                    alpha: &alpha,
+                    alpha_lo: &[],
+                    variance: if sparse {
+                        Variance::Sparse {
+                            variance_factor: &sparse_factor,
+                        }
+                    } else {
+                        Variance::Exact {
+                            chol_packed: &exact_factor,
+                        }
+                    },
+                    noise_var: 0.01,
+                })
+                .unwrap();
+                let mut scratch = vec![0.0; gp.predict_scratch(Want::ALL)];
+                for q in 0..5 {
+                    let t = q as f64;
+                    let x = [libm::sin(t), 0.5 * libm::cos(2.0 * t), 0.7 * t - 1.0];
+                    let all = gp.predict(&x, Want::ALL, &mut scratch).unwrap();
+                    let mean_only = gp.predict(&x, Want::MEAN, &mut scratch).unwrap();
+                    let var_only = gp.predict(&x, Want::VARIANCE, &mut scratch).unwrap();
+                    assert_eq!(mean_only.mean.to_bits(), all.mean.to_bits(), "{spec:?}");
+                    assert_eq!(var_only.mean.to_bits(), all.mean.to_bits(), "{spec:?}");
+                    assert_eq!(
+                        var_only.variance.to_bits(),
+                        all.variance.to_bits(),
+                        "{spec:?} sparse {sparse}"
+                    );
+                    assert!(
+                        all.variance > 0.0,
+                        "{spec:?} sparse {sparse}: {}",
+                        all.variance
+                    );
+                    assert!(all.grad_mean.iter().any(|g| *g != 0.0));
+                }
+            }
         }
     }
 

@@ -280,6 +280,30 @@ pub fn profiles_and_slopes_with(
     }
 }
 
+/// The profile values of [`profiles_and_slopes`] without the slopes, computed by the same
+/// operations (so bit-identical to its `f`): a mean-only prediction needs no slope.
+#[inline(always)]
+pub fn profiles(profile: Profile, r2: &[f64], f: &mut [f64]) {
+    match profile {
+        Profile::SquaredExponential => {
+            for (r2_i, f_i) in r2.iter().zip(f.iter_mut()) {
+                *f_i = exp_nonpositive(-0.5 * r2_i);
+            }
+        }
+        Profile::Matern52 => {
+            for (r_i, r2_i) in f.iter_mut().zip(r2) {
+                *r_i = libm::sqrt(if *r2_i > 0.0 { *r2_i } else { 0.0 });
+            }
+            for (r2_i, f_i) in r2.iter().zip(f.iter_mut()) {
+                let r = *f_i;
+                let e = exp_nonpositive(-SQRT5 * r);
+                let lin = 1.0 + SQRT5 * r;
+                *f_i = (lin + (5.0 / 3.0) * r2_i) * e;
+            }
+        }
+    }
+}
+
 /// Most negative argument [`exp_nonpositive`] resolves; below it the result is `exp(EXP_FLOOR)`
 /// (about `3e-308`), which no kernel value can tell from zero.
 pub const EXP_FLOOR: f64 = -708.0;
