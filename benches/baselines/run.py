@@ -175,6 +175,7 @@ def run_hbn(
         **dict(hbn_params or {}),
     )
     t_fit = time.perf_counter() - t0
+    held_out = _held_out(model)
     out: Dict[str, Dict[str, Any]] = {}
     for name, mode in (("hbn", None), ("hbn-ekf", "ekf"), ("hbn-ekf-blr", "ekf-blr")):
         t1 = time.perf_counter()
@@ -188,6 +189,7 @@ def run_hbn(
             "flags": est.flag_counts(),
             "model_rate": model.rate,
             "config": _config(model),
+            "held_out": held_out,
         }
     t1 = time.perf_counter()
     x_open = np.asarray(model.simulate_open_loop(test.u))
@@ -211,6 +213,38 @@ def _config(model: Any) -> str:
     lags = p.get("lags") or []
     tail = f" lags={','.join(f'{t:g}' for t in lags)}" if lags else ""
     return f"{p['transition_kernel']} {'exact' if m == 'exact' else f'm={m}'}{tail}"
+
+
+def _held_out(model: Any) -> Optional[Dict[str, Any]]:
+    """The held-out scores training chose by (``None`` without validation): the default mode's
+    held-out nRMSE and NLPD, and under model selection every candidate's default mode with its
+    scores (``config`` named as ``hbn train`` names it, ``chosen``). Recorded so that a
+    selection rule can be studied on a grid's runs without training again."""
+    v = (model.summary or {}).get("validation")
+    if not v:
+        return None
+    mode = v.get("default_mode")
+    row = next((r for r in v.get("rows", []) if r.get("mode") == mode), None)
+
+    def scores(s: Mapping[str, Any]) -> Dict[str, Any]:
+        cal = s.get("calibration", {})
+        return {"nrmse": s.get("nrmse"), "nlpd": cal.get("nlpd"), "coverage_2sigma": cal.get("coverage_2sigma")}
+
+    candidates = []
+    for c in v.get("candidates", []):
+        cand = c.get("candidate", {})
+        scored = c.get("scored")
+        m = cand.get("n_inducing")
+        lags = cand.get("lags") or []
+        tail = f" lags={','.join(f'{t:g}' for t in lags)}" if lags else ""
+        name = f"{cand.get('transition_kernel', {}).get('family')} {'exact' if m is None else f'm={m}'}{tail}"
+        candidates.append({
+            "config": name,
+            "chosen": bool(c.get("chosen")),
+            "mode": scored[0] if scored else None,
+            **(scores(scored[1]) if scored else {"nrmse": None, "nlpd": None, "coverage_2sigma": None}),
+        })  # fmt: skip
+    return {"mode": mode, **(scores(row["tuned"]) if row else {}), "candidates": candidates}
 
 
 def _finite_or_none(v: Any) -> Any:

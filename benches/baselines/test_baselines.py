@@ -334,6 +334,15 @@ def test_runner_end_to_end_on_simulated_logs(
     # The default mode is one of the two modes, and gives exactly that mode's estimate.
     assert ms["hbn"]["mode"] in ("ekf", "ekf-blr")
     assert ms["hbn"]["nrmse"] == ms["hbn-" + ms["hbn"]["mode"]]["nrmse"]
+    # The held-out scores training chose by: the default mode's, and the chosen candidate's
+    # are the same numbers (the rule picks a candidate by its default mode's scores).
+    held = ms["hbn"]["held_out"]
+    assert held["mode"] == ms["hbn"]["mode"] and 0.0 < held["nrmse"] < 1.0
+    assert math.isfinite(held["nlpd"]) and 0.0 <= held["coverage_2sigma"] <= 1.0
+    chosen = [c for c in held["candidates"] if c["chosen"]]
+    if held["candidates"]:
+        assert len(chosen) == 1 and chosen[0]["config"] == ms["hbn"]["config"]
+        assert (chosen[0]["mode"], chosen[0]["nlpd"]) == (held["mode"], held["nlpd"])
     # The open loop of the same fit: a point estimate from u alone, less accurate than the filter.
     ol = ms["hbn-open-loop"]
     assert ol["mode"] == "open-loop" and ol["mean_nees"] is None and ol["samples"] == 150
