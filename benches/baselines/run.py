@@ -209,10 +209,15 @@ def _config(model: Any) -> str:
     exact"``, ``"se-ard m=64"`` or ``"matern52 m=64 lags=1"`` (as ``hbn train`` names
     candidates)."""
     p = model.params
-    m = p["n_inducing"]
-    lags = p.get("lags") or []
+    return _name(p["transition_kernel"], p["sensor_kernel"], None if p["n_inducing"] == "exact" else p["n_inducing"], p.get("lags") or [])
+
+
+def _name(transition: str, sensor: str, m: Optional[int], lags: Sequence[float]) -> str:
+    """A configuration named as ``hbn train`` names candidates: the kernel (both, comma-separated,
+    when they differ), ``exact`` or ``m=M``, then any lags."""
+    kernels = transition if transition == sensor else f"{transition},{sensor}"
     tail = f" lags={','.join(f'{t:g}' for t in lags)}" if lags else ""
-    return f"{p['transition_kernel']} {'exact' if m == 'exact' else f'm={m}'}{tail}"
+    return f"{kernels} {'exact' if m is None else f'm={m}'}{tail}"
 
 
 def _held_out(model: Any) -> Optional[Dict[str, Any]]:
@@ -234,10 +239,12 @@ def _held_out(model: Any) -> Optional[Dict[str, Any]]:
     for c in v.get("candidates", []):
         cand = c.get("candidate", {})
         scored = c.get("scored")
-        m = cand.get("n_inducing")
-        lags = cand.get("lags") or []
-        tail = f" lags={','.join(f'{t:g}' for t in lags)}" if lags else ""
-        name = f"{cand.get('transition_kernel', {}).get('family')} {'exact' if m is None else f'm={m}'}{tail}"
+        name = _name(
+            _kernel_name(cand.get("transition_kernel", {})),
+            _kernel_name(cand.get("sensor_kernel", {})),
+            cand.get("n_inducing"),
+            cand.get("lags") or [],
+        )
         candidates.append({
             "config": name,
             "chosen": bool(c.get("chosen")),
@@ -245,6 +252,12 @@ def _held_out(model: Any) -> Optional[Dict[str, Any]]:
             **(scores(scored[1]) if scored else {"nrmse": None, "nlpd": None, "coverage_2sigma": None}),
         })  # fmt: skip
     return {"mode": mode, **(scores(row["tuned"]) if row else {}), "candidates": candidates}
+
+
+def _kernel_name(k: Mapping[str, Any]) -> str:
+    """A kernel of a model file's candidate table (``{"family": "se-ard", "direction": true}``)
+    by its ``hbn train`` name (``se-ard+dir``)."""
+    return f"{k.get('family')}{'+dir' if k.get('direction') else ''}"
 
 
 def _finite_or_none(v: Any) -> Any:
