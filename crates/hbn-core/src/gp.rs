@@ -493,23 +493,10 @@ impl<'a> GpView<'a> {
         };
         // Without a gradient (the unscented mode's sigma points, a mean or variance alone) the
         // pass skips the profile's slope and the gradient sums.
-        let mean_std = match (d, want.grad_mean || want.grad_variance) {
-            (1, true) => acc.run::<1, true>(kvec, cslot, &mut grad_u),
-            (2, true) => acc.run::<2, true>(kvec, cslot, &mut grad_u),
-            (3, true) => acc.run::<3, true>(kvec, cslot, &mut grad_u),
-            (4, true) => acc.run::<4, true>(kvec, cslot, &mut grad_u),
-            (5, true) => acc.run::<5, true>(kvec, cslot, &mut grad_u),
-            (6, true) => acc.run::<6, true>(kvec, cslot, &mut grad_u),
-            (7, true) => acc.run::<7, true>(kvec, cslot, &mut grad_u),
-            (_, true) => acc.run::<8, true>(kvec, cslot, &mut grad_u),
-            (1, false) => acc.run::<1, false>(kvec, cslot, &mut grad_u),
-            (2, false) => acc.run::<2, false>(kvec, cslot, &mut grad_u),
-            (3, false) => acc.run::<3, false>(kvec, cslot, &mut grad_u),
-            (4, false) => acc.run::<4, false>(kvec, cslot, &mut grad_u),
-            (5, false) => acc.run::<5, false>(kvec, cslot, &mut grad_u),
-            (6, false) => acc.run::<6, false>(kvec, cslot, &mut grad_u),
-            (7, false) => acc.run::<7, false>(kvec, cslot, &mut grad_u),
-            (_, false) => acc.run::<8, false>(kvec, cslot, &mut grad_u),
+        let mean_std = if want.grad_mean || want.grad_variance {
+            acc.run_dim::<true>(d, kvec, cslot, &mut grad_u)
+        } else {
+            acc.run_dim::<false>(d, kvec, cslot, &mut grad_u)
         };
 
         let mut out = Prediction {
@@ -716,6 +703,27 @@ struct Accum<'s> {
 const BLOCK: usize = 16;
 
 impl Accum<'_> {
+    /// [`Accum::run`] for `d` inputs (the kernel pass is compiled per dimension).
+    #[inline(always)]
+    fn run_dim<const GRAD: bool>(
+        &self,
+        d: usize,
+        kvec: &mut [f64],
+        cvec: Option<&mut [f64]>,
+        grad_u: &mut [f64; MAX_DIM],
+    ) -> f64 {
+        match d {
+            1 => self.run::<1, GRAD>(kvec, cvec, grad_u),
+            2 => self.run::<2, GRAD>(kvec, cvec, grad_u),
+            3 => self.run::<3, GRAD>(kvec, cvec, grad_u),
+            4 => self.run::<4, GRAD>(kvec, cvec, grad_u),
+            5 => self.run::<5, GRAD>(kvec, cvec, grad_u),
+            6 => self.run::<6, GRAD>(kvec, cvec, grad_u),
+            7 => self.run::<7, GRAD>(kvec, cvec, grad_u),
+            _ => self.run::<8, GRAD>(kvec, cvec, grad_u),
+        }
+    }
+
     /// One pass over the support points, in blocks of [`BLOCK`]: squared distances, then the
     /// profile and its slope for the whole block, then `k_i` into `kvec`, `dk_i/dr2` into
     /// `cvec`, the mean (returned) and its feature-space gradient.
