@@ -792,7 +792,12 @@ impl Accum<'_> {
             for (k_out, k_j) in k_out.iter_mut().zip(&k) {
                 *k_out = *k_j;
             }
-            if let Some(cv) = cvec.as_deref_mut().and_then(|cv| cv.get_mut(first..)) {
+            // Only a gradient pass has slopes (the variance gradient's weights need them).
+            if let Some(cv) = cvec
+                .as_deref_mut()
+                .filter(|_| GRAD)
+                .and_then(|cv| cv.get_mut(first..))
+            {
                 for (c_out, c_j) in cv.iter_mut().zip(&c) {
                     *c_out = *c_j;
                 }

@@ -270,10 +270,8 @@ pub fn profiles_and_slopes_with(
                 *r_i = sqrt(if *r2_i > 0.0 { *r2_i } else { 0.0 });
             }
             for ((r2_i, f_i), df_i) in r2.iter().zip(f.iter_mut()).zip(df.iter_mut()) {
-                let r = *f_i;
-                let e = exp_nonpositive(-SQRT5 * r);
-                let lin = 1.0 + SQRT5 * r;
-                *f_i = (lin + (5.0 / 3.0) * r2_i) * e;
+                let (value, lin, e) = matern52(*f_i, *r2_i);
+                *f_i = value;
                 *df_i = -(5.0 / 6.0) * lin * e;
             }
         }
@@ -295,13 +293,20 @@ pub fn profiles(profile: Profile, r2: &[f64], f: &mut [f64]) {
                 *r_i = libm::sqrt(if *r2_i > 0.0 { *r2_i } else { 0.0 });
             }
             for (r2_i, f_i) in r2.iter().zip(f.iter_mut()) {
-                let r = *f_i;
-                let e = exp_nonpositive(-SQRT5 * r);
-                let lin = 1.0 + SQRT5 * r;
-                *f_i = (lin + (5.0 / 3.0) * r2_i) * e;
+                *f_i = matern52(*f_i, *r2_i).0;
             }
         }
     }
+}
+
+/// Matern 5/2 at `r = sqrt(r2)`: the profile `(1 + sqrt5 r + 5/3 r2) exp(-sqrt5 r)`, and the
+/// two factors its slope `-(5/6) (1 + sqrt5 r) exp(-sqrt5 r)` reuses. One formula for
+/// [`profiles_and_slopes_with`] and [`profiles`], so their values agree to the bit.
+#[inline(always)]
+fn matern52(r: f64, r2: f64) -> (f64, f64, f64) {
+    let e = exp_nonpositive(-SQRT5 * r);
+    let lin = 1.0 + SQRT5 * r;
+    ((lin + (5.0 / 3.0) * r2) * e, lin, e)
 }
 
 /// Most negative argument [`exp_nonpositive`] resolves; below it the result is `exp(EXP_FLOOR)`
