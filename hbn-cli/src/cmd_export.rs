@@ -85,6 +85,23 @@ pub fn run(ui: &mut Ui<'_>, args: &ExportArgs) -> anyhow::Result<()> {
     let sizes = hbn_export::size_report(&model, precision, args.init_pairs)
         .context("cannot compute the firmware size report")?;
     let this = sizes.iter().find(|s| s.mode == mode);
+    if precision == Precision::F32 {
+        let view = model.view().context("cannot read the model's GPs")?;
+        let errors = hbn_export::f32_variance_errors(&view);
+        let kept = hbn_export::factors_in_two_parts(&view);
+        for ((name, err), _) in ["transition", "sensor"]
+            .iter()
+            .zip(errors)
+            .zip(kept)
+            .filter(|(_, kept)| *kept)
+        {
+            ui.notice(format!(
+                "the {name} GP's variance factor is kept in two f32 parts (in one, its latent \
+                 variance would move by {:.0}% of what the filter adds it to; docs/firmware.md)",
+                100.0 * err
+            ));
+        }
+    }
     ui.line(format!(
         "exported `{}` (mode {mode}, {} reals) as {}: {}",
         args.model.display(),

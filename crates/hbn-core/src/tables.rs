@@ -13,7 +13,14 @@
 //! - `reals` (`f64`): every real number, in the order the layout describes.
 //!
 //! An `f32` export stores `reals` as `f32`; [`widen`] converts them into caller-provided `f64`
-//! memory ([`widen_scratch`] values) that the view then borrows.
+//! memory ([`widen_scratch`] values) that the view then borrows. The few reals a prediction is
+//! sensitive to in every digit (the settings, each GP's hyperparameters, standardisation and
+//! inducing or support inputs, the plays) lie in *split ranges* that the layout lists
+//! ([`split_ranges`]): an `f32` export stores each of them as two `f32` parts, the nearest
+//! `f32` value in its place and the rest after all the reals, and [`widen`] adds the two back
+//! (about 48 bits). Rounded to 24 bits, the inputs of a GP whose kernel rides a near-linear
+//! ridge (a large signal variance and long length scales) moved a model's estimate by up to
+//! 23% of the range of `x`; the O(n d) values cost little next to the O(n^2) factor.
 //!
 //! The local training data of EKF+BLR is only written for that mode: the EKF and the UKF read
 //! the two GPs, the filter settings and the prior of `x_0`.
@@ -31,8 +38,9 @@ pub const MAGIC: u32 = u32::from_le_bytes(*b"HBN1");
 /// operators after the prior of `x_0`; 4 adds each GP's linear mean, its slope count after
 /// the whitening length and its slopes after the output scalars; tables of version 2 are read
 /// as having no plays, of versions 2 and 3 as having constant means; 5 adds the lags' count and
-/// coefficients after the plays, and tables before it are read as having no lags).
-pub const VERSION: u32 = 5;
+/// coefficients after the plays, and tables before it are read as having no lags; 6 adds the
+/// split ranges after the version, see [`split_ranges`]).
+pub const VERSION: u32 = 6;
 /// Oldest format version [`Tables::model`] reads.
 pub const OLDEST_VERSION: u32 = 2;
 /// Last value of every layout (catches a truncated or misaligned table).
@@ -72,23 +80,80 @@ pub struct TableModel<'a> {
     pub config: EkfConfig,
 }
 
-/// `f64` values [`widen`] needs for `reals_f32` `f32` values: one each.
-pub const fn widen_scratch(reals_f32: usize) -> usize {
-    reals_f32
+/// Most split ranges a layout lists (the encoder writes at most one per settings block, GP,
+/// local regression, prior of `x_0` and play block).
+pub const MAX_SPLIT_RANGES: usize = 8;
+
+/// The ranges of `reals` (as `start..end` indices) that an `f32` export stores in two parts,
+/// in increasing order, read from a layout (none before format version 6).
+#[derive(Clone, Copy, Debug)]
+pub struct SplitRanges<'a> {
+    pairs: &'a [[u32; 2]],
 }
 
-/// Converts `f32` reals into the front of `out` (at least [`widen_scratch`] values) and
-/// returns that part, for [`Tables::reals`].
-pub fn widen<'w>(reals: &[f32], out: &'w mut [f64]) -> Result<&'w [f64], CoreError> {
-    let got = out.len();
-    let Some(dst) = out.get_mut(..reals.len()) else {
-        return Err(CoreError::ScratchTooSmall {
-            needed: reals.len(),
-            got,
-        });
+impl SplitRanges<'_> {
+    /// How many reals the ranges hold: the length of the low parts an `f32` export appends.
+    pub fn total(&self) -> usize {
+        self.iter().map(|r| r.len()).sum()
+    }
+
+    /// The ranges, in order.
+    pub fn iter(&self) -> impl Iterator<Item = core::ops::Range<usize>> + '_ {
+        self.pairs.iter().map(|&[start, len]| {
+            let (start, len) = (start as usize, len as usize);
+            start..start.saturating_add(len)
+        })
+    }
+}
+
+/// The split ranges `layout` lists. Fails on a layout that is not hbn tables of a readable
+/// version, or whose ranges are unordered, overlapping or more than [`MAX_SPLIT_RANGES`].
+pub fn split_ranges(layout: &[u32]) -> Result<SplitRanges<'_>, CoreError> {
+    let mut r = Reader {
+        ints: layout,
+        keys: &[],
+        reals: &[],
     };
-    for (d, s) in dst.iter_mut().zip(reals) {
+    let version = r.header()?;
+    let pairs = r.split_pairs(version)?;
+    Ok(SplitRanges { pairs })
+}
+
+/// `f64` values [`widen`] writes for the `f32` tables with `layout` and `reals_f32` reals: one
+/// per real of the `f64` tables (the low parts of the split ranges widen into the values
+/// before them). Fails as [`split_ranges`] does, or when `reals_f32` is shorter than the low
+/// parts.
+pub fn widen_scratch(layout: &[u32], reals_f32: usize) -> Result<usize, CoreError> {
+    reals_f32
+        .checked_sub(split_ranges(layout)?.total())
+        .ok_or(TRUNCATED)
+}
+
+/// Converts the `f32` reals of the tables with `layout` into the front of `out` (at least
+/// [`widen_scratch`] values) and returns that part, for
+/// [`Tables::reals`]: each value widened, and each value of a split range plus its low part
+/// (the `f32` values after the widened ones, see [`split_ranges`]).
+pub fn widen<'w>(
+    layout: &[u32],
+    reals: &[f32],
+    out: &'w mut [f64],
+) -> Result<&'w [f64], CoreError> {
+    let split = split_ranges(layout)?;
+    let n = widen_scratch(layout, reals.len())?;
+    let (high, low) = reals.split_at(n);
+    let got = out.len();
+    let Some(dst) = out.get_mut(..n) else {
+        return Err(CoreError::ScratchTooSmall { needed: n, got });
+    };
+    for (d, s) in dst.iter_mut().zip(high) {
         *d = f64::from(*s);
+    }
+    let mut low = low.iter();
+    for range in split.iter() {
+        let part = dst.get_mut(range).ok_or(TRUNCATED)?;
+        for (d, lo) in part.iter_mut().zip(low.by_ref()) {
+            *d += f64::from(*lo);
+        }
     }
     Ok(dst)
 }
@@ -107,11 +172,128 @@ fn count(n: usize) -> Result<u32, CoreError> {
 
 /// Writes `view` and `config` (mode included) as tables into `sink`. The local training data is
 /// written only for [`Mode::EkfBlr`] (the other modes never read it). Fails when that mode's
-/// view has no local data, or a count exceeds `u32`.
+/// view has no local data, or a count exceeds `u32`. The variance factors lie outside the
+/// split ranges ([`encode_with`] can put them inside).
 pub fn encode<S: TableSink>(
     view: &HbnView<'_>,
     config: &EkfConfig,
     sink: &mut S,
+) -> Result<(), CoreError> {
+    encode_with(view, config, [false; 2], sink)
+}
+
+/// [`encode`], with the variance factor of the transition GP (`split_factors[0]`) and of the
+/// sensor GP (`[1]`) in the split ranges where asked: an `f32` export then keeps that factor to
+/// about 48 bits, at the size of an `f64` one. Worth it where the latent variance
+/// `k(x,x) - |F k|^2` cancels in most of its digits (a large signal variance against the
+/// posterior's), which the exporter measures.
+pub fn encode_with<S: TableSink>(
+    view: &HbnView<'_>,
+    config: &EkfConfig,
+    split_factors: [bool; 2],
+    sink: &mut S,
+) -> Result<(), CoreError> {
+    // Two passes: the first only counts the reals, to find the split ranges that the layout
+    // lists before them; the second writes.
+    let mut count_only = Writer::<S> {
+        sink: None,
+        reals: 0,
+        split: Split::default(),
+        open: None,
+    };
+    write_tables(
+        view,
+        config,
+        split_factors,
+        &Split::default(),
+        &mut count_only,
+    )?;
+    let split = count_only.split;
+    let mut writer = Writer {
+        sink: Some(sink),
+        reals: 0,
+        split: Split::default(),
+        open: None,
+    };
+    write_tables(view, config, split_factors, &split, &mut writer)
+}
+
+/// The split ranges the encoder found, as `(start, len)` pairs of reals.
+#[derive(Clone, Copy, Debug, Default)]
+struct Split {
+    ranges: [[u32; 2]; MAX_SPLIT_RANGES],
+    len: usize,
+}
+
+/// Writes into an optional sink, counting the reals and recording the split ranges.
+struct Writer<'s, S> {
+    sink: Option<&'s mut S>,
+    reals: usize,
+    split: Split,
+    /// Where the split range being written began.
+    open: Option<usize>,
+}
+
+impl<S: TableSink> Writer<'_, S> {
+    fn int(&mut self, v: u32) {
+        if let Some(s) = self.sink.as_mut() {
+            s.int(v);
+        }
+    }
+
+    fn key(&mut self, v: u64) {
+        if let Some(s) = self.sink.as_mut() {
+            s.key(v);
+        }
+    }
+
+    fn real(&mut self, v: f64) {
+        if let Some(s) = self.sink.as_mut() {
+            s.real(v);
+        }
+        self.reals += 1;
+    }
+
+    /// The reals written next, until [`Writer::end_split`], lie in a split range.
+    fn begin_split(&mut self) {
+        self.open = Some(self.reals);
+    }
+
+    /// Closes the split range begun last (merged with the one before when they touch).
+    fn end_split(&mut self) -> Result<(), CoreError> {
+        let Some(start) = self.open.take() else {
+            return Ok(());
+        };
+        if self.reals == start {
+            return Ok(());
+        }
+        let (start, end) = (count(start)?, count(self.reals)?);
+        let split = &mut self.split;
+        if let Some(last) = split
+            .len
+            .checked_sub(1)
+            .and_then(|i| split.ranges.get_mut(i))
+            && last[0] + last[1] == start
+        {
+            last[1] = end - last[0];
+            return Ok(());
+        }
+        let slot = split
+            .ranges
+            .get_mut(split.len)
+            .ok_or(CoreError::InvalidSpec("too many split ranges"))?;
+        *slot = [start, end - start];
+        split.len += 1;
+        Ok(())
+    }
+}
+
+fn write_tables<S: TableSink>(
+    view: &HbnView<'_>,
+    config: &EkfConfig,
+    split_factors: [bool; 2],
+    split: &Split,
+    w: &mut Writer<'_, S>,
 ) -> Result<(), CoreError> {
     let blr = config.mode == Mode::EkfBlr;
     let locals = match (blr, view.transition_local, view.sensor_local) {
@@ -123,13 +305,19 @@ pub fn encode<S: TableSink>(
             ));
         }
     };
-    sink.int(MAGIC);
-    sink.int(VERSION);
-    sink.int(mode_code(config.mode));
-    sink.int(u32::from(view.init.is_some()));
-    sink.int(u32::from(locals.is_some()));
-    sink.int(count(view.blr.max_neighbours)?);
+    w.int(MAGIC);
+    w.int(VERSION);
+    w.int(count(split.len)?);
+    for [start, len] in split.ranges.iter().take(split.len) {
+        w.int(*start);
+        w.int(*len);
+    }
+    w.int(mode_code(config.mode));
+    w.int(u32::from(view.init.is_some()));
+    w.int(u32::from(locals.is_some()));
+    w.int(count(view.blr.max_neighbours)?);
     let c = config;
+    w.begin_split();
     for v in [
         c.q_floor,
         c.r_floor,
@@ -152,67 +340,76 @@ pub fn encode<S: TableSink>(
         view.blr.nu0,
         view.blr.kappa,
     ] {
-        sink.real(v);
+        w.real(v);
     }
-    encode_gp(&view.transition, sink)?;
-    encode_gp(&view.sensor, sink)?;
+    w.end_split()?;
+    encode_gp(&view.transition, split_factors[0], w)?;
+    encode_gp(&view.sensor, split_factors[1], w)?;
     if let Some((t, s)) = locals {
-        encode_local(&t, sink)?;
-        encode_local(&s, sink)?;
+        encode_local(&t, w)?;
+        encode_local(&s, w)?;
     }
     if let Some(init) = view.init {
-        sink.int(count(init.pairs().len())?);
-        sink.int(count(init.neighbours())?);
-        sink.real(init.var_floor());
+        w.int(count(init.pairs().len())?);
+        w.int(count(init.neighbours())?);
+        w.begin_split();
+        w.real(init.var_floor());
+        w.end_split()?;
         for p in init.pairs() {
-            sink.real(p[0]);
-            sink.real(p[1]);
+            w.real(p[0]);
+            w.real(p[1]);
         }
     }
-    sink.int(count(view.plays.radii().len())?);
+    w.begin_split();
+    w.int(count(view.plays.radii().len())?);
     for &r in view.plays.radii() {
-        sink.real(r);
+        w.real(r);
     }
-    sink.int(count(view.plays.lags().len())?);
+    w.int(count(view.plays.lags().len())?);
     for &a in view.plays.lags() {
-        sink.real(a);
+        w.real(a);
     }
-    sink.int(END);
+    w.end_split()?;
+    w.int(END);
     Ok(())
 }
 
-fn encode_gp<S: TableSink>(gp: &GpView<'_>, sink: &mut S) -> Result<(), CoreError> {
+fn encode_gp<S: TableSink>(
+    gp: &GpView<'_>,
+    split_factor: bool,
+    w: &mut Writer<'_, S>,
+) -> Result<(), CoreError> {
     let p = gp.parts();
     let spec = *p.kernel.spec();
-    sink.int(match spec.profile {
+    w.int(match spec.profile {
         Profile::SquaredExponential => 0,
         Profile::Matern52 => 1,
     });
-    sink.int(match spec.metric {
+    w.int(match spec.metric {
         Metric::Isotropic => 0,
         Metric::Ard => 1,
         Metric::Mahalanobis => 2,
     });
-    sink.int(count(spec.dim)?);
-    sink.int(count(spec.warp_units)?);
+    w.int(count(spec.dim)?);
+    w.int(count(spec.warp_units)?);
     match spec.direction {
         Some([a, b]) => {
-            sink.int(count(a)?);
-            sink.int(count(b)?);
+            w.int(count(a)?);
+            w.int(count(b)?);
         }
         None => {
-            sink.int(NONE);
-            sink.int(NONE);
+            w.int(NONE);
+            w.int(NONE);
         }
     }
-    sink.int(count(gp.len())?);
-    sink.int(u32::from(gp.is_sparse()));
-    sink.int(match gp.mean_input() {
+    w.int(count(gp.len())?);
+    w.int(u32::from(gp.is_sparse()));
+    w.int(match gp.mean_input() {
         Some(j) => count(j)?,
         None => NONE,
     });
-    sink.int(count(p.kernel.whiten().len())?);
-    sink.int(count(p.linear.len())?);
+    w.int(count(p.kernel.whiten().len())?);
+    w.int(count(p.linear.len())?);
     let factor = match p.variance {
         Variance::Exact { chol_packed } => chol_packed,
         Variance::Sparse { variance_factor } => variance_factor,
@@ -228,29 +425,34 @@ fn encode_gp<S: TableSink>(gp: &GpView<'_>, sink: &mut S) -> Result<(), CoreErro
         p.features,
         p.directions,
     ];
+    w.begin_split();
     for v in arrays.iter().flat_map(|s| s.iter()) {
-        sink.real(*v);
+        w.real(*v);
     }
+    w.end_split()?;
     // The mean weights as an f32-representable high part and the rest: their sum is the weight
     // exactly in f64, and to about 48 bits once both are rounded to f32 (see
     // `GpParts::alpha_lo`).
     let weight = |i: usize| at(p.alpha, i) + at(p.alpha_lo, i);
     for i in 0..p.alpha.len() {
-        sink.real(split_f32(weight(i)).0);
+        w.real(split_f32(weight(i)).0);
     }
     for i in 0..p.alpha.len() {
-        sink.real(split_f32(weight(i)).1);
+        w.real(split_f32(weight(i)).1);
+    }
+    if split_factor {
+        w.begin_split();
     }
     for v in factor {
-        sink.real(*v);
+        w.real(*v);
     }
-    Ok(())
+    w.end_split()
 }
 
 /// `v` as `(hi, lo)`: `hi` the nearest `f32` value (as `f64`) and `lo = v - hi`, exact in
 /// `f64`, so that `hi + lo == v`; `(v, 0)` where `v` is outside `f32`'s range (the `f32`
 /// export then refuses it, as any such real).
-fn split_f32(v: f64) -> (f64, f64) {
+pub fn split_f32(v: f64) -> (f64, f64) {
     // `as` rounds to the nearest `f32` (and saturates to infinity outside its range).
     #[allow(clippy::cast_possible_truncation)]
     let hi = f64::from(v as f32);
@@ -261,22 +463,28 @@ fn split_f32(v: f64) -> (f64, f64) {
     }
 }
 
-fn encode_local<S: TableSink>(nb: &Neighbourhood<'_>, sink: &mut S) -> Result<(), CoreError> {
+fn encode_local<S: TableSink>(
+    nb: &Neighbourhood<'_>,
+    w: &mut Writer<'_, S>,
+) -> Result<(), CoreError> {
     let p = nb.parts();
-    sink.int(count(nb.dim())?);
-    sink.int(count(p.targets.len())?);
-    sink.int(count(p.cell_keys.len())?);
+    w.int(count(nb.dim())?);
+    w.int(count(p.targets.len())?);
+    w.int(count(p.cell_keys.len())?);
     for &s in p.cell_start {
-        sink.int(s);
+        w.int(s);
     }
     for &k in p.cell_keys {
-        sink.key(k);
+        w.key(k);
     }
-    let arrays: [&[f64]; 5] = [p.inputs, p.targets, p.origin, p.half_window, p.input_var];
-    for v in arrays.iter().flat_map(|s| s.iter()) {
-        sink.real(*v);
+    for v in p.inputs.iter().chain(p.targets) {
+        w.real(*v);
     }
-    Ok(())
+    w.begin_split();
+    for v in p.origin.iter().chain(p.half_window).chain(p.input_var) {
+        w.real(*v);
+    }
+    w.end_split()
 }
 
 /// A cursor over the three arrays; every read is checked.
@@ -329,6 +537,47 @@ impl<'a> Reader<'a> {
     }
 }
 
+impl<'a> Reader<'a> {
+    /// Reads the magic number and the version; fails unless they are hbn tables of a
+    /// readable version.
+    fn header(&mut self) -> Result<u32, CoreError> {
+        if self.int()? != MAGIC {
+            return Err(CoreError::InvalidSpec(
+                "not hbn model tables (the magic number differs)",
+            ));
+        }
+        let version = self.int()?;
+        if !(OLDEST_VERSION..=VERSION).contains(&version) {
+            return Err(CoreError::InvalidSpec(
+                "model tables of another format version: export the model again",
+            ));
+        }
+        Ok(version)
+    }
+
+    /// The split ranges as `(start, len)` pairs (version 6 on), checked to be increasing and
+    /// apart.
+    fn split_pairs(&mut self, version: u32) -> Result<&'a [[u32; 2]], CoreError> {
+        if version < 6 {
+            return Ok(&[]);
+        }
+        let n = self.size()?;
+        if n > MAX_SPLIT_RANGES {
+            return Err(TRUNCATED);
+        }
+        let (pairs, _) = self.ints(mul(n, 2)?)?.as_chunks::<2>();
+        let mut end = 0u64;
+        for &[start, len] in pairs {
+            let (start, len) = (u64::from(start), u64::from(len));
+            if start < end || len == 0 {
+                return Err(TRUNCATED);
+            }
+            end = start + len;
+        }
+        Ok(pairs)
+    }
+}
+
 fn mul(a: usize, b: usize) -> Result<usize, CoreError> {
     a.checked_mul(b).ok_or(TRUNCATED)
 }
@@ -346,15 +595,8 @@ pub fn scratch_len(layout: &[u32]) -> Result<usize, CoreError> {
         keys: &[],
         reals: &[],
     };
-    if r.int()? != MAGIC {
-        return Err(CoreError::InvalidSpec("not hbn model tables"));
-    }
-    let version = r.int()?;
-    if !(OLDEST_VERSION..=VERSION).contains(&version) {
-        return Err(CoreError::InvalidSpec(
-            "not hbn model tables of this format version",
-        ));
-    }
+    let version = r.header()?;
+    r.split_pairs(version)?;
     r.ints(4)?;
     let mut len = 0;
     // The two GPs' integers are adjacent: profile, metric, dim, warp units, direction (2),
@@ -379,16 +621,11 @@ impl<'a> Tables<'a> {
             keys: self.keys,
             reals: self.reals,
         };
-        if r.int()? != MAGIC {
-            return Err(CoreError::InvalidSpec(
-                "not hbn model tables (the magic number differs)",
-            ));
-        }
-        let version = r.int()?;
-        if !(OLDEST_VERSION..=VERSION).contains(&version) {
-            return Err(CoreError::InvalidSpec(
-                "model tables of another format version: export the model again",
-            ));
+        let version = r.header()?;
+        let split = r.split_pairs(version)?;
+        let split = SplitRanges { pairs: split };
+        if split.iter().any(|range| range.end > self.reals.len()) {
+            return Err(TRUNCATED);
         }
         let mode = match r.int()? {
             0 => Mode::Ekf,
@@ -602,4 +839,54 @@ fn read_local<'a>(r: &mut Reader<'a>) -> Result<Neighbourhood<'a>, CoreError> {
             input_var,
         },
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn layout(pairs: &[u32]) -> [u32; 16] {
+        let mut l = [0; 16];
+        l[0] = MAGIC;
+        l[1] = VERSION;
+        l[2] = (pairs.len() / 2) as u32;
+        l[3..3 + pairs.len()].copy_from_slice(pairs);
+        l
+    }
+
+    /// `widen` adds the low parts (after the widened values) to the values of the split
+    /// ranges, in order, and leaves the others as rounded.
+    #[test]
+    fn widen_adds_the_low_parts_of_the_split_ranges() {
+        let l = layout(&[0, 2, 3, 1]);
+        assert_eq!(split_ranges(&l).unwrap().total(), 3);
+        let reals = [1.0f32, 2.0, 3.0, 4.0, 5.0, 0.25, 0.5, 0.125];
+        assert_eq!(widen_scratch(&l, reals.len()).unwrap(), 5);
+        let mut out = [0.0; 8];
+        let wide = widen(&l, &reals, &mut out).unwrap();
+        assert_eq!(wide, [1.25, 2.5, 3.0, 4.125, 5.0]);
+        // Too little memory, and too few reals for the low parts.
+        assert!(widen(&l, &reals, &mut [0.0; 4]).is_err());
+        assert!(widen(&l, &reals[..2], &mut out).is_err());
+        // A range past the widened values.
+        assert!(widen(&layout(&[5, 2]), &reals, &mut out).is_err());
+    }
+
+    /// Ranges must be increasing, apart and non-empty, and at most `MAX_SPLIT_RANGES`; tables
+    /// of version 5 have none.
+    #[test]
+    fn bad_split_ranges_are_rejected() {
+        assert!(split_ranges(&layout(&[0, 2, 1, 1])).is_err());
+        assert!(split_ranges(&layout(&[3, 1, 0, 1])).is_err());
+        assert!(split_ranges(&layout(&[0, 0])).is_err());
+        let mut many = layout(&[]);
+        many[2] = MAX_SPLIT_RANGES as u32 + 1;
+        assert!(split_ranges(&many).is_err());
+        let mut v5 = layout(&[0, 2]);
+        v5[1] = 5;
+        assert_eq!(split_ranges(&v5).unwrap().total(), 0);
+        let mut foreign = layout(&[]);
+        foreign[0] = 7;
+        assert!(split_ranges(&foreign).is_err());
+    }
 }

@@ -37,6 +37,8 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use hbn_core::gp::{GpView, Variance};
+use hbn_core::kernel::profile_and_slope;
 use hbn_core::tables::{self, TableSink, Tables};
 use hbn_core::{CoreError, EkfConfig, Estimator, HbnView, InitPrior, Mode};
 use hbn_model::{HbnModel, ModelError};
@@ -105,6 +107,9 @@ pub enum ExportError {
         #[source]
         source: CoreError,
     },
+    /// The tables' layout does not read (tables built by hand, not by [`ModelTables::encode`]).
+    #[error("the model tables' layout is corrupt: {0}")]
+    Layout(#[source] CoreError),
     /// A real number does not fit in `f32` (it would become infinite).
     #[error("the model holds {value:e}, which f32 cannot represent: export with --precision f64")]
     F32Range {
@@ -154,11 +159,119 @@ impl TableSink for ModelTables {
     }
 }
 
+/// Largest change of a GP's latent variance, as a fraction of what the filter adds it to,
+/// that rounding the GP's variance factor to `f32` may cause before the tables keep the factor
+/// in two parts ([`f32_variance_error`], [`factors_in_two_parts`]).
+pub const F32_VARIANCE_TOLERANCE: f64 = 0.01;
+
+/// Most probes [`f32_variance_error`] takes at a GP's support (inducing) points.
+const VARIANCE_PROBES: usize = 64;
+
+/// How far rounding `gp`'s variance factor to `f32` moves its latent variance where the filter
+/// uses it: the largest `|var_f32 - var_f64| / (var_f64 + noise)` over probes at up to 64 of
+/// its support (inducing) points and midway between consecutive ones, latent variances
+/// clamped at 0 as the GP clamps them, with the GP's noise variance as `noise` where the
+/// filter adds it (`with_noise`), else 0. The variance `k(x,x) - |F k|^2` cancels in as many
+/// digits as the signal variance exceeds the posterior's, so a GP with a large signal variance
+/// (a kernel on a near-linear ridge) can lose there all that `f32` keeps (an error of 1).
+pub fn f32_variance_error(gp: &GpView<'_>, with_noise: bool) -> f64 {
+    let p = gp.parts();
+    let (n, d) = (gp.len(), gp.dim());
+    let spec = *p.kernel.spec();
+    let sf2 = p.kernel.signal_variance();
+    let (factor, exact) = match p.variance {
+        Variance::Exact { chol_packed } => (chol_packed, true),
+        Variance::Sparse { variance_factor } => (variance_factor, false),
+    };
+    let rounded: Vec<f64> = factor.iter().map(|&v| f64::from(v as f32)).collect();
+    let feature = |i: usize| &p.features[i * d..(i + 1) * d];
+    let sign = |i: usize| p.directions.get(i).copied().unwrap_or(1.0);
+    // |F k|^2: `L^{-1} k` by forward substitution (exact), `R k` (sparse); rows packed.
+    let quad = |f: &[f64], k: &[f64]| -> f64 {
+        let mut w = vec![0.0; n];
+        for i in 0..n {
+            let row = &f[i * (i + 1) / 2..][..=i];
+            w[i] = if exact {
+                let dot: f64 = row[..i].iter().zip(&w[..i]).map(|(a, b)| a * b).sum();
+                (k[i] - dot) / row[i]
+            } else {
+                row.iter().zip(k).map(|(a, b)| a * b).sum()
+            };
+        }
+        w.iter().map(|v| v * v).sum()
+    };
+    let mut worst = 0.0f64;
+    let mut k = vec![0.0; n];
+    let step = n.div_ceil(VARIANCE_PROBES).max(1);
+    for i in (0..n).step_by(step) {
+        let next = (i + step).min(n - 1);
+        for (probe, g) in [
+            (feature(i).to_vec(), sign(i)),
+            (
+                feature(i)
+                    .iter()
+                    .zip(feature(next))
+                    .map(|(a, b)| 0.5 * (a + b))
+                    .collect(),
+                sign(i),
+            ),
+        ] {
+            for (j, kj) in k.iter_mut().enumerate() {
+                let r2: f64 = probe
+                    .iter()
+                    .zip(feature(j))
+                    .map(|(a, b)| (a - b) * (a - b))
+                    .sum();
+                *kj =
+                    sf2 * profile_and_slope(spec.profile, r2).0 * spec.direction_factor(g, sign(j));
+            }
+            // The latent variance, clamped at 0 as the GP does.
+            let kss = sf2 * spec.direction_factor(g, g);
+            let var = (kss - quad(factor, &k)).max(0.0);
+            let var32 = (kss - quad(&rounded, &k)).max(0.0);
+            let noise = if with_noise { p.noise_var } else { 0.0 };
+            let err = (var32 - var).abs() / (var + noise);
+            // 0 / 0 (no latent variance and no noise): nothing to lose.
+            if !err.is_nan() {
+                worst = worst.max(err);
+            }
+        }
+    }
+    worst
+}
+
+/// Which variance factors (transition, sensor) the tables keep in two parts: those whose
+/// latent variance rounding to `f32` would move by more than [`F32_VARIANCE_TOLERANCE`] of
+/// what the filter adds it to ([`f32_variance_error`]). The transition's variance enters the
+/// process noise with its noise variance; the sensor's enters the process noise alone.
+pub fn factors_in_two_parts(view: &HbnView<'_>) -> [bool; 2] {
+    f32_variance_errors(view).map(|err| err > F32_VARIANCE_TOLERANCE)
+}
+
+/// [`f32_variance_error`] of the transition GP (with its noise) and of the sensor GP (without).
+pub fn f32_variance_errors(view: &HbnView<'_>) -> [f64; 2] {
+    [
+        f32_variance_error(&view.transition, true),
+        f32_variance_error(&view.sensor, false),
+    ]
+}
+
 impl ModelTables {
-    /// Encodes `view` with `config` ([`tables::encode`]).
+    /// Encodes `view` with `config` ([`tables::encode_with`]), the variance factors that
+    /// [`factors_in_two_parts`] names in the split ranges.
     pub fn encode(view: &HbnView<'_>, config: &EkfConfig) -> Result<Self, CoreError> {
+        Self::encode_with(view, config, factors_in_two_parts(view))
+    }
+
+    /// Encodes `view` with `config`, the variance factors named by `split_factors`
+    /// (transition, sensor) in the split ranges ([`tables::encode_with`]).
+    pub fn encode_with(
+        view: &HbnView<'_>,
+        config: &EkfConfig,
+        split_factors: [bool; 2],
+    ) -> Result<Self, CoreError> {
         let mut t = Self::default();
-        tables::encode(view, config, &mut t)?;
+        tables::encode_with(view, config, split_factors, &mut t)?;
         Ok(t)
     }
 
@@ -171,24 +284,40 @@ impl ModelTables {
         }
     }
 
-    /// The reals rounded to `f32`; fails on a value outside `f32`'s range.
+    /// The reals as an `f32` export stores them: each rounded to `f32`, then the low parts
+    /// (`v - f32(v)`, rounded) of the reals in the split ranges ([`tables::split_ranges`]), in
+    /// order. Fails on a value outside `f32`'s range.
     pub fn reals_f32(&self) -> Result<Vec<f32>, ExportError> {
-        self.reals
-            .iter()
-            .map(|&v| {
-                let s = v as f32;
-                if s.is_finite() {
-                    Ok(s)
-                } else {
-                    Err(ExportError::F32Range { value: v })
-                }
-            })
-            .collect()
+        let split = tables::split_ranges(&self.layout).map_err(ExportError::Layout)?;
+        let to_f32 = |v: f64| {
+            let s = v as f32;
+            if s.is_finite() {
+                Ok(s)
+            } else {
+                Err(ExportError::F32Range { value: v })
+            }
+        };
+        let high = self.reals.iter().map(|&v| to_f32(v));
+        let low = split.iter().flat_map(|range| {
+            self.reals
+                .get(range)
+                .unwrap_or_default()
+                .iter()
+                .map(|&v| to_f32(tables::split_f32(v).1))
+        });
+        high.chain(low).collect()
     }
 
-    /// Bytes of the three arrays with reals stored at `precision`.
+    /// Bytes of the three arrays with reals stored at `precision` (an `f32` export holds the
+    /// low parts of the split ranges too).
     pub fn bytes(&self, precision: Precision) -> usize {
-        4 * self.layout.len() + 8 * self.keys.len() + precision.bytes() * self.reals.len()
+        let reals = match precision {
+            Precision::F64 => self.reals.len(),
+            Precision::F32 => {
+                self.reals.len() + tables::split_ranges(&self.layout).map_or(0, |s| s.total())
+            }
+        };
+        4 * self.layout.len() + 8 * self.keys.len() + precision.bytes() * reals
     }
 }
 
@@ -197,15 +326,16 @@ impl ModelTables {
 pub fn model_tables(model: &HbnModel, mode: Mode) -> Result<ModelTables, ExportError> {
     let view = model.view()?;
     let config = model.ekf_config(mode);
-    encode(&view, &config, Precision::F64)
+    encode(&view, &config, factors_in_two_parts(&view), Precision::F64)
 }
 
 fn encode(
     view: &HbnView<'_>,
     config: &EkfConfig,
+    split_factors: [bool; 2],
     precision: Precision,
 ) -> Result<ModelTables, ExportError> {
-    ModelTables::encode(view, config).map_err(|source| ExportError::Tables {
+    ModelTables::encode_with(view, config, split_factors).map_err(|source| ExportError::Tables {
         mode: config.mode,
         precision: precision.name(),
         source,
@@ -231,8 +361,8 @@ fn checked(
         }
         Precision::F32 => {
             let r32 = t.reals_f32()?;
-            let mut wide = vec![0.0; tables::widen_scratch(r32.len())];
-            let reals = tables::widen(&r32, &mut wide).map_err(err)?;
+            let mut wide = vec![0.0; tables::widen_scratch(&t.layout, r32.len()).map_err(err)?];
+            let reals = tables::widen(&t.layout, &r32, &mut wide).map_err(err)?;
             Tables {
                 layout: &t.layout,
                 keys: &t.keys,
@@ -336,14 +466,17 @@ pub fn size_report(
     })?;
     let scratch_bytes = 8 * Estimator::scratch_len(&view);
     let bare = HbnView { init: None, ..view };
+    let split = factors_in_two_parts(&view);
     Mode::ALL
         .into_iter()
         .map(|mode| {
             let config = model.ekf_config(mode);
-            let full = encode(&view, &config, precision)?.bytes(precision);
-            let without_init = encode(&bare, &config, precision)?.bytes(precision);
-            let gp_only = encode(&bare, &model.ekf_config(Mode::Ekf), precision)?.bytes(precision);
-            let reals = encode(&view, &config, precision)?.reals.len();
+            let tables = encode(&view, &config, split, precision)?;
+            let full = tables.bytes(precision);
+            let without_init = encode(&bare, &config, split, precision)?.bytes(precision);
+            let gp_config = model.ekf_config(Mode::Ekf);
+            let gp_only = encode(&bare, &gp_config, split, precision)?.bytes(precision);
+            let reals = tables.reals.len();
             Ok(ModeSize {
                 mode,
                 precision,
@@ -353,7 +486,8 @@ pub fn size_report(
                 model_bytes: full,
                 widen_bytes: match precision {
                     Precision::F64 => 0,
-                    Precision::F32 => 8 * tables::widen_scratch(reals),
+                    // One widened value per real of the f64 tables.
+                    Precision::F32 => 8 * reals,
                 },
                 scratch_bytes,
             })
@@ -422,7 +556,7 @@ pub fn export(
         precision: precision.name(),
         source,
     })?;
-    let t = encode(&view, &config, precision)?;
+    let t = encode(&view, &config, factors_in_two_parts(&view), precision)?;
     let r32 = checked(&t, mode, precision)?;
     let scratch = tables::scratch_len(&t.layout).map_err(|source| ExportError::Tables {
         mode,
@@ -436,8 +570,10 @@ pub fn export(
         scratch,
         widen: match precision {
             Precision::F64 => 0,
-            Precision::F32 => tables::widen_scratch(t.reals.len()),
+            // One widened value per real of the f64 tables.
+            Precision::F32 => t.reals.len(),
         },
+        reals: r32.as_ref().map_or(t.reals.len(), Vec::len),
         kind: [view.transition.is_sparse(), view.sensor.is_sparse()],
         points: [view.transition.len(), view.sensor.len()],
         bytes: t.bytes(precision),
@@ -466,6 +602,8 @@ struct Info<'a> {
     precision: Precision,
     scratch: usize,
     widen: usize,
+    /// Reals stored (an `f32` export adds the low parts of the split ranges).
+    reals: usize,
     kind: [bool; 2],
     points: [usize; 2],
     bytes: usize,
@@ -559,10 +697,10 @@ pub fn hbn_model(
         layout = list(&t.layout, 8, "    ", |v| v.to_string()),
         nk = t.keys.len(),
         keys = list(&t.keys, 4, "    ", |v| v.to_string()),
-        nr = t.reals.len(),
+        nr = info.reals,
         body = match r32 {
             Some(_) =>
-                "    let reals = hbn_core::tables::widen(&HBN_REALS, work)?;
+                "    let reals = hbn_core::tables::widen(&HBN_LAYOUT, &HBN_REALS, work)?;
     hbn_core::tables::Tables {
         layout: &HBN_LAYOUT,
         keys: &HBN_KEYS,
@@ -635,7 +773,7 @@ extern const HbnModelData hbn_model;
         bits = 8 * info.precision.bytes(),
         nl = t.layout.len(),
         nk = t.keys.len(),
-        nr = t.reals.len(),
+        nr = info.reals,
         work = info.widen + info.scratch,
     )
 }
@@ -689,7 +827,7 @@ const HbnModelData hbn_model = {{
         layout = list(&t.layout, 8, "    ", |v| format!("{v}u")),
         nk_alloc = t.keys.len().max(1),
         nk = t.keys.len(),
-        nr = t.reals.len(),
+        nr = info.reals,
     )
 }
 
@@ -738,8 +876,8 @@ mod tests {
     /// The f32 tables of `t` as a firmware reads them: rounded to f32, widened back to f64.
     fn widened(t: &ModelTables) -> Vec<f64> {
         let r32 = t.reals_f32().unwrap();
-        let mut wide = vec![0.0; r32.len()];
-        tables::widen(&r32, &mut wide).unwrap();
+        let mut wide = vec![0.0; tables::widen_scratch(&t.layout, r32.len()).unwrap()];
+        tables::widen(&t.layout, &r32, &mut wide).unwrap();
         wide
     }
 
@@ -804,31 +942,39 @@ mod tests {
         }
     }
 
-    /// Tables of format versions 3 (before the linear mean) and 4 (before the lags) still
-    /// read (firmware built then holds them): the same tables with the lags' count removed
-    /// (version 4), and each GP's linear-slope count too (version 3), give the same view,
-    /// scratch size and steps as the current tables.
+    /// Tables of format versions 3 (before the linear mean), 4 (before the lags) and 5 (before
+    /// the split ranges) still read (firmware built then holds them): the same tables with
+    /// the split ranges removed (version 5), the lags' count too (version 4), and each GP's
+    /// linear-slope count too (version 3), give the same view, scratch size and steps as the
+    /// current tables.
     #[test]
-    fn version_3_and_4_tables_still_read() {
+    fn version_3_4_and_5_tables_still_read() {
         let m = model(Some(16));
         let t = model_tables(&m, Mode::Ekf).unwrap();
         assert_eq!(t.layout[1], tables::VERSION);
+        // Version 6 lists the split ranges after the version: their count, then two values
+        // each.
+        let ranges = t.layout[2] as usize;
+        assert!(ranges >= 3, "settings and two GPs: {ranges}");
+        let mut v5 = t.layout.clone();
+        v5.drain(2..3 + 2 * ranges);
+        v5[1] = 5;
         // The layout ends with the plays' count, (version 5) the lags' count, here 0, and END.
-        let n = t.layout.len();
-        assert_eq!(t.layout[n - 2], 0);
-        let mut v4 = t.layout.clone();
+        let n = v5.len();
+        assert_eq!(v5[n - 2], 0);
+        let mut v4 = v5.clone();
         v4.remove(n - 2);
         v4[1] = 4;
         // Layout: magic, version, mode, has_init, has_local, max_neighbours, then per GP
         // profile, metric, dim, warp units, direction (2), n, sparse, mean input, whitening
         // length and (version 4) the slope count, here 0.
         let (first, second) = (6 + 10, 6 + 11 + 10);
-        assert_eq!((t.layout[first], t.layout[second]), (0, 0));
+        assert_eq!((v4[first], v4[second]), (0, 0));
         let mut v3 = v4.clone();
         v3.remove(second);
         v3.remove(first);
         v3[1] = 3;
-        for old in [v4, v3] {
+        for old in [v5, v4, v3] {
             check_old_tables(&t, &old);
         }
     }
@@ -893,6 +1039,11 @@ mod tests {
         }
     }
 
+    /// A sparse model (m = 32) trained on 1200 samples, with each kernel: the step on its f32
+    /// tables stays within 2% of the range of x of the f64 step (measured: 1e-7 of it). With
+    /// the squared exponential the sensor GP rides a near-linear ridge (signal variance e^10
+    /// and more); with every real rounded to f32 its estimate was off by 13-23% of the range,
+    /// 3% with the hyperparameters and inputs in two parts but the variance factors in one.
     #[test]
     fn f32_tables_stay_close() {
         let cfg = SimConfig {
@@ -900,37 +1051,91 @@ mod tests {
             ..SimConfig::new(SystemKind::BoucWen)
         };
         let log = simulate_random(&cfg, 1200).unwrap();
-        let params = HbnParams {
-            n_inducing: Some(32),
-            n_starts: 1,
-            max_iters: 60,
-            ..HbnParams::default()
-        };
-        let m = HbnModel::fit(&[Sequence::new(&log.u, &log.x, &log.y)], &params).unwrap();
         let test = simulate_random(&SimConfig { seed: 9, ..cfg }, 400).unwrap();
         let span = test.x.iter().cloned().fold(f64::MIN, f64::max)
             - test.x.iter().cloned().fold(f64::MAX, f64::min);
-        for mode in Mode::ALL {
-            let base = m.estimate(&test.u, &test.y, mode).unwrap();
-            let t = model_tables(&m, mode).unwrap();
-            let wide = widened(&t);
-            let tm = Tables {
-                reals: &wide,
-                ..t.tables()
+        for kernel in ["matern52", "se-ard"] {
+            let kernel: hbn_model::KernelChoice = kernel.parse().unwrap();
+            let params = HbnParams {
+                n_inducing: Some(32),
+                n_starts: 1,
+                max_iters: 60,
+                transition_kernel: kernel,
+                sensor_kernel: kernel,
+                ..HbnParams::default()
+            };
+            let m = HbnModel::fit(&[Sequence::new(&log.u, &log.x, &log.y)], &params).unwrap();
+            let view = m.view().unwrap();
+            let factors = [view.transition.len(), view.sensor.len()].map(|n| n * (n + 1) / 2);
+            for mode in Mode::ALL {
+                let base = m.estimate(&test.u, &test.y, mode).unwrap();
+                let t = model_tables(&m, mode).unwrap();
+                // The factors whose variance f32 would move by more than the tolerance are
+                // in the split ranges; a sparse sensor GP's always is (in one f32 part its
+                // latent variance, a millionth of its signal variance, is lost).
+                let errors = f32_variance_errors(&view);
+                assert!(errors[1] > F32_VARIANCE_TOLERANCE, "{errors:?}");
+                let mut plain = ModelTables::default();
+                tables::encode(&view, &m.ekf_config(mode), &mut plain).unwrap();
+                let split = |t: &ModelTables| tables::split_ranges(&t.layout).unwrap().total();
+                let kept: usize = (0..2)
+                    .filter(|&i| errors[i] > F32_VARIANCE_TOLERANCE)
+                    .map(|i| factors[i])
+                    .sum();
+                assert_eq!(split(&t) - split(&plain), kept, "{errors:?}");
+                let wide = widened(&t);
+                let tm = Tables {
+                    reals: &wide,
+                    ..t.tables()
+                }
+                .model()
+                .unwrap();
+                let mut scratch = vec![0.0; Estimator::scratch_len(&tm.view)];
+                let mut e = Estimator::new(tm.view, tm.config, &mut scratch).unwrap();
+                let worst = test
+                    .u
+                    .iter()
+                    .zip(&test.y)
+                    .enumerate()
+                    .map(|(k, (&u, &y))| (e.step(u, y).x - base.x[k]).abs())
+                    .fold(0.0, f64::max);
+                eprintln!(
+                    "{kernel:?} {mode}: f32 off by {:.2e} of the range",
+                    worst / span
+                );
+                assert!(
+                    worst < 0.02 * span,
+                    "{kernel:?} {mode}: f32 off by {worst} of {span}"
+                );
             }
-            .model()
-            .unwrap();
-            let mut scratch = vec![0.0; Estimator::scratch_len(&tm.view)];
-            let mut e = Estimator::new(tm.view, tm.config, &mut scratch).unwrap();
-            let worst = test
-                .u
-                .iter()
-                .zip(&test.y)
-                .enumerate()
-                .map(|(k, (&u, &y))| (e.step(u, y).x - base.x[k]).abs())
-                .fold(0.0, f64::max);
-            assert!(worst < 0.02 * span, "{mode}: f32 off by {worst} of {span}");
         }
+    }
+
+    /// The split ranges hold each GP's hyperparameters and inputs, and widen back to f64 to
+    /// about 48 bits (one f32 part keeps 24).
+    #[test]
+    fn split_ranges_widen_to_48_bits() {
+        let m = model(Some(16));
+        let t = model_tables(&m, Mode::Ekf).unwrap();
+        let split = tables::split_ranges(&t.layout).unwrap();
+        let features = m.transition().view().unwrap().parts().features.len();
+        assert!(split.total() > 2 * features, "{}", split.total());
+        let wide = widened(&t);
+        let mut inside = 0;
+        for range in split.iter() {
+            for i in range {
+                let (v, w) = (t.reals[i], wide[i]);
+                assert!((v - w).abs() <= 1e-13 * v.abs(), "{i}: {w} vs {v}");
+                inside += 1;
+            }
+        }
+        assert_eq!(inside, split.total());
+        // Outside the ranges a real keeps f32's 24 bits, so the ranges do matter.
+        let rounded = (0..t.reals.len())
+            .filter(|i| !split.iter().any(|r| r.contains(i)))
+            .filter(|&i| wide[i] != t.reals[i])
+            .count();
+        assert!(rounded > 0);
     }
 
     #[test]
@@ -946,7 +1151,21 @@ mod tests {
         let mut long = t.clone();
         long.reals.push(0.0);
         assert!(long.tables().model().is_err());
-        assert!(tables::widen(&[1.0f32; 3], &mut [0.0; 2]).is_err());
+        let r32 = t.reals_f32().unwrap();
+        let mut wide = vec![0.0; t.reals.len()];
+        assert!(tables::widen(&t.layout, &r32, &mut wide[1..]).is_err());
+        // A truncated f32 array does not widen into tables that read.
+        let short = tables::widen(&t.layout, &r32[1..], &mut wide);
+        assert!(
+            short.is_err()
+                || Tables {
+                    reals: short.unwrap(),
+                    ..t.tables()
+                }
+                .model()
+                .is_err()
+        );
+        assert!(tables::widen(&t.layout, &r32[..3], &mut wide).is_err());
     }
 
     #[test]

@@ -165,7 +165,7 @@ unsafe fn work_len(model: *const HbnModelData) -> Result<usize, HbnStatus> {
     let widen = if m.reals_f32.is_null() {
         0
     } else {
-        tables::widen_scratch(m.reals_len)
+        tables::widen_scratch(layout, m.reals_len).map_err(bad_model)?
     };
     scratch.checked_add(widen).ok_or(HbnStatus::BadModel)
 }
@@ -237,9 +237,11 @@ unsafe fn init(
                 // SAFETY: as for the layout.
                 let r32 = unsafe { slice(m.reals_f32, m.reals_len) }?;
                 let (wide, scratch) = work
-                    .split_at_mut_checked(tables::widen_scratch(r32.len()))
+                    .split_at_mut_checked(
+                        tables::widen_scratch(layout, r32.len()).map_err(bad_model)?,
+                    )
                     .ok_or(HbnStatus::WorkTooSmall)?;
-                let wide: &'static [f64] = tables::widen(r32, wide).map_err(bad_model)?;
+                let wide: &'static [f64] = tables::widen(layout, r32, wide).map_err(bad_model)?;
                 (wide, scratch)
             }
             _ => return Err(HbnStatus::BadModel),

@@ -42,7 +42,7 @@ fn c_abi_reproduces_the_model_and_reports_misuse() {
     .unwrap();
     for mode in Mode::ALL {
         let t = model_tables(&m, mode).unwrap();
-        let r32: Vec<f32> = t.reals.iter().map(|&v| v as f32).collect();
+        let r32 = t.reals_f32().unwrap();
         let est = m.estimate(&test.u, &test.y, mode).unwrap();
         for f32_tables in [false, true] {
             let data = HbnModelData {
@@ -60,7 +60,7 @@ fn c_abi_reproduces_the_model_and_reports_misuse() {
                 } else {
                     std::ptr::null()
                 },
-                reals_len: t.reals.len(),
+                reals_len: if f32_tables { r32.len() } else { t.reals.len() },
             };
             let n = unsafe { hbn_work_len(&data) };
             assert!(n > 0);

@@ -76,3 +76,13 @@ pub fn substitute(l: &[f64], k: &[f64], v: &mut [f64]) -> Result<(), CoreError> 
     hbn_core::gp::forward_substitute_packed(l, k, v)?;
     hbn_core::gp::back_substitute_packed(l, v)
 }
+
+/// Widening `f32` tables into work memory (the firmware's initialisation), with any lengths.
+#[no_panic]
+pub fn widen<'w>(
+    layout: &[u32],
+    reals: &[f32],
+    out: &'w mut [f64],
+) -> Result<&'w [f64], CoreError> {
+    hbn_core::tables::widen(layout, reals, out)
+}

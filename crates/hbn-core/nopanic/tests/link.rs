@@ -177,3 +177,19 @@ fn step_links_without_panic_paths_and_stays_finite() {
         hbn_core_nopanic::substitute(&[1.0, 0.0, 1.0, 0.0, 0.0, 1.0], &[1.0; 3], &mut v).is_ok()
     );
 }
+
+/// The widening wrapper links (no panic path) and widens a split range.
+#[test]
+fn widen_links_without_panic_paths() {
+    let layout = [
+        hbn_core::tables::MAGIC,
+        hbn_core::tables::VERSION,
+        1,
+        1,
+        1,
+    ];
+    let mut out = [0.0; 3];
+    let wide = hbn_core_nopanic::widen(&layout, &[1.0, 2.0, 0.5], &mut out).unwrap();
+    assert_eq!(wide, [1.0, 2.5]);
+    assert!(hbn_core_nopanic::widen(&layout, &[1.0], &mut out).is_err());
+}
