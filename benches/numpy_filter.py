@@ -494,7 +494,7 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=2000, help="test samples (default 2000)")
     ap.add_argument("--max-points", type=int, default=500, help="support points per GP (default 500)")
     ap.add_argument("--system", default="duhem", help="simulated system (default duhem)")
-    ap.add_argument("--kernel", default="matern52", help="kernel of both GPs (default matern52, the hbn default)")
+    ap.add_argument("--kernel", default="matern52", help="kernel of both GPs (default matern52; hbn's default chooses per GP by evidence)")
     ap.add_argument("--train-steps", type=int, default=1000, help="training samples (default 1000)")
     ap.add_argument("--model", default=None, help="use this model file instead of training one")
     ap.add_argument("--inducing", type=int, default=None, help="sparse GPs with this many inducing points (default: exact)")

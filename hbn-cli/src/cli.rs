@@ -431,7 +431,8 @@ impl ReadArgs {
      --state /mocap.angle --output /strain.data --out model.hbn\n\n\
      Each log is one trajectory; its signals are resampled to one rate (default: the native rate\n\
      of the input signal in the first log). Kernels: se, se-ard, matern52, mahalanobis, warped\n\
-     (each optionally +dir), thesis; default matern52."
+     (each optionally +dir), thesis; default: each GP chooses between matern52 and se-ard by\n\
+     its evidence (the exact GP's log marginal likelihood)."
 )]
 pub struct TrainArgs {
     /// Training log (repeat for several trajectories).
@@ -449,14 +450,16 @@ pub struct TrainArgs {
     /// Resampling rate (Hz); default: the input's native rate in the first log.
     #[arg(long, allow_negative_numbers = true)]
     pub rate: Option<f64>,
-    /// Kernel of both GPs (default matern52). Several, comma-separated, are chosen among on
-    /// held-out data (model selection; each costs one training).
+    /// Kernel of both GPs. Default: each GP chooses between matern52 and se-ard by its
+    /// evidence (the exact GP's log marginal likelihood); naming a kernel turns that off.
+    /// Several, comma-separated, are chosen among on held-out data (model selection; each
+    /// costs one training).
     #[arg(long, value_parser = parse_kernel, value_delimiter = ',', value_name = "KERNEL[,..]")]
     pub kernel: Vec<KernelChoice>,
-    /// Kernel of the transition GP (overrides --kernel).
+    /// Kernel of the transition GP (overrides --kernel; turns the choice by evidence off).
     #[arg(long, value_parser = parse_kernel)]
     pub transition_kernel: Option<KernelChoice>,
-    /// Kernel of the sensor GP (overrides --kernel).
+    /// Kernel of the sensor GP (overrides --kernel; turns the choice by evidence off).
     #[arg(long, value_parser = parse_kernel)]
     pub sensor_kernel: Option<KernelChoice>,
     /// Inducing points per GP for sparse GPs trained on every sample, or `exact`: exact GPs on

@@ -283,6 +283,7 @@ pub fn model_text(model: &HbnModel, file: &std::path::Path) -> String {
         ));
     }
     t.push_str("\nfilter\n");
+    t.push_str(&crate::report::evidence_line(model, true));
     t.push_str(&crate::report::validation_table(model));
     match &s.observability {
         Some(o) => t.push_str(&format!(

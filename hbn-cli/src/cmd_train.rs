@@ -42,6 +42,15 @@ impl TrainArgs {
             lags,
             linear_mean: self.linear_mean,
             max_signal_variance: self.max_signal_variance.0,
+            // A kernel named on the command line is used as named.
+            kernel_evidence: if self.kernel.is_empty()
+                && self.transition_kernel.is_none()
+                && self.sensor_kernel.is_none()
+            {
+                d.kernel_evidence
+            } else {
+                Vec::new()
+            },
             ..d
         }
     }
@@ -133,6 +142,7 @@ pub fn summary_text(
         s.seconds,
         default_mode_line(model),
     );
+    text.push_str(&report::evidence_line(model, verbose));
     if verbose {
         text.push_str(&format!("  {} rows per GP\n", s.rows));
         for role in GpRole::ALL {

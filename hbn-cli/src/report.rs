@@ -209,6 +209,46 @@ impl Drop for Renderer {
     }
 }
 
+/// Each GP's kernel chosen by evidence (`hbn train`, `hbn inspect`): the chosen kernels, and
+/// with `details` every kernel's LML; empty when the kernels were set.
+pub fn evidence_line(model: &hbn_model::HbnModel, details: bool) -> String {
+    let rows = &model.summary().kernel_evidence;
+    if rows.is_empty() {
+        return String::new();
+    }
+    let lml = |l: Option<f64>| l.map_or("failed".to_owned(), |l| format!("{l:.1}"));
+    let per_gp: Vec<String> = hbn_model::GpRole::ALL
+        .iter()
+        .map(|&role| {
+            let of: Vec<_> = rows.iter().filter(|r| r.gp == role).collect();
+            let chosen = of.iter().find(|r| r.chosen);
+            let name = chosen.map_or("none".to_owned(), |r| r.kernel.to_string());
+            if !details {
+                return format!("{} {name}", role.name());
+            }
+            let others: Vec<String> = of
+                .iter()
+                .filter(|r| !r.chosen)
+                .map(|r| format!("{} {}", r.kernel, lml(r.lml)))
+                .collect();
+            format!(
+                "{} {name} (LML {}), against {}",
+                role.name(),
+                lml(chosen.and_then(|r| r.lml)),
+                others.join(", ")
+            )
+        })
+        .collect();
+    if details {
+        format!(
+            "  kernels chosen by evidence (the exact GP's LML): {}\n",
+            per_gp.join("; ")
+        )
+    } else {
+        format!("  kernels chosen by evidence: {}\n", per_gp.join(", "))
+    }
+}
+
 /// The validation table of filter-aware training (`hbn train`, `hbn inspect`): per mode the
 /// learned noise scales and the held-out scores before and after; empty without tuning.
 pub fn validation_table(model: &hbn_model::HbnModel) -> String {

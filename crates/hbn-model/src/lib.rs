@@ -39,6 +39,7 @@
 pub mod dataset;
 mod error;
 mod estimate;
+mod evidence;
 pub mod explore;
 mod filter;
 mod local;
@@ -50,6 +51,7 @@ pub mod tuning;
 pub use dataset::{Dataset, MIN_SAMPLES, Sequence, Table, build_dataset};
 pub use error::{DataError, ModelError, ModelFileProblem, Signal};
 pub use estimate::{Estimate, NEAR_UNOBSERVABLE, OBSERVABILITY_WINDOW, ObservabilitySummary};
+pub use evidence::KernelEvidence;
 pub use filter::{Filter, FilterOutput};
 /// A GP's prior mean ([`HbnParams::linear_mean`]).
 pub use hbn_gp::MeanFunction;
@@ -59,8 +61,8 @@ pub use model::{
     SignalStats, StartSummary, TrainingSummary,
 };
 pub use params::{
-    Candidate, CheckedHbnParams, ConfigError, DEFAULT_INDUCING, DEFAULT_LAGS, DEFAULT_MEMORY,
-    HbnParams, Increments, KernelChoice, KernelFamily, LinearMean, Param, ParamValue, Problem,
-    Selection, SignalInfo, Signals, UnknownKernel,
+    Candidate, CheckedHbnParams, ConfigError, DEFAULT_EVIDENCE_KERNELS, DEFAULT_INDUCING,
+    DEFAULT_LAGS, DEFAULT_MEMORY, HbnParams, Increments, KernelChoice, KernelFamily, LinearMean,
+    Param, ParamValue, Problem, Selection, SignalInfo, Signals, UnknownKernel,
 };
 pub use tuning::{CandidateRow, FilterTuning, NoiseScales, ValidationReport};

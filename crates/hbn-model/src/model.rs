@@ -5,6 +5,7 @@ use crate::dataset::{
     SENSOR_DIM, SENSOR_DIRECTION, Sequence, TRANSITION_DIM, TRANSITION_DIRECTION, build_dataset,
 };
 use crate::error::ModelFileProblem;
+use crate::evidence::{KernelEvidence, Prefit};
 use crate::local::LocalData;
 use crate::params::{CheckedHbnParams, HbnParams, Signals};
 use crate::tuning::FilterTuning;
@@ -134,6 +135,10 @@ pub struct TrainingSummary {
     /// too little data, or a model file from before tuning existed).
     #[serde(default)]
     pub validation: Option<crate::tuning::ValidationReport>,
+    /// Each GP's evidence under every kernel it chose among ([`HbnParams::kernel_evidence`];
+    /// empty when the kernels were set, or in files written before the choice existed).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub kernel_evidence: Vec<KernelEvidence>,
 }
 
 /// The trained Hysteresis Bayesian Network.
@@ -252,12 +257,28 @@ impl HbnModel {
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
         let t0 = Instant::now();
+        let chosen = crate::evidence::choose(trajectories, params)?;
+        let mut model = Self::fit_selected(trajectories, &chosen.params, &chosen.prefit, observe)?;
+        model.summary.kernel_evidence = chosen.rows;
+        model.summary.seconds = t0.elapsed().as_secs_f64();
+        Ok(model)
+    }
+
+    /// [`Self::fit_checked`] once the kernels are chosen: the primary configuration, or model
+    /// selection among the candidates. `prefit` holds the GPs the kernel choice fitted.
+    fn fit_selected(
+        trajectories: &[Sequence<'_>],
+        params: &CheckedHbnParams,
+        prefit: &[Prefit],
+        observe: &mut dyn FnMut(GpRole, &FitProgress),
+    ) -> Result<Self, ModelError> {
         let candidates = params.candidates();
         let selecting =
             candidates.len() > 1 && crate::tuning::split(trajectories, params.validation).is_some();
         if !selecting {
             let primary = params.for_candidate(&params.candidate());
-            let mut model = Self::fit_tuned(trajectories, &primary, observe)?;
+            let mut model =
+                Self::fit_tuned_from(trajectories, &primary, Start::Fresh, prefit, observe)?;
             // The default's alternatives (sparse GPs, a lag) are the library's offer, not the
             // user's request: with nothing held out they are dropped silently (`validation = 0` says
             // so, and too little data has its own warning below). Alternatives the user listed
@@ -285,7 +306,6 @@ impl HbnModel {
                     params.candidate()
                 ));
             }
-            model.summary.seconds = t0.elapsed().as_secs_f64();
             return Ok(model);
         }
         let mut rows = Vec::with_capacity(candidates.len());
@@ -294,7 +314,7 @@ impl HbnModel {
         let mut first_error = None;
         // The first candidate trained, kept in case none can be scored.
         let mut fallback: Option<(usize, HbnModel)> = None;
-        let trained = Self::fit_candidates(trajectories, params, &candidates, observe);
+        let trained = Self::fit_candidates(trajectories, params, &candidates, prefit, observe);
         for (candidate, (fitted, seconds)) in candidates.into_iter().zip(trained) {
             let (scored, note) = match fitted {
                 Ok(model) => {
@@ -363,7 +383,6 @@ impl HbnModel {
         if let Some(v) = model.summary.validation.as_mut() {
             v.candidates = rows;
         }
-        model.summary.seconds = t0.elapsed().as_secs_f64();
         Ok(model)
     }
 
@@ -385,6 +404,7 @@ impl HbnModel {
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
         candidates: &[crate::Candidate],
+        prefit: &[Prefit],
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Vec<(Result<Self, ModelError>, f64)> {
         let threads = std::thread::available_parallelism()
@@ -429,7 +449,7 @@ impl HbnModel {
                 _ => params.for_candidate(&candidates[i]),
             };
             let t = Instant::now();
-            let fitted = Self::fit_tuned_from(trajectories, &p, start, observe);
+            let fitted = Self::fit_tuned_from(trajectories, &p, start, prefit, observe);
             (i, (fitted, before + t.elapsed().as_secs_f64()))
         };
         // Progress of the candidates on other threads, passed on to `observe` on this one.
@@ -471,8 +491,9 @@ impl HbnModel {
             if phase_one {
                 let t = Instant::now();
                 let p = params.for_candidate(first);
-                let fitted = Self::plays_for(trajectories, &p)
-                    .and_then(|plays| Self::fit_gps(trajectories, &p, &plays, None, None, observe));
+                let fitted = Self::plays_for(trajectories, &p).and_then(|plays| {
+                    Self::fit_gps(trajectories, &p, &plays, None, None, prefit, observe)
+                });
                 let seconds = t.elapsed().as_secs_f64();
                 match fitted {
                     Ok(model) => exact = Some((model, seconds)),
@@ -583,12 +604,13 @@ impl HbnModel {
 
     /// One configuration: its GPs fitted on every run, then (with `params.validation > 0`)
     /// refitted per fold and the filter tuned on the held-out blocks.
+    #[cfg(test)]
     fn fit_tuned(
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
-        Self::fit_tuned_from(trajectories, params, Start::Fresh, observe)
+        Self::fit_tuned_from(trajectories, params, Start::Fresh, &[], observe)
     }
 
     /// [`Self::fit_tuned`] from GPs already fitted, or with the exact GPs a sparse search
@@ -597,15 +619,24 @@ impl HbnModel {
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
         start: Start<'_>,
+        prefit: &[Prefit],
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
         let plays = Self::plays_for(trajectories, params)?;
         let mut model = match start {
             Start::Fitted(model) => *model,
-            Start::Fresh => Self::fit_gps(trajectories, params, &plays, None, None, observe)?,
-            Start::FromExact(exact) => {
-                Self::fit_gps(trajectories, params, &plays, None, Some(exact), observe)?
+            Start::Fresh => {
+                Self::fit_gps(trajectories, params, &plays, None, None, prefit, observe)?
             }
+            Start::FromExact(exact) => Self::fit_gps(
+                trajectories,
+                params,
+                &plays,
+                None,
+                Some(exact),
+                prefit,
+                observe,
+            )?,
         };
         match crate::tuning::split(trajectories, params.validation) {
             Some(split) => {
@@ -622,6 +653,7 @@ impl HbnModel {
                             &plays,
                             Some((&model.transition, &model.sensor)),
                             None,
+                            &[],
                             &mut |_, _| {},
                         )?;
                         Ok(crate::tuning::Trial {
@@ -656,7 +688,7 @@ impl HbnModel {
     /// The play operators of `params.memory` on the input range of `trajectories` (all of
     /// them, so that the folds of filter-aware training share the radii), and the lags of
     /// `params.lags`.
-    fn plays_for(
+    pub(crate) fn plays_for(
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
     ) -> Result<Plays, ModelError> {
@@ -688,7 +720,7 @@ impl HbnModel {
     /// increments), from the dataset of `plays`. [`Self::fit_gps`] and the exact optimum a
     /// sparse search starts from ([`Self::exact_transition_optimum`]) read it here, so that
     /// the two fit the same problem.
-    fn gp_problem(
+    pub(crate) fn gp_problem(
         params: &CheckedHbnParams,
         plays: &Plays,
         data: &crate::dataset::Dataset,
@@ -709,6 +741,28 @@ impl HbnModel {
         }
     }
 
+    /// One GP on `table` with `gp_params`, every optimiser start reported to `observe` and kept.
+    pub(crate) fn fit_gp(
+        which: GpRole,
+        gp_params: &hbn_gp::GpParams,
+        table: &crate::dataset::Table,
+        observe: &mut dyn FnMut(GpRole, &FitProgress),
+    ) -> Result<(GaussianProcess, Vec<StartSummary>), ModelError> {
+        let mut own = Vec::new();
+        let mut gp = hbn_gp::fit_observed(gp_params, &table.inputs, &table.targets, &mut |p| {
+            own.push(StartSummary {
+                gp: which,
+                start: p.start,
+                lml: p.lml,
+                termination: p.termination.clone(),
+            });
+            observe(which, &p);
+        })
+        .map_err(|source| ModelError::Gp { which, source })?;
+        gp.forget_timing();
+        Ok((gp, own))
+    }
+
     /// Fits both GPs and the local data on `trajectories`; with `fixed`, every GP keeps the
     /// hyperparameters of the given one (no optimisation: a refit on more data, a fold's of
     /// filter-aware training, which also skips the observability diagnostic).
@@ -717,12 +771,14 @@ impl HbnModel {
     /// the optimum of the exact GP with the same settings (one start): `exact` (transition,
     /// sensor), when the caller has those GPs already (the primary candidate of model
     /// selection), else fitted here on the same data.
+    #[allow(clippy::too_many_arguments)]
     fn fit_gps(
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
         plays: &Plays,
         fixed: Option<(&GaussianProcess, &GaussianProcess)>,
         exact: Option<&ExactStart<'_>>,
+        prefit: &[Prefit],
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
         let t0 = Instant::now();
@@ -752,28 +808,17 @@ impl HbnModel {
                     gp_params.n_starts = 1;
                 }
             }
-            let mut fit_one = || {
-                let mut own = Vec::new();
-                let mut gp =
-                    hbn_gp::fit_observed(&gp_params, &table.inputs, &table.targets, &mut |p| {
-                        own.push(StartSummary {
-                            gp: which,
-                            start: p.start,
-                            lml: p.lml,
-                            termination: p.termination.clone(),
-                        });
-                        observe(which, &p);
-                    })
-                    .map_err(|source| ModelError::Gp { which, source })?;
-                gp.forget_timing();
-                Ok::<_, ModelError>((gp, own))
-            };
+            let mut fit_one = || Self::fit_gp(which, &gp_params, table, observe);
             // A sparse sensor GP another candidate fits the same: fitted once.
             let shared = exact.and_then(|e| e.sensor_fit).filter(|_| {
                 which == GpRole::Sensor && fixed.is_none() && gp_params.sparse.is_some()
             });
-            let (gp, own) = match shared.map(|cell| cell.get_or_init(|| fit_one().ok())) {
-                Some(Some((gp, own))) => (gp.clone(), own.clone()),
+            // The GP the kernel choice by evidence fitted already (the same problem).
+            let chosen =
+                Prefit::matching(prefit, which, &gp_params, params).filter(|_| fixed.is_none());
+            let (gp, own) = match (chosen, shared.map(|c| c.get_or_init(|| fit_one().ok()))) {
+                (Some(p), _) => (p.gp.clone(), p.starts.clone()),
+                (None, Some(Some((gp, own)))) => (gp.clone(), own.clone()),
                 _ => fit_one()?,
             };
             starts.extend(own);
@@ -827,6 +872,7 @@ impl HbnModel {
                 observability: None,
                 starts,
                 validation: None,
+                kernel_evidence: Vec::new(),
             },
         };
         // Observability diagnostic (Sec. 4.2) along the first training trajectory. A fold's
@@ -1190,7 +1236,7 @@ mod sparse_start_tests {
         let params = small_selection(Vec::new());
         let candidates = params.candidates();
         assert_eq!(candidates.len(), 2);
-        let trained = HbnModel::fit_candidates(&seqs, &params, &candidates, &mut |_, _| {});
+        let trained = HbnModel::fit_candidates(&seqs, &params, &candidates, &[], &mut |_, _| {});
         let sparse = trained[1].0.as_ref().unwrap();
         assert!(sparse.params().sparse_from_exact);
         for gp in [&sparse.transition, &sparse.sensor] {
@@ -1228,7 +1274,7 @@ mod sparse_start_tests {
             (Some(16), &[0.5][..])
         );
         let mut sensor_events = 0;
-        let trained = HbnModel::fit_candidates(&seqs, &params, &candidates, &mut |role, _| {
+        let trained = HbnModel::fit_candidates(&seqs, &params, &candidates, &[], &mut |role, _| {
             sensor_events += usize::from(role == GpRole::Sensor);
         });
         // The sensor's searches: the first candidate's two starts, and one start for the
@@ -1264,7 +1310,7 @@ mod sparse_start_tests {
         // The other two are as they are without the lag candidate.
         let without = small_selection(Vec::new());
         let before =
-            HbnModel::fit_candidates(&seqs, &without, &without.candidates(), &mut |_, _| {});
+            HbnModel::fit_candidates(&seqs, &without, &without.candidates(), &[], &mut |_, _| {});
         for i in 0..2 {
             assert_eq!(
                 trained[i].0.as_ref().unwrap().to_json().unwrap(),

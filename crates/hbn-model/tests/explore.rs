@@ -227,8 +227,12 @@ fn resuming_from_a_first_batch_continues_its_last_run() {
     let e = Explorer::resume(ExploreParams::new(0.0, 1.0, 0.02), &model, &seqs).unwrap();
     assert!(matches!(e.phase(), Phase::Seeking { .. }));
     // The model's own parameters: the configuration it was trained as (with `validation = 0`
-    // the primary one; model files keep no alternatives).
-    assert_eq!(e.params().model, params.with_candidate(&params.candidate()));
+    // the primary one, with the kernels its GPs chose by evidence; model files keep no
+    // alternatives).
+    let mut trained_as = params.with_candidate(&params.candidate());
+    trained_as.transition_kernel = model.params().transition_kernel;
+    trained_as.sensor_kernel = model.params().sensor_kernel;
+    assert_eq!(e.params().model, trained_as);
     let (u_plan, _) = e.plan(200);
     let mut all = vec![*batch.u.last().unwrap()];
     all.extend(&u_plan);

@@ -617,7 +617,9 @@ class HysteresisModel:
 
     Training parameters are keyword arguments (``**params``) applied over the library defaults
     (:func:`default_params`): ``kernel`` (both GPs; see :data:`KERNELS`), ``transition_kernel``,
-    ``sensor_kernel``, ``n_inducing`` (``None``: exact GPs on at most ``max_points`` samples;
+    ``sensor_kernel`` (by default each GP chooses between ``"matern52"`` and ``"se-ard"`` by its
+    evidence, the exact GP's log marginal likelihood, so :func:`default_params` lists no kernel;
+    naming one turns that off; the table is ``summary["kernel_evidence"]``), ``n_inducing`` (``None``: exact GPs on at most ``max_points`` samples;
     an integer: sparse GPs with that many inducing points, trained on every sample; a list:
     chosen among on held-out data, see below; default ``[None, DEFAULT_INDUCING]``, so the
     held-out data choose between exact and sparse GPs, and with ``validation=0`` the exact GPs
@@ -890,7 +892,9 @@ class HysteresisModel:
     @property
     def summary(self) -> Dict[str, Any]:
         """Training summary: trajectories, rows, warnings, observability, every optimiser start
-        (``gp``, ``start``, ``lml``, ``termination``) and ``seconds`` (0 for a loaded model)."""
+        (``gp``, ``start``, ``lml``, ``termination``), ``seconds`` (0 for a loaded model) and,
+        when each GP chose its kernel by evidence, ``kernel_evidence`` (per GP and kernel the
+        exact GP's ``lml`` and whether it was ``chosen``)."""
         return self._core.summary()
 
     @property
