@@ -252,6 +252,34 @@ mod tests {
         assert_eq!(est(&again), est(&m));
     }
 
+    /// The chosen fits are the primary exact candidate's GPs (same role, GP parameters and
+    /// data), so it reuses them; a sparse candidate's do not match.
+    #[test]
+    fn the_chosen_fits_match_the_exact_candidate() {
+        let log = simulate_random(&SimConfig::new(SystemKind::Duhem), 300).unwrap();
+        let runs = [Sequence::new(&log.u, &log.x, &log.y)];
+        let params = small().check().unwrap();
+        let chosen = choose(&runs, &params).unwrap();
+        assert_eq!(chosen.prefit.len(), 2);
+        let plays = HbnModel::plays_for(&runs, &chosen.params).unwrap();
+        let data = crate::build_dataset(&runs, &plays).unwrap();
+        for (candidate, reused) in [(chosen.params.candidate(), true), {
+            let mut sparse = chosen.params.candidate();
+            sparse.n_inducing = Some(16);
+            (sparse, false)
+        }] {
+            let p = chosen.params.for_candidate(&candidate);
+            for role in [GpRole::Transition, GpRole::Sensor] {
+                let (spec, _) = HbnModel::gp_problem(&p, &plays, &data, role);
+                let found = Prefit::matching(&chosen.prefit, role, &p.gp_params(spec, role), &p);
+                assert_eq!(found.is_some(), reused, "{candidate} {role}");
+                if let Some(f) = found {
+                    assert_eq!(f.role, role);
+                }
+            }
+        }
+    }
+
     /// Naming a kernel turns the choice off; while it is on, the kernels have no value to
     /// read (front ends list them as chosen at training).
     #[test]
