@@ -239,6 +239,29 @@ fn exported_models_reproduce_hbn_estimate_in_c_and_rust() {
                 precision,
             ]);
             assert!(out.contains("model data"), "{out}");
+            if precision == "f32" && kind.starts_with("sparse") {
+                // A sparse sensor GP's latent variance does not survive one f32 part: the
+                // export keeps its factor in two and says so.
+                let (mut o, mut e) = (Vec::new(), Vec::new());
+                let args = [
+                    "hbn",
+                    "export",
+                    "--model",
+                    &model,
+                    "--out",
+                    &c_dir.to_string_lossy(),
+                    "--format",
+                    "c",
+                    "--precision",
+                    "f32",
+                ];
+                hbn_cli::run_with(args, &mut o, &mut e).expect("export again");
+                let e = String::from_utf8_lossy(&e);
+                assert!(
+                    e.contains("the sensor GP's variance factor is kept in two f32 parts"),
+                    "{kind}: {e}"
+                );
+            }
             let bin = build_c(
                 &c_dir,
                 &dir.path().join(format!("{kind}-c-{precision}-build")),

@@ -88,12 +88,11 @@ pub fn run(ui: &mut Ui<'_>, args: &ExportArgs) -> anyhow::Result<()> {
     if precision == Precision::F32 {
         let view = model.view().context("cannot read the model's GPs")?;
         let errors = hbn_export::f32_variance_errors(&view);
-        let kept = hbn_export::factors_in_two_parts(&view);
-        for ((name, err), _) in ["transition", "sensor"]
+        // The rule of `factors_in_two_parts`, on the errors it would compute again.
+        for (name, err) in ["transition", "sensor"]
             .iter()
             .zip(errors)
-            .zip(kept)
-            .filter(|(_, kept)| *kept)
+            .filter(|(_, err)| *err > hbn_export::F32_VARIANCE_TOLERANCE)
         {
             ui.notice(format!(
                 "the {name} GP's variance factor is kept in two f32 parts (in one, its latent \

@@ -881,6 +881,16 @@ mod tests {
         wide
     }
 
+    /// The model a firmware reads from `t`'s layout and keys with the widened reals `wide`.
+    fn read_widened<'a>(t: &'a ModelTables, wide: &'a [f64]) -> tables::TableModel<'a> {
+        Tables {
+            reals: wide,
+            ..t.tables()
+        }
+        .model()
+        .unwrap()
+    }
+
     fn model(inducing: Option<usize>) -> HbnModel {
         let cfg = SimConfig {
             noise_gain: 1.0,
@@ -927,12 +937,7 @@ mod tests {
                 }
                 // f32
                 let wide = widened(&t);
-                let tm = Tables {
-                    reals: &wide,
-                    ..t.tables()
-                }
-                .model()
-                .unwrap();
+                let tm = read_widened(&t, &wide);
                 let mut e = Estimator::new(tm.view, tm.config, &mut scratch).unwrap();
                 for (&u, &y) in test.u.iter().zip(&test.y) {
                     let o = e.step(u, y);
@@ -1018,12 +1023,7 @@ mod tests {
         for m in [model(Some(16)), model(None)] {
             let t = model_tables(&m, Mode::Ekf).unwrap();
             let wide = widened(&t);
-            let tm = Tables {
-                reals: &wide,
-                ..t.tables()
-            }
-            .model()
-            .unwrap();
+            let tm = read_widened(&t, &wide);
             for (gp, read) in [
                 (m.transition(), tm.view.transition),
                 (m.sensor(), tm.view.sensor),
@@ -1084,12 +1084,7 @@ mod tests {
                     .sum();
                 assert_eq!(split(&t) - split(&plain), kept, "{errors:?}");
                 let wide = widened(&t);
-                let tm = Tables {
-                    reals: &wide,
-                    ..t.tables()
-                }
-                .model()
-                .unwrap();
+                let tm = read_widened(&t, &wide);
                 let mut scratch = vec![0.0; Estimator::scratch_len(&tm.view)];
                 let mut e = Estimator::new(tm.view, tm.config, &mut scratch).unwrap();
                 let worst = test
