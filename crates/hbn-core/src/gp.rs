@@ -427,6 +427,20 @@ impl<'a> GpView<'a> {
         want: Want,
         scratch: &mut [f64],
     ) -> Result<Prediction, CoreError> {
+        crate::simd::vectorised(
+            #[inline(always)]
+            || self.predict_inline(x_raw, want, scratch),
+        )
+    }
+
+    /// [`GpView::predict`], inlined where it is called ([`crate::simd::vectorised`]).
+    #[inline(always)]
+    fn predict_inline(
+        &self,
+        x_raw: &[f64],
+        want: Want,
+        scratch: &mut [f64],
+    ) -> Result<Prediction, CoreError> {
         let d = self.dim();
         let n = self.len();
         if x_raw.len() != d {
@@ -539,18 +553,18 @@ impl<'a> GpView<'a> {
             // `weights` ends up as d var / d k / (-2): K^{-1} k (exact) or R^T R k (sparse).
             let (var_std, weights) = match self.variance {
                 Variance::Exact { chol_packed } => {
-                    forward_substitute_packed(chol_packed, kvec, vvec)?;
+                    forward_substitute_inline(chol_packed, kvec, vvec)?;
                     let var = kss - dot(vvec, vvec);
                     if want.grad_variance {
-                        back_substitute_packed(chol_packed, vvec)?;
+                        back_substitute_inline(chol_packed, vvec)?;
                     }
                     (var, &*vvec)
                 }
                 Variance::Sparse { variance_factor } => {
-                    lower_packed_times(variance_factor, kvec, vvec);
+                    lower_packed_times_inline(variance_factor, kvec, vvec);
                     let var = kss - dot(vvec, vvec);
                     if want.grad_variance {
-                        lower_packed_transpose_times(variance_factor, vvec, qvec);
+                        lower_packed_transpose_times_inline(variance_factor, vvec, qvec);
                     }
                     (var, &*qvec)
                 }
@@ -603,6 +617,14 @@ pub const fn predict_scratch(n: usize, sparse: bool, want: Want) -> usize {
 /// `out = T k` for a row-packed lower-triangular `T` (`n = out.len()` rows): one independent
 /// dot product per row (`row_dot`, two-lane sums).
 pub fn lower_packed_times(t_packed: &[f64], k: &[f64], out: &mut [f64]) {
+    crate::simd::vectorised(
+        #[inline(always)]
+        || lower_packed_times_inline(t_packed, k, out),
+    )
+}
+
+#[inline(always)]
+fn lower_packed_times_inline(t_packed: &[f64], k: &[f64], out: &mut [f64]) {
     for (i, o) in out.iter_mut().enumerate() {
         let start = i * (i + 1) / 2;
         *o = match (t_packed.get(start..start + i + 1), k.get(..=i)) {
@@ -657,6 +679,14 @@ fn row_dot(a: &[f64], b: &[f64]) -> f64 {
 
 /// `out = T^T v` for a row-packed lower-triangular `T` (`n = out.len()` rows).
 pub fn lower_packed_transpose_times(t_packed: &[f64], v: &[f64], out: &mut [f64]) {
+    crate::simd::vectorised(
+        #[inline(always)]
+        || lower_packed_transpose_times_inline(t_packed, v, out),
+    )
+}
+
+#[inline(always)]
+fn lower_packed_transpose_times_inline(t_packed: &[f64], v: &[f64], out: &mut [f64]) {
     out.fill(0.0);
     for (i, &vi) in v.iter().enumerate().take(out.len()) {
         let start = i * (i + 1) / 2;
@@ -879,6 +909,14 @@ pub fn forward_substitute_packed(
     k: &[f64],
     v: &mut [f64],
 ) -> Result<(), CoreError> {
+    crate::simd::vectorised(
+        #[inline(always)]
+        || forward_substitute_inline(l_packed, k, v),
+    )
+}
+
+#[inline(always)]
+fn forward_substitute_inline(l_packed: &[f64], k: &[f64], v: &mut [f64]) -> Result<(), CoreError> {
     let n = v.len().min(k.len());
     check_packed(l_packed, n)?;
     let short = CoreError::DimensionMismatch {
@@ -928,7 +966,7 @@ pub fn forward_substitute_packed(
 /// so each vectorises along the row, and a pair shares every load of `b`. (Measured on the
 /// exact n = 500 EKF step: 56-59 us, against 61-66 us for the four rows at once with four
 /// sums each, which LLVM vectorised across the rows, and 72 us one row at a time.)
-#[inline]
+#[inline(always)]
 fn dot4(rows: [&[f64]; 4], b: &[f64]) -> [f64; 4] {
     let n = rows.iter().fold(b.len(), |n, r| n.min(r.len()));
     fn cut(s: &[f64], n: usize) -> &[f64] {
@@ -977,6 +1015,14 @@ fn dot4(rows: [&[f64]; 4], b: &[f64]) -> [f64; 4] {
 /// Errors with [`CoreError::DimensionMismatch`] when `l_packed` holds fewer than
 /// `n (n + 1) / 2` values (then `v` is left unchanged).
 pub fn back_substitute_packed(l_packed: &[f64], v: &mut [f64]) -> Result<(), CoreError> {
+    crate::simd::vectorised(
+        #[inline(always)]
+        || back_substitute_inline(l_packed, v),
+    )
+}
+
+#[inline(always)]
+fn back_substitute_inline(l_packed: &[f64], v: &mut [f64]) -> Result<(), CoreError> {
     let n = v.len();
     check_packed(l_packed, n)?;
     let short = CoreError::DimensionMismatch {
@@ -1264,8 +1310,51 @@ mod tests {
                         all.variance
                     );
                     assert!(all.grad_mean.iter().any(|g| *g != 0.0));
+                    // `predict` runs on the CPU's widest vectors (`simd`); its body inlined
+                    // here runs on the build's. Every output to the bit.
+                    for want in [Want::ALL, Want::EKF, Want::MEAN] {
+                        let wide = gp.predict(&x, want, &mut scratch).unwrap();
+                        let narrow = gp.predict_inline(&x, want, &mut scratch).unwrap();
+                        assert_eq!(bits(&wide), bits(&narrow), "{spec:?} sparse {sparse}");
+                    }
                 }
             }
+        }
+    }
+
+    /// Every number of a prediction, as bits.
+    fn bits(p: &Prediction) -> Vec<u64> {
+        let head = [p.mean, p.variance, p.prior_variance];
+        head.iter()
+            .chain(&p.grad_mean)
+            .chain(&p.grad_variance)
+            .map(|v| v.to_bits())
+            .collect()
+    }
+
+    /// The public triangular products run on the CPU's widest vectors (`simd`), their bodies
+    /// inlined here on the build's: the same bits, on sizes around every block and chunk.
+    #[test]
+    fn triangular_products_give_the_same_bits_on_wide_and_narrow_vectors() {
+        for n in [0usize, 1, 3, 4, 7, 8, 9, 17, 64, 101, 203] {
+            let packed: Vec<f64> = (0..n * (n + 1) / 2)
+                .map(|i| 1.0 + 0.3 * libm::sin(0.37 * i as f64) * 10f64.powi(i as i32 % 7 - 3))
+                .collect();
+            let k: Vec<f64> = (0..n).map(|i| libm::cos(0.7 * i as f64) + 0.2).collect();
+            let (mut wide, mut narrow) = (vec![0.0; n], vec![0.0; n]);
+            let as_bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            forward_substitute_packed(&packed, &k, &mut wide).unwrap();
+            forward_substitute_inline(&packed, &k, &mut narrow).unwrap();
+            assert_eq!(as_bits(&wide), as_bits(&narrow), "forward, n = {n}");
+            back_substitute_packed(&packed, &mut wide).unwrap();
+            back_substitute_inline(&packed, &mut narrow).unwrap();
+            assert_eq!(as_bits(&wide), as_bits(&narrow), "back, n = {n}");
+            lower_packed_times(&packed, &k, &mut wide);
+            lower_packed_times_inline(&packed, &k, &mut narrow);
+            assert_eq!(as_bits(&wide), as_bits(&narrow), "times, n = {n}");
+            lower_packed_transpose_times(&packed, &k, &mut wide);
+            lower_packed_transpose_times_inline(&packed, &k, &mut narrow);
+            assert_eq!(as_bits(&wide), as_bits(&narrow), "transpose, n = {n}");
         }
     }
 

@@ -13,7 +13,8 @@
 //! - [`rng`]: a small portable random number generator;
 //! - [`tables`]: a trained model as constant tables (flash) and the view read back from them.
 #![cfg_attr(not(feature = "std"), no_std)]
-#![forbid(unsafe_code)]
+// `unsafe` only in `simd`, to call code compiled for a CPU feature the CPU was seen to have.
+#![deny(unsafe_code)]
 #![deny(missing_docs)]
 #![allow(clippy::needless_range_loop)]
 // index loops read like the matrix algebra they implement
@@ -40,6 +41,7 @@ pub mod gp;
 pub mod kernel;
 pub mod play;
 pub mod rng;
+pub mod simd;
 pub mod tables;
 
 pub mod eigen;
