@@ -68,12 +68,18 @@ pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<HbnModel> {
     let params = args.params();
     let candidates = params.candidates();
     if candidates.len() > 1 {
-        let names: Vec<String> = candidates.iter().map(|c| c.to_string()).collect();
+        // With the kernels chosen by evidence first, the candidates' kernels are not known yet.
+        let evidence = params.chooses_kernels_by_evidence();
+        let names: Vec<String> = candidates
+            .iter()
+            .map(|c| if evidence { c.shape() } else { c.to_string() })
+            .collect();
         ui.notice(format!(
-            "model selection: training {} candidates side by side ({}); the one with the \
+            "model selection: training {} candidates side by side ({}{}); the one with the \
              lowest held-out NLPD, if at least as accurate held out as the first, becomes the model",
             candidates.len(),
-            names.join(", ")
+            names.join(", "),
+            if evidence { ", each GP's kernel chosen by evidence first" } else { "" }
         ));
     }
     let mut render = Renderer::default();

@@ -491,19 +491,27 @@ pub struct Candidate {
 impl std::fmt::Display for Candidate {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         if self.transition_kernel == self.sensor_kernel {
-            write!(f, "{}", self.transition_kernel)?;
+            write!(f, "{} ", self.transition_kernel)?;
         } else {
-            write!(f, "{},{}", self.transition_kernel, self.sensor_kernel)?;
+            write!(f, "{},{} ", self.transition_kernel, self.sensor_kernel)?;
         }
-        match self.n_inducing {
-            Some(m) => write!(f, " m={m}")?,
-            None => f.write_str(" exact")?,
-        }
+        f.write_str(&self.shape())
+    }
+}
+
+impl Candidate {
+    /// The candidate without its kernels (`exact`, `m=64 lags=1`): what names it before the
+    /// kernels are chosen by evidence.
+    pub fn shape(&self) -> String {
+        let mut out = match self.n_inducing {
+            Some(m) => format!("m={m}"),
+            None => "exact".to_owned(),
+        };
         if !self.lags.is_empty() {
             let taus: Vec<String> = self.lags.iter().map(|t| t.to_string()).collect();
-            write!(f, " lags={}", taus.join(","))?;
+            out.push_str(&format!(" lags={}", taus.join(",")));
         }
-        Ok(())
+        out
     }
 }
 
