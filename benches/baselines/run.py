@@ -248,6 +248,7 @@ def _held_out(model: Any) -> Optional[Dict[str, Any]]:
         candidates.append({
             "config": name,
             "chosen": bool(c.get("chosen")),
+            "lost": c.get("lost", 0),
             "mode": scored[0] if scored else None,
             **(scores(scored[1]) if scored else {"nrmse": None, "nlpd": None, "coverage_2sigma": None}),
         })  # fmt: skip

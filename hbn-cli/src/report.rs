@@ -302,21 +302,22 @@ fn candidate_table(rows: &[hbn_model::CandidateRow]) -> String {
     }
     let mut s = format!(
         "  model selection, {} candidates on the same held-out data:\n    {:<24} {:<8} {:>8} {:>8} \
-         {:>8} {:>8}\n",
+         {:>8} {:>8} {:>5}\n",
         rows.len(),
         "candidate",
         "mode",
         "nRMSE",
         "in 2 sd",
         "NLPD",
-        "seconds"
+        "seconds",
+        "lost"
     );
     for r in rows {
         let star = if r.chosen { "*" } else { " " };
         let name = format!("{}{star}", r.candidate);
         match (&r.scored, &r.note) {
             (Some((mode, sc)), _) => s.push_str(&format!(
-                "    {name:<24} {:<8} {:>8.4} {:>7.1}% {:>8.3} {:>8}\n",
+                "    {name:<24} {:<8} {:>8.4} {:>7.1}% {:>8.3} {:>8} {:>5}\n",
                 mode.name(),
                 sc.nrmse,
                 100.0 * sc.calibration.coverage_2sigma,
@@ -326,7 +327,8 @@ fn candidate_table(rows: &[hbn_model::CandidateRow]) -> String {
                     format!("{:.1}", r.seconds)
                 } else {
                     "-".to_owned()
-                }
+                },
+                r.lost
             )),
             (None, note) => s.push_str(&format!(
                 "    {name:<24} not scored: {}\n",
@@ -336,8 +338,9 @@ fn candidate_table(rows: &[hbn_model::CandidateRow]) -> String {
     }
     s.push_str(
         "    * chosen: the lowest held-out NLPD of its default mode among those with a held-out \
-         nRMSE no higher than the first's; the model is that \
-         candidate's\n",
+         nRMSE no higher than the first's, leaving out those whose filter lost the state on their \
+         own training runs (lost: samples it re-started at) while another did not; the model is \
+         that candidate's\n",
     );
     s
 }

@@ -198,8 +198,14 @@ pub struct CandidateRow {
     #[serde(default)]
     pub note: Option<String>,
     /// The candidate chosen: the lowest held-out NLPD among the candidates whose held-out
-    /// nRMSE is no higher than the first's.
+    /// nRMSE is no higher than the first's, leaving out those that lost the state on their
+    /// own training runs (`lost`) when another did not.
     pub chosen: bool,
+    /// Times its filter, in its default mode, lost the state (flag `relocalised`) when run
+    /// over the runs it was trained on, after tuning; 0 when not scored (and in model files
+    /// from before session 25).
+    #[serde(default)]
+    pub lost: usize,
 }
 
 /// Held-out samples the search runs the filter over at most, all folds together (a prefix of

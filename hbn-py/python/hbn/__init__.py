@@ -649,8 +649,9 @@ class HysteresisModel:
     lag sets (``lags=[[], [1.0]]``, the first the primary one). Every combination of kernel and
     inducing setting is trained, each sparse one also with every further lag set, and its
     filter tuned on the same held-out data; the one whose default mode has the lowest held-out
-    NLPD among those at least as accurate held out (nRMSE) as the first becomes the model; each
-    candidate costs one training. The table is
+    NLPD among those at least as accurate held out (nRMSE) as the first becomes the model,
+    leaving out candidates whose filter loses the state on their own training runs (a row's
+    ``"lost"``) while another does not; each candidate costs one training. The table is
     ``summary["validation"]["candidates"]``, and :attr:`params` holds the chosen configuration.
 
     >>> import hbn
