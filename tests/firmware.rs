@@ -28,19 +28,32 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// Runs `hbn ARGS` in-process; `Err(message)` as `main` prints it.
-fn hbn(args: &[&str]) -> Result<String, String> {
+/// Runs `hbn ARGS` in-process: `(stdout, stderr)`, or `Err(message)` as `main` prints it.
+fn run(args: &[&str]) -> Result<(String, String), String> {
     let mut out = Vec::new();
     let mut err = Vec::new();
     let full: Vec<&str> = std::iter::once("hbn").chain(args.iter().copied()).collect();
     match hbn_cli::run_with(full, &mut out, &mut err) {
-        Ok(()) => Ok(String::from_utf8_lossy(&out).into_owned()),
+        Ok(()) => Ok((
+            String::from_utf8_lossy(&out).into_owned(),
+            String::from_utf8_lossy(&err).into_owned(),
+        )),
         Err(e) => Err(hbn_cli::error_message(&e)),
     }
 }
 
+/// [`run`]'s stdout.
+fn hbn(args: &[&str]) -> Result<String, String> {
+    run(args).map(|(out, _)| out)
+}
+
+/// [`run`], which must succeed.
+fn ok_with_stderr(args: &[&str]) -> (String, String) {
+    run(args).unwrap_or_else(|e| panic!("hbn {args:?} failed: {e}"))
+}
+
 fn ok(args: &[&str]) -> String {
-    hbn(args).unwrap_or_else(|e| panic!("hbn {args:?} failed: {e}"))
+    ok_with_stderr(args).0
 }
 
 /// `(x, x_std, flags)` rows of a CSV whose header names those columns.
@@ -227,7 +240,7 @@ fn exported_models_reproduce_hbn_estimate_in_c_and_rust() {
         for precision in ["f64", "f32"] {
             // C
             let c_dir = dir.path().join(format!("{kind}-c-{precision}"));
-            let out = ok(&[
+            let (out, err) = ok_with_stderr(&[
                 "export",
                 "--model",
                 &model,
@@ -242,24 +255,9 @@ fn exported_models_reproduce_hbn_estimate_in_c_and_rust() {
             if precision == "f32" && kind.starts_with("sparse") {
                 // A sparse sensor GP's latent variance does not survive one f32 part: the
                 // export keeps its factor in two and says so.
-                let (mut o, mut e) = (Vec::new(), Vec::new());
-                let args = [
-                    "hbn",
-                    "export",
-                    "--model",
-                    &model,
-                    "--out",
-                    &c_dir.to_string_lossy(),
-                    "--format",
-                    "c",
-                    "--precision",
-                    "f32",
-                ];
-                hbn_cli::run_with(args, &mut o, &mut e).expect("export again");
-                let e = String::from_utf8_lossy(&e);
                 assert!(
-                    e.contains("the sensor GP's variance factor is kept in two f32 parts"),
-                    "{kind}: {e}"
+                    err.contains("the sensor GP's variance factor is kept in two f32 parts"),
+                    "{kind}: {err}"
                 );
             }
             let bin = build_c(

@@ -357,17 +357,21 @@ impl HbnModel {
         }
         // Each scored candidate's filter over its own training runs: a candidate that loses
         // the state there is not chosen while another does not (docs/tuning.md, "Candidates
-        // that lose their own training runs").
-        let lost: Vec<usize> = std::thread::scope(|scope| {
-            let jobs: Vec<_> = scored_models
-                .iter()
-                .map(|(_, _, _, model)| scope.spawn(|| model.relocalisations(trajectories)))
-                .collect();
-            // A panic is a bug: it propagates, as it would without the threads.
-            jobs.into_iter()
-                .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                .collect()
-        });
+        // that lose their own training runs"). With one scored candidate there is no choice.
+        let lost: Vec<usize> = if scored_models.len() < 2 {
+            vec![0; scored_models.len()]
+        } else {
+            std::thread::scope(|scope| {
+                let jobs: Vec<_> = scored_models
+                    .iter()
+                    .map(|(_, _, _, model)| scope.spawn(|| model.relocalisations(trajectories)))
+                    .collect();
+                // A panic is a bug: it propagates, as it would without the threads.
+                jobs.into_iter()
+                    .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                    .collect()
+            })
+        };
         for (&(row, ..), &n) in scored_models.iter().zip(&lost) {
             if let Some(r) = rows.get_mut(row) {
                 r.lost = n;
