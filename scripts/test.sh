@@ -27,6 +27,9 @@ echo "== Rust tests (release: the end-to-end tests train GPs; also builds target
 echo "   tests/firmware.rs builds the C and no_std Rust firmware examples: needs make and cc)"
 cargo test --release --workspace --exclude hbn-py
 
+echo "== The AVX2 code of target/release/hbn holds no legacy-SSE instruction (objdump; optional)"
+python3 scripts/check_avx2_encoding.py target/release/hbn
+
 echo "== Fuzz smoke: each cargo-fuzz target, a fixed seed and run count (needs nightly and cargo-fuzz; optional)"
 # The corpora also replay on stable in tests/fuzz_replay.rs (above). The smoke is
 # deterministic: a fresh scratch corpus, -seed=1 and a fixed number of executions, so CI

@@ -513,7 +513,7 @@ fn solve_spd(a: &[[f64; P]; P], b: &[f64; P]) -> Option<[f64; P]> {
                 if s.is_nan() || s <= 0.0 || !s.is_finite() {
                     return None;
                 }
-                set_m(&mut l, i, i, libm::sqrt(s));
+                set_m(&mut l, i, i, crate::simd::sqrt(s));
             } else {
                 let v = s / m(&l, j, j);
                 set_m(&mut l, i, j, v);

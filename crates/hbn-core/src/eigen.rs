@@ -72,10 +72,10 @@ fn rotate(
     }
     // Classic symmetric Schur decomposition (Golub & Van Loan, Alg. 8.5.1).
     let theta = (aqq - app) / (2.0 * apq);
-    let t = theta.signum() / (theta.abs() + libm::sqrt(theta * theta + 1.0));
+    let t = theta.signum() / (theta.abs() + crate::simd::sqrt(theta * theta + 1.0));
     // theta = +-inf (apq tiny): t = 0, no rotation needed.
     let t = if t.is_finite() { t } else { 0.0 };
-    let c = 1.0 / libm::sqrt(t * t + 1.0);
+    let c = 1.0 / crate::simd::sqrt(t * t + 1.0);
     let s = t * c;
     let new_pp = app - t * apq;
     let new_qq = aqq + t * apq;

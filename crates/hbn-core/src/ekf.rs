@@ -1364,7 +1364,7 @@ fn floor_flag(v: f64, floor: f64, flags: &mut u32) -> f64 {
 }
 
 fn sqrt(v: f64) -> f64 {
-    libm::sqrt(v)
+    crate::simd::sqrt(v)
 }
 
 /// Smallest and largest eigenvalue of the observability Gramian over the last `h + 1`

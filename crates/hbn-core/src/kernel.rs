@@ -233,7 +233,7 @@ fn check_len(got: usize, expected: usize) -> Result<(), CoreError> {
 /// Profile value `f(r2)` and its derivative `df/dr2`.
 #[inline(always)]
 pub fn profile_and_slope(profile: Profile, r2: f64) -> (f64, f64) {
-    profile_and_slope_with(profile, r2, libm::sqrt)
+    profile_and_slope_with(profile, r2, crate::simd::sqrt)
 }
 
 /// [`profile_and_slope`] for many squared distances at once: `f[i]` and `df[i]` from `r2[i]`,
@@ -242,7 +242,7 @@ pub fn profile_and_slope(profile: Profile, r2: f64) -> (f64, f64) {
 /// training's kernel blocks run through here.
 #[inline(always)]
 pub fn profiles_and_slopes(profile: Profile, r2: &[f64], f: &mut [f64], df: &mut [f64]) {
-    profiles_and_slopes_with(profile, r2, f, df, libm::sqrt)
+    profiles_and_slopes_with(profile, r2, f, df, crate::simd::sqrt)
 }
 
 /// [`profiles_and_slopes`] with the caller's square root: training on a host passes
@@ -290,7 +290,7 @@ pub fn profiles(profile: Profile, r2: &[f64], f: &mut [f64]) {
         }
         Profile::Matern52 => {
             for (r_i, r2_i) in f.iter_mut().zip(r2) {
-                *r_i = libm::sqrt(if *r2_i > 0.0 { *r2_i } else { 0.0 });
+                *r_i = crate::simd::sqrt(if *r2_i > 0.0 { *r2_i } else { 0.0 });
             }
             for (r2_i, f_i) in r2.iter().zip(f.iter_mut()) {
                 *f_i = matern52(*f_i, *r2_i).0;

@@ -46,6 +46,32 @@ pub fn vectorised<R>(f: impl FnOnce() -> R) -> R {
     f()
 }
 
+/// The correctly rounded square root of `x` (as IEEE 754 requires of every square root, so the
+/// same bits as `libm::sqrt` and `f64::sqrt`), in an instruction encoding that suits the code
+/// around it.
+///
+/// On x86-64, `libm::sqrt` is the legacy SSE `sqrtsd` in inline assembly, which the compiler
+/// cannot re-encode. Inside [`vectorised`]'s AVX2 code each such instruction mixes the two
+/// encodings, and on some CPUs that stalls every one of them: on an AMD EPYC (Zen 3) machine
+/// the exact GP's EKF step took 181 us with it against about 40 us without (session 26,
+/// `docs/benchmarks.md`). Here the square root is the compiler's own operation (through
+/// `core::arch`), which it encodes as the code around it needs, and which a loop can
+/// vectorise. Other targets use `libm::sqrt`.
+#[inline(always)]
+pub fn sqrt(x: f64) -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use core::arch::x86_64::{_mm_cvtsd_f64, _mm_set_sd, _mm_sqrt_pd};
+        // SAFETY: these need SSE2, which every x86-64 CPU has (it is part of the x86-64
+        // baseline that every build for this architecture targets).
+        unsafe { _mm_cvtsd_f64(_mm_sqrt_pd(_mm_set_sd(x))) }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        libm::sqrt(x)
+    }
+}
+
 /// `f()` in a function compiled with AVX2 enabled.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
@@ -86,5 +112,29 @@ mod tests {
         let wide = vectorised(|| sums(&a, &b));
         let narrow = sums(&a, &b);
         assert_eq!(wide.map(f64::to_bits), narrow.map(f64::to_bits));
+    }
+
+    /// `sqrt` is the correctly rounded square root everywhere (the bits of `libm::sqrt`, which
+    /// the filter used before), in the wide code as in the narrow, on ordinary, tiny, huge and
+    /// special arguments.
+    #[test]
+    fn sqrt_gives_the_bits_of_libm_in_wide_and_narrow_code() {
+        let mut args = vec![
+            0.0,
+            -0.0,
+            f64::MIN_POSITIVE,
+            f64::MIN_POSITIVE / 3.0,
+            f64::MAX,
+            f64::INFINITY,
+            2.0,
+            1e-300,
+        ];
+        args.extend((0..2000).map(|i| (f64::from(i) * 0.731).exp() * 1e-12 + f64::from(i) * 0.013));
+        let narrow: Vec<u64> = args.iter().map(|&x| sqrt(x).to_bits()).collect();
+        let wide: Vec<u64> = vectorised(|| args.iter().map(|&x| sqrt(x).to_bits()).collect());
+        let reference: Vec<u64> = args.iter().map(|&x| libm::sqrt(x).to_bits()).collect();
+        assert_eq!(narrow, reference);
+        assert_eq!(wide, reference);
+        assert!(sqrt(-1.0).is_nan() && sqrt(f64::NAN).is_nan());
     }
 }
