@@ -770,6 +770,48 @@ mod tests {
         );
     }
 
+    /// A dense window holds far more samples than the buffer: the query must return exactly the
+    /// 48 nearest, nearest first, ties by index (checked against a sort of every sample in
+    /// the window).
+    #[test]
+    fn a_full_window_returns_the_nearest_in_order() {
+        let mut rng = crate::rng::Rng::new(5);
+        let n = 1500;
+        // Coarse values make equal distances (ties) common.
+        let x: Vec<f64> = (0..n * 3).map(|_| (rng.uniform() * 20.0).round() / 20.0).collect();
+        let y = vec![0.0; n];
+        let hw = [0.25, 0.2, 0.3];
+        let o = build(3, &x, &y, &hw, &[0.1; 3]);
+        let nb = view(&o, 3);
+        let inv = hw.map(|h| 1.0 / h);
+        let mut full = 0;
+        for _ in 0..40 {
+            let z = [rng.uniform(), rng.uniform(), rng.uniform()];
+            let mut want: Vec<(f64, u32)> = (0..n)
+                .filter_map(|i| {
+                    let mut r2 = 0.0;
+                    let mut widest = 0.0f64;
+                    for j in 0..3 {
+                        // The index keeps its samples in cell order; `out` indexes those.
+                        let t = (o.inputs[i * 3 + j] - z[j]) * inv[j];
+                        r2 += t * t;
+                        widest = widest.max(t.abs());
+                    }
+                    (widest <= 1.0).then_some((r2, i as u32))
+                })
+                .collect();
+            want.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            let mut out = [0u32; BLR_MAX_NEIGHBOURS];
+            let (k, capped) = nb.query(&z, &mut out);
+            assert_eq!(capped, want.len() > BLR_MAX_NEIGHBOURS);
+            want.truncate(BLR_MAX_NEIGHBOURS);
+            let want: Vec<u32> = want.into_iter().map(|(_, i)| i).collect();
+            assert_eq!(&out[..k], &want[..]);
+            full += usize::from(capped);
+        }
+        assert!(full >= 20, "only {full} of 40 windows were full");
+    }
+
     #[test]
     fn query_is_exact_and_deterministic() {
         let mut rng = crate::rng::Rng::new(2);
