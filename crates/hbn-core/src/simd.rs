@@ -10,8 +10,12 @@
 //!
 //! What it buys is measured in `docs/benchmarks.md` ("Vector width chosen at run time").
 //!
+//! It also holds [`sqrt`], the square root the core uses everywhere: `libm`'s is legacy-SSE
+//! inline assembly, which stalls inside the AVX2 code on some CPUs.
+//!
 //! This module holds the crate's only `unsafe` code: the call of a `#[target_feature]` function,
-//! made only after the CPU was seen to support the feature.
+//! made only after the CPU was seen to support the feature, and the SSE2 square root (SSE2 is
+//! part of every x86-64 CPU).
 #![allow(unsafe_code)]
 
 #[cfg(target_arch = "x86_64")]
