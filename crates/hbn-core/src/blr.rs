@@ -778,7 +778,9 @@ mod tests {
         let mut rng = crate::rng::Rng::new(5);
         let n = 1500;
         // Coarse values make equal distances (ties) common.
-        let x: Vec<f64> = (0..n * 3).map(|_| (rng.uniform() * 20.0).round() / 20.0).collect();
+        let x: Vec<f64> = (0..n * 3)
+            .map(|_| (rng.uniform() * 20.0).round() / 20.0)
+            .collect();
         let y = vec![0.0; n];
         let hw = [0.25, 0.2, 0.3];
         let o = build(3, &x, &y, &hw, &[0.1; 3]);
