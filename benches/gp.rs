@@ -1,5 +1,7 @@
 //! GP engine benchmarks: fitting (n = 1000, 2000; 4 inputs; ARD SE + noise; one optimiser
-//! start) and prediction with 500 support points (mean + variance + mean gradient).
+//! start), prediction with 500 support points (mean + variance + mean gradient), and the sparse
+//! GP's variance kernels: the row-packed triangular products `T k` and `T^T v` for m = 64 and
+//! 128 (`triangular_m64`, `triangular_m128`).
 //!
 //! `cargo bench --bench gp`. The scikit-learn comparison on the same data in the same run is
 //! `python3 benches/compare_sklearn.py` (see docs/benchmarks.md).
@@ -74,5 +76,34 @@ fn bench_predict(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench_predict, bench_fit);
+/// The two triangular products of the sparse GP's variance (`var = k** - |T k|^2`, and
+/// `T^T (T k)` for its gradient), on a random row-packed factor.
+fn bench_triangular(c: &mut Criterion) {
+    for m in [64usize, 128] {
+        let mut rng = Rng::new(7);
+        let packed: Vec<f64> = (0..m * (m + 1) / 2).map(|_| rng.normal()).collect();
+        let k: Vec<f64> = (0..m).map(|_| rng.normal()).collect();
+        let mut out = vec![0.0; m];
+        let mut g = c.benchmark_group(format!("triangular_m{m}"));
+        g.bench_function("lower_packed_times", |b| {
+            b.iter(|| {
+                hbn::core::gp::lower_packed_times(black_box(&packed), black_box(&k), &mut out);
+                out[m - 1]
+            })
+        });
+        g.bench_function("lower_packed_transpose_times", |b| {
+            b.iter(|| {
+                hbn::core::gp::lower_packed_transpose_times(
+                    black_box(&packed),
+                    black_box(&k),
+                    &mut out,
+                );
+                out[0]
+            })
+        });
+        g.finish();
+    }
+}
+
+criterion_group!(benches, bench_predict, bench_fit, bench_triangular);
 criterion_main!(benches);

@@ -561,7 +561,7 @@ impl<'a> GpView<'a> {
                     (var, &*vvec)
                 }
                 Variance::Sparse { variance_factor } => {
-                    lower_packed_times_inline(variance_factor, kvec, vvec);
+                    lower_packed_times(variance_factor, kvec, vvec);
                     let var = kss - dot(vvec, vvec);
                     if want.grad_variance {
                         lower_packed_transpose_times_inline(variance_factor, vvec, qvec);
@@ -614,70 +614,70 @@ pub const fn predict_scratch(n: usize, sparse: bool, want: Want) -> usize {
     s
 }
 
-/// `out = T k` for a row-packed lower-triangular `T` (`n = out.len()` rows): one independent
-/// dot product per row (`row_dot`, two-lane sums).
+/// `out = T k` for a row-packed lower-triangular `T` (`n = out.len()` rows). The sparse GP's
+/// rows are short (`m <= 256`), so what costs is not the arithmetic but the work at each row's
+/// ends: row `i` sums its first `4 floor(i / 4)` columns in one four-lane accumulator (no tail
+/// loop), then adds its last one to four products in column order. With AVX2, four rows go at
+/// once in intrinsics (`simd::lower_packed_times_rows4`), to the same bits. Measured with
+/// `cargo bench --bench gp -- triangular` (docs/benchmarks.md).
 pub fn lower_packed_times(t_packed: &[f64], k: &[f64], out: &mut [f64]) {
-    crate::simd::vectorised(
-        #[inline(always)]
-        || lower_packed_times_inline(t_packed, k, out),
-    )
+    let done = crate::simd::lower_packed_times_rows4(t_packed, k, out);
+    lower_packed_times_from(t_packed, k, out, done);
 }
 
+/// The row-packed row `i` of a lower-triangular factor (`i + 1` entries).
 #[inline(always)]
-fn lower_packed_times_inline(t_packed: &[f64], k: &[f64], out: &mut [f64]) {
-    for (i, o) in out.iter_mut().enumerate() {
-        let start = i * (i + 1) / 2;
-        *o = match (t_packed.get(start..start + i + 1), k.get(..=i)) {
-            (Some(row), Some(kk)) => row_dot(row, kk),
+fn lower_row(packed: &[f64], i: usize) -> Option<&[f64]> {
+    let start = i * (i + 1) / 2;
+    packed.get(start..start + i + 1)
+}
+
+/// The four lanes of a chunk of four (zeros for a chunk of another length, which
+/// `chunks_exact(4)` never yields).
+#[inline(always)]
+fn lanes4(c: &[f64]) -> [f64; 4] {
+    match c {
+        [a, b, c, d] => [*a, *b, *c, *d],
+        _ => [0.0; 4],
+    }
+}
+
+/// `sum_l acc[l]` in a fixed order.
+#[inline(always)]
+fn sum4(a: [f64; 4]) -> f64 {
+    (a[0] + a[1]) + (a[2] + a[3])
+}
+
+/// Rows `first..` of [`lower_packed_times`], one by one (0 for rows a short factor or `k`
+/// does not have).
+#[inline(always)]
+fn lower_packed_times_from(t_packed: &[f64], k: &[f64], out: &mut [f64], first: usize) {
+    for (i, o) in out.iter_mut().enumerate().skip(first) {
+        // The first `4 floor(i / 4)` columns in four lanes, then the rest in column order.
+        let head = i - i % 4;
+        let row = lower_row(t_packed, i).and_then(|r| r.split_at_checked(head));
+        let kk = k.get(..=i).and_then(|r| r.split_at_checked(head));
+        *o = match (row, kk) {
+            (Some((row_head, row_tail)), Some((k_head, k_tail))) => {
+                let mut acc = [0.0f64; 4];
+                for (c, kc) in row_head.chunks_exact(4).zip(k_head.chunks_exact(4)) {
+                    for ((a, t), k) in acc.iter_mut().zip(lanes4(c)).zip(lanes4(kc)) {
+                        *a += t * k;
+                    }
+                }
+                row_tail
+                    .iter()
+                    .zip(k_tail)
+                    .fold(sum4(acc), |s, (t, k)| s + t * k)
+            }
             _ => 0.0,
         };
     }
 }
 
-/// Dot product of a short row (the sparse variance's rows, `m <= 256`): four two-lane sums
-/// over chunks of eight, then one chunk of four, then the last few one by one. The loop is
-/// bound by the latency of its additions, so independent sums are what speed it up: four
-/// took 485 ns for m = 64 against 651 ns for two (a micro-benchmark of `lower_packed_times`
-/// on this machine); eight sums in one array cost lane shuffles on short rows (callgrind).
-#[inline]
-fn row_dot(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len().min(b.len());
-    let (a, b) = (a.get(..n).unwrap_or(&[]), b.get(..n).unwrap_or(&[]));
-    let (c8a, c8b) = (a.chunks_exact(8), b.chunks_exact(8));
-    let (r8a, r8b) = (c8a.remainder(), c8b.remainder());
-    let mut s = [[0.0f64; 2]; 4];
-    for (x, y) in c8a.zip(c8b) {
-        // Always matches (chunks of exactly eight); the pattern keeps indexing out.
-        if let ([x0, x1, x2, x3, x4, x5, x6, x7], [y0, y1, y2, y3, y4, y5, y6, y7]) = (x, y) {
-            s[0][0] += x0 * y0;
-            s[0][1] += x1 * y1;
-            s[1][0] += x2 * y2;
-            s[1][1] += x3 * y3;
-            s[2][0] += x4 * y4;
-            s[2][1] += x5 * y5;
-            s[3][0] += x6 * y6;
-            s[3][1] += x7 * y7;
-        }
-    }
-    let (c4a, c4b) = (r8a.chunks_exact(4), r8b.chunks_exact(4));
-    let (ra, rb) = (c4a.remainder(), c4b.remainder());
-    for (x, y) in c4a.zip(c4b) {
-        if let ([x0, x1, x2, x3], [y0, y1, y2, y3]) = (x, y) {
-            s[0][0] += x0 * y0;
-            s[0][1] += x1 * y1;
-            s[1][0] += x2 * y2;
-            s[1][1] += x3 * y3;
-        }
-    }
-    let [s0, s1, s2, s3] = s;
-    let mut total = ((s0[0] + s2[0]) + (s1[0] + s3[0])) + ((s0[1] + s2[1]) + (s1[1] + s3[1]));
-    for (x, y) in ra.iter().zip(rb) {
-        total += x * y;
-    }
-    total
-}
-
-/// `out = T^T v` for a row-packed lower-triangular `T` (`n = out.len()` rows).
+/// `out = T^T v` for a row-packed lower-triangular `T` (`n = out.len()` rows): four rows at a
+/// time, so each entry of `out` is loaded and stored once per four rows. Each entry still sums
+/// its rows' terms one by one in row order.
 pub fn lower_packed_transpose_times(t_packed: &[f64], v: &[f64], out: &mut [f64]) {
     crate::simd::vectorised(
         #[inline(always)]
@@ -688,10 +688,46 @@ pub fn lower_packed_transpose_times(t_packed: &[f64], v: &[f64], out: &mut [f64]
 #[inline(always)]
 fn lower_packed_transpose_times_inline(t_packed: &[f64], v: &[f64], out: &mut [f64]) {
     out.fill(0.0);
-    for (i, &vi) in v.iter().enumerate().take(out.len()) {
-        let start = i * (i + 1) / 2;
-        if let Some(row) = t_packed.get(start..start + i + 1) {
-            for (o, t) in out.iter_mut().zip(row) {
+    let n = out.len().min(v.len());
+    let row = |i: usize| lower_row(t_packed, i);
+    let mut i = 0;
+    while i + 4 <= n {
+        if let (Some(r0), Some(r1), Some(r2), Some(r3), Some(&[v0, v1, v2, v3])) = (
+            row(i),
+            row(i + 1),
+            row(i + 2),
+            row(i + 3),
+            v.get(i..).and_then(|t| t.first_chunk::<4>()),
+        ) {
+            // Columns `..=i`, which all four rows have, then the triangle beyond.
+            let it = out.iter_mut().zip(r0).zip(r1).zip(r2).zip(r3);
+            for ((((o, a0), a1), a2), a3) in it {
+                let mut s = *o;
+                s += a0 * v0;
+                s += a1 * v1;
+                s += a2 * v2;
+                s += a3 * v3;
+                *o = s;
+            }
+            if let (Some([o1, o2, o3]), [.., a11], [.., a21, a22], [.., a31, a32, a33]) = (
+                out.get_mut(i + 1..i + 4),
+                r1,
+                r2,
+                r3,
+            ) {
+                *o1 += a11 * v1;
+                *o1 += a21 * v2;
+                *o1 += a31 * v3;
+                *o2 += a22 * v2;
+                *o2 += a32 * v3;
+                *o3 += a33 * v3;
+            }
+        }
+        i += 4;
+    }
+    for (i, &vi) in v.iter().enumerate().take(n).skip(i) {
+        if let Some(r) = row(i) {
+            for (o, t) in out.iter_mut().zip(r) {
                 *o += t * vi;
             }
         }
@@ -1350,11 +1386,47 @@ mod tests {
             back_substitute_inline(&packed, &mut narrow).unwrap();
             assert_eq!(as_bits(&wide), as_bits(&narrow), "back, n = {n}");
             lower_packed_times(&packed, &k, &mut wide);
-            lower_packed_times_inline(&packed, &k, &mut narrow);
+            lower_packed_times_from(&packed, &k, &mut narrow, 0);
             assert_eq!(as_bits(&wide), as_bits(&narrow), "times, n = {n}");
             lower_packed_transpose_times(&packed, &k, &mut wide);
             lower_packed_transpose_times_inline(&packed, &k, &mut narrow);
             assert_eq!(as_bits(&wide), as_bits(&narrow), "transpose, n = {n}");
+        }
+    }
+
+    /// `T k` and `T^T v` against the textbook double loop on every size around the four-row
+    /// blocks. `T^T v` sums each entry's terms in row order, as the loop does: the same bits.
+    #[test]
+    fn triangular_products_match_the_textbook_loops() {
+        for n in (0..23usize).chain([64, 101, 128]) {
+            let packed: Vec<f64> = (0..n * (n + 1) / 2)
+                .map(|i| libm::sin(0.37 * i as f64 + 0.1) * 10f64.powi(i as i32 % 5 - 2))
+                .collect();
+            let k: Vec<f64> = (0..n).map(|i| libm::cos(0.7 * i as f64) + 0.2).collect();
+            let t = |i: usize, j: usize| packed[i * (i + 1) / 2 + j];
+            let mut out = vec![f64::NAN; n];
+            lower_packed_times(&packed, &k, &mut out);
+            for i in 0..n {
+                let (mut want, mut scale) = (0.0, 0.0);
+                for j in 0..=i {
+                    want += t(i, j) * k[j];
+                    scale += (t(i, j) * k[j]).abs();
+                }
+                assert!(
+                    (out[i] - want).abs() <= 1e-14 * scale,
+                    "T k, n = {n}, row {i}: {} against {want}",
+                    out[i]
+                );
+            }
+            let mut out = vec![f64::NAN; n];
+            lower_packed_transpose_times(&packed, &k, &mut out);
+            for j in 0..n {
+                let mut want = 0.0;
+                for i in j..n {
+                    want += t(i, j) * k[i];
+                }
+                assert_eq!(out[j].to_bits(), want.to_bits(), "T^T v, n = {n}, entry {j}");
+            }
         }
     }
 

@@ -13,9 +13,12 @@
 //! It also holds [`sqrt`], the square root the core uses everywhere: `libm`'s is legacy-SSE
 //! inline assembly, which stalls inside the AVX2 code on some CPUs.
 //!
-//! This module holds the crate's only `unsafe` code: the call of a `#[target_feature]` function,
-//! made only after the CPU was seen to support the feature, and the SSE2 square root (SSE2 is
-//! part of every x86-64 CPU).
+//! And it holds one kernel written with AVX2 intrinsics, the sparse GP's `T k`
+//! ([`lower_packed_times_rows4`]), where the compiler's own vectorisation chose a poor layout.
+//!
+//! This module holds the crate's only `unsafe` code: the calls of `#[target_feature]` functions,
+//! made only after the CPU was seen to support the feature, the SSE2 square root (SSE2 is
+//! part of every x86-64 CPU), and the unaligned vector loads and stores of that kernel.
 #![allow(unsafe_code)]
 
 #[cfg(target_arch = "x86_64")]
@@ -74,6 +77,98 @@ pub fn sqrt(x: f64) -> f64 {
     {
         libm::sqrt(x)
     }
+}
+
+/// `out = T k` for the first `4 floor(n / 4)` rows of a row-packed lower-triangular `T`
+/// (`n = out.len()`), with AVX2 intrinsics when the CPU has them; returns how many rows it
+/// wrote (0 without AVX2, where the caller does them all).
+///
+/// The rows go four at a time. Each row sums the columns before its block (a multiple of
+/// four) in one four-lane accumulator, then adds the block's triangle column by column: the
+/// order of `crate::gp`'s row-by-row loop, so the bits are the same (multiplications and
+/// additions stay separate, never fused). The compiler's own vectorisation of that loop paired
+/// lanes across rows with shuffles, and one row at a time waits on its accumulator.
+pub(crate) fn lower_packed_times_rows4(t_packed: &[f64], k: &[f64], out: &mut [f64]) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if avx2() {
+        // SAFETY: the CPU supports AVX2 (as in `vectorised`).
+        return unsafe { lower_packed_times_avx2(t_packed, k, out) };
+    }
+    let _ = (t_packed, k, out);
+    0
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn lower_packed_times_avx2(t_packed: &[f64], k: &[f64], out: &mut [f64]) -> usize {
+    use core::arch::x86_64::{
+        __m256d, _mm256_add_pd, _mm256_hadd_pd, _mm256_loadu_pd, _mm256_mul_pd,
+        _mm256_permute2f128_pd, _mm256_setzero_pd, _mm256_storeu_pd,
+    };
+    let row = |i: usize| {
+        let start = i * (i + 1) / 2;
+        t_packed.get(start..start + i + 1)
+    };
+    // A chunk of exactly four values (what `chunks_exact(4)` yields) as one vector.
+    let load = |c: &[f64]| match c.first_chunk::<4>() {
+        // SAFETY: the pointer is to four readable, initialised `f64`s; the load is unaligned.
+        Some(c4) => unsafe { _mm256_loadu_pd(c4.as_ptr()) },
+        None => _mm256_setzero_pd(),
+    };
+    let mut done = 0;
+    for (b, block) in out.chunks_exact_mut(4).enumerate() {
+        let i = 4 * b;
+        let (Some(r0), Some(r1), Some(r2), Some(r3), Some(k_head), Some(&[k0, k1, k2, k3])) = (
+            row(i),
+            row(i + 1),
+            row(i + 2),
+            row(i + 3),
+            k.get(..i),
+            k.get(i..).and_then(|t| t.first_chunk::<4>()),
+        ) else {
+            break;
+        };
+        let mut acc: [__m256d; 4] = [_mm256_setzero_pd(); 4];
+        let it = k_head
+            .chunks_exact(4)
+            .zip(r0.chunks_exact(4))
+            .zip(r1.chunks_exact(4))
+            .zip(r2.chunks_exact(4))
+            .zip(r3.chunks_exact(4));
+        for ((((kc, c0), c1), c2), c3) in it {
+            let kv = load(kc);
+            for (a, c) in acc.iter_mut().zip([c0, c1, c2, c3]) {
+                *a = _mm256_add_pd(*a, _mm256_mul_pd(load(c), kv));
+            }
+        }
+        // Row r's (x0 + x1) + (x2 + x3), the four rows in one vector.
+        let [a0, a1, a2, a3] = acc;
+        let (h01, h23) = (_mm256_hadd_pd(a0, a1), _mm256_hadd_pd(a2, a3));
+        let sums = _mm256_add_pd(
+            _mm256_permute2f128_pd::<0x20>(h01, h23),
+            _mm256_permute2f128_pd::<0x31>(h01, h23),
+        );
+        let mut s = [0.0f64; 4];
+        // SAFETY: `s` holds four writable `f64`s; the store is unaligned.
+        unsafe { _mm256_storeu_pd(s.as_mut_ptr(), sums) };
+        let [s0, s1, s2, s3] = s;
+        let (
+            [o0, o1, o2, o3],
+            [.., a00],
+            [.., a10, a11],
+            [.., a20, a21, a22],
+            [.., a30, a31, a32, a33],
+        ) = (block, r0, r1, r2, r3)
+        else {
+            break;
+        };
+        *o0 = s0 + a00 * k0;
+        *o1 = (s1 + a10 * k0) + a11 * k1;
+        *o2 = ((s2 + a20 * k0) + a21 * k1) + a22 * k2;
+        *o3 = (((s3 + a30 * k0) + a31 * k1) + a32 * k2) + a33 * k3;
+        done = i + 4;
+    }
+    done
 }
 
 /// `f()` in a function compiled with AVX2 enabled.
