@@ -709,12 +709,9 @@ fn lower_packed_transpose_times_inline(t_packed: &[f64], v: &[f64], out: &mut [f
                 s += a3 * v3;
                 *o = s;
             }
-            if let (Some([o1, o2, o3]), [.., a11], [.., a21, a22], [.., a31, a32, a33]) = (
-                out.get_mut(i + 1..i + 4),
-                r1,
-                r2,
-                r3,
-            ) {
+            if let (Some([o1, o2, o3]), [.., a11], [.., a21, a22], [.., a31, a32, a33]) =
+                (out.get_mut(i + 1..i + 4), r1, r2, r3)
+            {
                 *o1 += a11 * v1;
                 *o1 += a21 * v2;
                 *o1 += a31 * v3;
@@ -1425,7 +1422,11 @@ mod tests {
                 for i in j..n {
                     want += t(i, j) * k[i];
                 }
-                assert_eq!(out[j].to_bits(), want.to_bits(), "T^T v, n = {n}, entry {j}");
+                assert_eq!(
+                    out[j].to_bits(),
+                    want.to_bits(),
+                    "T^T v, n = {n}, entry {j}"
+                );
             }
         }
     }
