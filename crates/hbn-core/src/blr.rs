@@ -24,8 +24,8 @@
 //!
 //! The neighbourhood query uses a uniform grid built at training time (cells as wide as the
 //! window, so a window touches at most `2^d` cells), keys sorted for binary search, and fixed
-//! capacity: at most [`BLR_MAX_NEIGHBOURS`] nearest samples (ties by index) from at most
-//! [`BLR_MAX_SCAN`] candidates. Time and memory are bounded.
+//! capacity: at most [`BLR_MAX_NEIGHBOURS`] nearest samples (ties by index), returned in index
+//! order, from at most [`BLR_MAX_SCAN`] candidates. Time and memory are bounded.
 
 use crate::CoreError;
 use crate::kernel::{MAX_DIM, at, clamp_to, set};
@@ -373,8 +373,9 @@ impl<'a> Neighbourhood<'a> {
         coords.iter().fold(0u64, |k, &c| (k << CELL_BITS) | c)
     }
 
-    /// Indices of the samples in the window around `z`, nearest first (at most `out.len()`),
-    /// and whether a cap was reached.
+    /// Indices of the samples in the window around `z`, in index order: all of them when they
+    /// fit in `out`, else the `out.len()` nearest (of equal distances, the lower index), and
+    /// whether a cap was reached.
     pub fn query(&self, z: &[f64], out: &mut [u32]) -> (usize, bool) {
         // One copy per input dimension, so the per-sample loop has fixed-size arrays.
         match self.dim {
@@ -485,12 +486,19 @@ impl<'a> Neighbourhood<'a> {
     }
 }
 
-/// The nearest samples seen so far, sorted by distance then index, in the caller's buffer.
+/// The nearest samples seen so far, in the caller's buffer in the order they came (the
+/// query offers them in index order). Until the buffer is full each is appended; then one
+/// nearer than the farthest kept (the later one of equal distances, which has the higher
+/// index) replaces it: the farthest leaves, those after it move up one place, and the new
+/// one goes last, so the order stays that of the index. No sort: most windows hold about as
+/// many samples as the buffer, and a sorted insertion shifted half the buffer for each.
 struct Nearest<'o> {
     dist: [f64; BLR_MAX_NEIGHBOURS],
     out: &'o mut [u32],
     cap: usize,
     count: usize,
+    /// Where the farthest kept sample is (meaningful once the buffer is full).
+    worst: usize,
     capped: bool,
 }
 
@@ -502,46 +510,62 @@ impl<'o> Nearest<'o> {
             out,
             cap,
             count: 0,
+            worst: 0,
             capped: false,
         }
     }
 
-    /// Keeps sample `iu` at squared distance `r2` if it is among the `cap` nearest.
+    /// Keeps sample `iu` (higher than every index offered before) at squared distance `r2`
+    /// (not NaN) if it is among the `cap` nearest.
     #[inline(always)]
     fn offer(&mut self, r2: f64, iu: u32) {
-        let (dist, out, cap) = (&mut self.dist, &mut *self.out, self.cap);
-        // Insert into the sorted buffer (distance, then index: deterministic).
-        // `1 <= cap <= min(out.len(), BLR_MAX_NEIGHBOURS)` and `pos <= count < cap`, so
-        // every `get` below succeeds.
-        if self.count == cap {
-            self.capped = true;
-            let (Some(&d_last), Some(&o_last)) = (dist.get(cap - 1), out.get(cap - 1)) else {
-                return;
-            };
-            if !(r2 < d_last || (r2 == d_last && iu < o_last)) {
-                return;
+        let cap = self.cap;
+        if self.count < cap {
+            if let (Some(d), Some(o)) =
+                (self.dist.get_mut(self.count), self.out.get_mut(self.count))
+            {
+                *d = r2;
+                *o = iu;
+                self.count += 1;
             }
-            self.count -= 1;
-        }
-        let mut pos = self.count;
-        while pos > 0 {
-            let (Some(&d_prev), Some(&o_prev)) = (dist.get(pos - 1), out.get(pos - 1)) else {
-                break;
-            };
-            if !(d_prev > r2 || (d_prev == r2 && o_prev > iu)) {
-                break;
+            if self.count == cap {
+                self.worst = self.farthest();
             }
-            if let (Some(dp), Some(op)) = (dist.get_mut(pos), out.get_mut(pos)) {
-                *dp = d_prev;
-                *op = o_prev;
+            return;
+        }
+        self.capped = true;
+        // Equal distance loses: the kept sample has the lower index.
+        if !self.dist.get(self.worst).is_some_and(|&d| r2 < d) {
+            return;
+        }
+        // `worst < cap <= min(out.len(), BLR_MAX_NEIGHBOURS)`: every `get` succeeds.
+        for p in self.worst..cap - 1 {
+            if let (Some(&d), Some(&o)) = (self.dist.get(p + 1), self.out.get(p + 1))
+                && let (Some(dp), Some(op)) = (self.dist.get_mut(p), self.out.get_mut(p))
+            {
+                *dp = d;
+                *op = o;
             }
-            pos -= 1;
         }
-        if let (Some(dp), Some(op)) = (dist.get_mut(pos), out.get_mut(pos)) {
-            *dp = r2;
-            *op = iu;
-            self.count += 1;
+        if let (Some(d), Some(o)) = (self.dist.get_mut(cap - 1), self.out.get_mut(cap - 1)) {
+            *d = r2;
+            *o = iu;
         }
+        self.worst = self.farthest();
+    }
+
+    /// Position of the farthest kept sample, the last of equal distances.
+    #[inline(always)]
+    fn farthest(&self) -> usize {
+        let mut worst = 0;
+        let mut d_worst = f64::NEG_INFINITY;
+        for (p, &d) in self.dist.iter().enumerate().take(self.count) {
+            if d >= d_worst {
+                d_worst = d;
+                worst = p;
+            }
+        }
+        worst
     }
 }
 
@@ -829,10 +853,10 @@ mod tests {
     }
 
     /// A dense window holds far more samples than the buffer: the query must return exactly the
-    /// 48 nearest, nearest first, ties by index (checked against a sort of every sample in
+    /// 48 nearest (ties by index), in index order (checked against a sort of every sample in
     /// the window), for every input dimension.
     #[test]
-    fn a_full_window_returns_the_nearest_in_order() {
+    fn a_full_window_returns_the_nearest_in_index_order() {
         for d in 1..=BLR_MAX_DIM {
             let mut rng = crate::rng::Rng::new(5 + d as u64);
             let n = 1500;
@@ -862,14 +886,18 @@ mod tests {
                     })
                     .collect();
                 want.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-                let mut out = [0u32; BLR_MAX_NEIGHBOURS];
-                let (k, capped) = nb.query(&z, &mut out);
-                assert_eq!(capped, want.len() > BLR_MAX_NEIGHBOURS, "d = {d}");
-                full += usize::from(capped);
-                partial += usize::from(!capped && !want.is_empty());
-                want.truncate(BLR_MAX_NEIGHBOURS);
-                let want: Vec<u32> = want.into_iter().map(|(_, i)| i).collect();
-                assert_eq!(&out[..k], &want[..], "d = {d}");
+                for cap in [BLR_MAX_NEIGHBOURS, 32, 5, 1] {
+                    let mut out = vec![0u32; cap];
+                    let (k, capped) = nb.query(&z, &mut out);
+                    assert_eq!(capped, want.len() > cap, "d = {d}, cap {cap}");
+                    if cap == BLR_MAX_NEIGHBOURS {
+                        full += usize::from(capped);
+                        partial += usize::from(!capped && !want.is_empty());
+                    }
+                    let mut kept: Vec<u32> = want.iter().take(cap).map(|&(_, i)| i).collect();
+                    kept.sort_unstable();
+                    assert_eq!(&out[..k], &kept[..], "d = {d}, cap {cap}");
+                }
             }
             assert!(full >= 10, "d = {d}: only {full} of 40 windows were full");
             if d == BLR_MAX_DIM {
