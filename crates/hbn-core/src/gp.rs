@@ -627,7 +627,7 @@ pub fn lower_packed_times(t_packed: &[f64], k: &[f64], out: &mut [f64]) {
 
 /// The row-packed row `i` of a lower-triangular factor (`i + 1` entries).
 #[inline(always)]
-fn lower_row(packed: &[f64], i: usize) -> Option<&[f64]> {
+pub(crate) fn lower_row(packed: &[f64], i: usize) -> Option<&[f64]> {
     let start = i * (i + 1) / 2;
     packed.get(start..start + i + 1)
 }

@@ -105,10 +105,7 @@ fn lower_packed_times_avx2(t_packed: &[f64], k: &[f64], out: &mut [f64]) -> usiz
         __m256d, _mm256_add_pd, _mm256_hadd_pd, _mm256_loadu_pd, _mm256_mul_pd,
         _mm256_permute2f128_pd, _mm256_setzero_pd, _mm256_storeu_pd,
     };
-    let row = |i: usize| {
-        let start = i * (i + 1) / 2;
-        t_packed.get(start..start + i + 1)
-    };
+    let row = |i: usize| crate::gp::lower_row(t_packed, i);
     // A chunk of exactly four values (what `chunks_exact(4)` yields) as one vector.
     let load = |c: &[f64]| match c.first_chunk::<4>() {
         // SAFETY: the pointer is to four readable, initialised `f64`s; the load is unaligned.
