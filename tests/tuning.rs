@@ -50,6 +50,11 @@ fn tuning_makes_the_uncertainty_honest_on_unseen_data() {
         .expect("validation table");
     assert_eq!(report.rows.len(), Mode::ALL.len());
     assert_eq!(report.holdout.from, vec![375; 6]);
+    // The search of (q, r) keeps to its cap; the std scales and the table use every held-out
+    // sample (3000, under the calibration cap).
+    assert_eq!(report.samples, report.holdout.held_out);
+    assert!(report.searched <= hbn::model::tuning::MAX_VALIDATION_SAMPLES);
+    assert!(report.searched < report.samples);
 
     let score = |m: &HbnModel| {
         let est = m

@@ -257,11 +257,18 @@ pub fn validation_table(model: &hbn_model::HbnModel) -> String {
                 scales 1, default mode ekf\n"
             .to_owned();
     };
+    let scored = if v.searched > 0 && v.searched < v.samples {
+        format!(
+            "{} samples scored; the Q and R scales searched on {} of them",
+            v.samples, v.searched
+        )
+    } else {
+        format!("{} samples scored", v.samples)
+    };
     let mut s = format!(
-        "  filter tuned on held-out data ({}; {} samples scored):\n    {:<8} {:>8} {:>8} {:>9} \
+        "  filter tuned on held-out data ({}; {scored}):\n    {:<8} {:>8} {:>8} {:>9} \
          {:>17} {:>17} {:>17}\n",
         v.holdout,
-        v.samples,
         "mode",
         "Q scale",
         "R scale",

@@ -168,8 +168,14 @@ pub struct ValidationRow {
 pub struct ValidationReport {
     /// Which data were held out.
     pub holdout: Holdout,
-    /// Held-out samples scored (after the cap, [`MAX_VALIDATION_SAMPLES`]).
+    /// Held-out samples the table's scores, the `std` scales and the default mode were
+    /// computed on (after the cap, [`MAX_CALIBRATION_SAMPLES`]).
     pub samples: usize,
+    /// Held-out samples the search for the `q` and `r` scales ran on (after the cap,
+    /// [`MAX_VALIDATION_SAMPLES`]): all of `samples` when there are few, a subset otherwise.
+    /// Model files from before session 29, where both were the same, read as 0.
+    #[serde(default)]
+    pub searched: usize,
     /// One row per mode.
     pub rows: Vec<ValidationRow>,
     /// The mode chosen as the default (lowest tuned NLPD).
@@ -213,6 +219,16 @@ pub struct CandidateRow {
 /// README's demo (3 x 1000 samples, 4 folds): 750 gave the same scales' coverage on the test
 /// log as 1000 and 1500 (96.9%, 97.4%, 97.8% in the default mode) at half the cost.
 pub const MAX_VALIDATION_SAMPLES: usize = 750;
+/// Held-out samples at most that the learned `(q, r)` of each mode are run over once more to
+/// set the `std` scale, the held-out table's scores and the default mode (all folds together,
+/// spread over the runs: [`spread`]). The search of `(q, r)` makes dozens of filter runs and
+/// keeps to [`MAX_VALIDATION_SAMPLES`]; these two runs per mode can afford more. Measured on
+/// logs of 5 x 10,000 samples (session 29): the filter's error varies by 5x from one stretch of
+/// 500 samples to the next, so the 750 samples the search scores (four stretches of 187) had
+/// set `std` scales that put 44-86% of fresh logs' truth inside the 2-sigma band.
+pub const MAX_CALIBRATION_SAMPLES: usize = 4000;
+/// Shortest piece of a held-out block that [`spread`] scores, where the cap forces pieces.
+const MIN_SPREAD_PIECE: usize = 200;
 /// Fewest samples a held-out block (one run) or the training part may have for tuning.
 pub const MIN_TUNING_SAMPLES: usize = 50;
 
@@ -338,6 +354,24 @@ pub(crate) struct Trial<'a> {
     pub blocks: Vec<Block<'a>>,
 }
 
+/// A fold's model and the held-out blocks (or pieces of them) it is scored on.
+struct Scored<'t, 'a> {
+    model: &'t HbnModel,
+    blocks: Vec<Block<'a>>,
+}
+
+/// Pairs every fold's model with its blocks in `blocks` (one list per fold, in order).
+fn scored<'t, 'a>(trials: &'t [Trial<'a>], blocks: Vec<Vec<Block<'a>>>) -> Vec<Scored<'t, 'a>> {
+    trials
+        .iter()
+        .zip(blocks)
+        .map(|(t, blocks)| Scored {
+            model: &t.model,
+            blocks,
+        })
+        .collect()
+}
+
 /// Shortest piece of a block worth scoring when the cap cuts it.
 const MIN_PIECE: usize = 25;
 
@@ -369,6 +403,41 @@ fn capped<'a>(folds: &[Vec<Block<'a>>], cap: usize) -> Vec<Vec<Block<'a>>> {
                 if left == 0 {
                     break;
                 }
+            }
+            out
+        })
+        .collect()
+}
+
+/// The held-out blocks of every fold under a cap of `cap` scored samples, spread over the
+/// runs: each fold gets an equal share, divided evenly among as many of its blocks as give
+/// pieces of at least [`MIN_SPREAD_PIECE`] samples (fold `j` starting at run `j`), a prefix of
+/// each; a block shorter than its piece leaves the rest to the next ones. [`capped`] fills
+/// whole blocks instead, which on long runs scores one stretch per fold.
+fn spread<'a>(folds: &[Vec<Block<'a>>], cap: usize) -> Vec<Vec<Block<'a>>> {
+    let total: usize = folds.iter().flatten().map(Block::scored).sum();
+    if total <= cap {
+        return folds.to_vec();
+    }
+    let share = cap / folds.len().max(1);
+    folds
+        .iter()
+        .enumerate()
+        .map(|(j, blocks)| {
+            let pieces = (share / MIN_SPREAD_PIECE).clamp(1, blocks.len().max(1));
+            let mut out = Vec::new();
+            let mut left = share;
+            for i in 0..blocks.len() {
+                if out.len() == pieces || left == 0 {
+                    break;
+                }
+                let b = blocks[(i + j) % blocks.len()];
+                let keep = b.scored().min(left.div_ceil(pieces - out.len()));
+                if keep < MIN_PIECE.min(b.scored()) {
+                    continue;
+                }
+                out.push(b.prefix(keep));
+                left -= keep;
             }
             out
         })
@@ -411,7 +480,7 @@ struct Run {
 impl Run {
     /// Runs every fold's filter in `mode` over its held-out blocks with the scales `(q, r)`
     /// (`std` scale 1).
-    fn of(trials: &[Trial<'_>], mode: Mode, q: f64, r: f64) -> Result<Self, ModelError> {
+    fn of(trials: &[Scored<'_, '_>], mode: Mode, q: f64, r: f64) -> Result<Self, ModelError> {
         let mut out = Self::default();
         for t in trials {
             let mut config = t.model.untuned_config(mode);
@@ -479,7 +548,7 @@ fn scales_at((lq, lr): Point) -> (f64, f64) {
 type Evaluated = Option<(f64, f64, Run)>;
 
 /// Runs the filter at `points` on up to `threads` threads; results in order.
-fn evaluate_many(trials: &[Trial<'_>], mode: Mode, points: &[Point]) -> Vec<Evaluated> {
+fn evaluate_many(trials: &[Scored<'_, '_>], mode: Mode, points: &[Point]) -> Vec<Evaluated> {
     let eval = |&p: &Point| -> Evaluated {
         let (q, r) = scales_at(p);
         let run = Run::of(trials, mode, q, r).ok()?;
@@ -537,8 +606,6 @@ const LAST_STEP: i32 = 2;
 struct Found<R> {
     /// The optimum in lattice units (where the next modes start).
     at: Point,
-    /// The best `std` scale at the optimum.
-    std: f64,
     /// Filter runs made (points met again are not run again).
     evaluations: usize,
     /// The run at the optimum, and at the untuned point (scales 1) when it ran.
@@ -610,13 +677,12 @@ fn pattern_search<R>(
             step /= 2;
         }
     }
-    let (at, _, std) = current?;
+    let (at, _, _) = current?;
     let mut run_at = |p: Point| seen.remove(&p).flatten().map(|(_, _, run)| run);
     let best = run_at(at)?;
     let untuned = run_at((0, 0));
     Some(Found {
         at,
-        std,
         evaluations,
         best,
         untuned,
@@ -624,50 +690,75 @@ fn pattern_search<R>(
 }
 
 /// Tunes every mode on the folds: `trials` pairs each fold's model (GPs refitted on the fold's
-/// training part) with its held-out runs, which are capped here to
-/// [`MAX_VALIDATION_SAMPLES`] together. The scales are common to all folds.
+/// training part) with its held-out runs. The search of `(q, r)` runs on at most
+/// [`MAX_VALIDATION_SAMPLES`] of them ([`capped`]); the `std` scale, the table's scores and
+/// the default mode come from the learned `(q, r)` run over at most
+/// [`MAX_CALIBRATION_SAMPLES`] ([`spread`]; the same samples when there are few). The scales
+/// are common to all folds.
 pub(crate) fn tune(
     trials: Vec<Trial<'_>>,
     holdout: &Holdout,
 ) -> Result<Option<(FilterTuning, ValidationReport)>, ModelError> {
     let blocks: Vec<Vec<Block<'_>>> = trials.iter().map(|t| t.blocks.clone()).collect();
-    let trials: Vec<Trial<'_>> = trials
-        .into_iter()
-        .zip(capped(&blocks, MAX_VALIDATION_SAMPLES))
-        .map(|(t, blocks)| Trial {
-            model: t.model,
-            blocks,
-        })
-        .collect();
-    let samples: usize = trials
-        .iter()
-        .flat_map(|t| &t.blocks)
-        .map(Block::scored)
-        .sum();
+    let count = |set: &[Scored<'_, '_>]| -> usize {
+        set.iter().flat_map(|t| &t.blocks).map(Block::scored).sum()
+    };
+    let search = scored(&trials, capped(&blocks, MAX_VALIDATION_SAMPLES));
+    let total: usize = blocks.iter().flatten().map(Block::scored).sum();
+    // Under the search's cap both sets are every held-out sample: the search's runs serve.
+    let wide = (total > MAX_VALIDATION_SAMPLES)
+        .then(|| scored(&trials, spread(&blocks, MAX_CALIBRATION_SAMPLES)));
+    let searched = count(&search);
+    let samples = wide.as_deref().map_or(searched, count);
     let mut tuning = FilterTuning::default();
     let mut rows = Vec::new();
     let mut first_optimum: Option<Point> = None;
     for mode in Mode::ALL {
         let Some(found) =
-            pattern_search(first_optimum, |points| evaluate_many(&trials, mode, points))
+            pattern_search(first_optimum, |points| evaluate_many(&search, mode, points))
         else {
             return Ok(None);
         };
         first_optimum.get_or_insert(found.at);
         let (q, r) = scales_at(found.at);
-        let scales = NoiseScales {
-            q,
-            r,
-            std: found.std,
+        let (best, untuned) = match &wide {
+            // The learned and the untuned point on the wide set, side by side; a failure of
+            // the learned point is a failure to tune, the untuned one runs again for its error.
+            Some(wide) => {
+                let points: &[Point] = if found.at == (0, 0) {
+                    &[(0, 0)]
+                } else {
+                    &[found.at, (0, 0)]
+                };
+                let mut runs = evaluate_many(wide, mode, points)
+                    .into_iter()
+                    .map(|e| e.map(|(_, _, run)| run));
+                let Some(Some(best)) = runs.next() else {
+                    return Ok(None);
+                };
+                let untuned = match runs.next() {
+                    None => best.scores(1.0),
+                    Some(Some(run)) => run.scores(1.0),
+                    Some(None) => Run::of(wide, mode, 1.0, 1.0)?.scores(1.0),
+                };
+                (best, untuned)
+            }
+            // The untuned point is the optimum, or failed in the search: run it again (for
+            // the error it gives, if it fails).
+            None => {
+                let untuned = match &found.untuned {
+                    Some(run) => run.scores(1.0),
+                    None if found.at == (0, 0) => found.best.scores(1.0),
+                    None => Run::of(&search, mode, 1.0, 1.0)?.scores(1.0),
+                };
+                (found.best, untuned)
+            }
         };
-        // The untuned point is the optimum, or failed in the search: run it again (for the
-        // error it gives, if it fails).
-        let untuned = match &found.untuned {
-            Some(run) => run.scores(1.0),
-            None if found.at == (0, 0) => found.best.scores(1.0),
-            None => Run::of(&trials, mode, 1.0, 1.0)?.scores(1.0),
+        let Some((_, std)) = best.sums().profile() else {
+            return Ok(None);
         };
-        let tuned = found.best.scores(scales.std);
+        let scales = NoiseScales { q, r, std };
+        let tuned = best.scores(scales.std);
         let finite = |s: &HeldOutScores| s.nrmse.is_finite() && s.calibration.nlpd.is_finite();
         if !(finite(&tuned) && finite(&untuned)) {
             return Ok(None);
@@ -696,6 +787,7 @@ pub(crate) fn tune(
         ValidationReport {
             holdout: holdout.clone(),
             samples,
+            searched,
             rows,
             default_mode,
             candidates: Vec::new(),
@@ -801,6 +893,69 @@ mod tests {
         assert_eq!(c[0].len(), 1);
         // Under the cap, everything is kept.
         assert_eq!(capped(&folds, 600)[1].len(), 3);
+    }
+
+    #[test]
+    fn the_wide_cap_spreads_pieces_over_every_run() {
+        let (u, x, y) = seq(20_000);
+        let block = |from: usize, len: usize| Block {
+            seq: Sequence::new(
+                &u[from - BURN_IN..from + len],
+                &x[from - BURN_IN..from + len],
+                &y[from - BURN_IN..from + len],
+            ),
+            burn_in: BURN_IN,
+        };
+        // Two folds of five 1000-sample blocks (one per run), one with a short block.
+        let folds = vec![
+            (0..5).map(|r| block(100 + 2000 * r, 1000)).collect(),
+            vec![
+                block(1100, 1000),
+                block(3100, 100),
+                block(5100, 1000),
+                block(7100, 1000),
+                block(9100, 1000),
+            ],
+        ];
+        let firsts = |f: &Vec<Block<'_>>| -> Vec<(f64, usize)> {
+            f.iter().map(|b| (b.seq.u[b.burn_in], b.scored())).collect()
+        };
+        // A share of 1000 per fold: five pieces of 200, one per run, fold j from run j; the
+        // short block gives its 100 and the pieces after it share the rest.
+        let c = spread(&folds, 2000);
+        assert_eq!(
+            firsts(&c[0]),
+            vec![
+                (100.0, 200),
+                (2100.0, 200),
+                (4100.0, 200),
+                (6100.0, 200),
+                (8100.0, 200)
+            ]
+        );
+        assert_eq!(
+            firsts(&c[1]),
+            vec![
+                (3100.0, 100),
+                (5100.0, 225),
+                (7100.0, 225),
+                (9100.0, 225),
+                (1100.0, 225)
+            ]
+        );
+        // A smaller share: fewer pieces, none under MIN_SPREAD_PIECE.
+        let c = spread(&folds, 2 * 450);
+        assert_eq!(firsts(&c[0]), vec![(100.0, 225), (2100.0, 225)]);
+        // Under the cap, every block whole; `capped` at the same cap fills whole blocks.
+        let all: Vec<_> = folds.iter().map(firsts).collect();
+        assert_eq!(
+            spread(&folds, 10_000)
+                .iter()
+                .map(firsts)
+                .collect::<Vec<_>>(),
+            all
+        );
+        assert_eq!(firsts(&capped(&folds, 2000)[0]), vec![(100.0, 1000)]);
     }
 
     #[test]
