@@ -720,28 +720,39 @@ pub(crate) fn tune(
             return Ok(None);
         };
         first_optimum.get_or_insert(found.at);
-        let (q, r) = scales_at(found.at);
-        let (best, untuned) = match &wide {
-            // The learned and the untuned point on the wide set, side by side; a failure of
-            // the learned point is a failure to tune, the untuned one runs again for its error.
+        let (at, best, untuned) = match &wide {
+            // The learned and the untuned point on the wide set, side by side. The learned
+            // point stands if it scores at least as well there (penalised, as in the search);
+            // otherwise the identity does, so the table's score after tuning is never worse
+            // than before on the samples it shows. Both failing is a failure to tune; the
+            // untuned point alone failing runs again for its error.
             Some(wide) => {
                 let points: &[Point] = if found.at == (0, 0) {
                     &[(0, 0)]
                 } else {
                     &[found.at, (0, 0)]
                 };
-                let mut runs = evaluate_many(wide, mode, points)
-                    .into_iter()
-                    .map(|e| e.map(|(_, _, run)| run));
-                let Some(Some(best)) = runs.next() else {
-                    return Ok(None);
-                };
-                let untuned = match runs.next() {
-                    None => best.scores(1.0),
-                    Some(Some(run)) => run.scores(1.0),
-                    Some(None) => Run::of(wide, mode, 1.0, 1.0)?.scores(1.0),
-                };
-                (best, untuned)
+                let mut runs = evaluate_many(wide, mode, points).into_iter();
+                let learned = runs.next().flatten();
+                let identity = runs.next().flatten();
+                match (learned, identity) {
+                    (Some((j, _, best)), Some((j0, _, run))) if j <= j0 => {
+                        (found.at, best, run.scores(1.0))
+                    }
+                    (_, Some((_, _, run))) => {
+                        let untuned = run.scores(1.0);
+                        ((0, 0), run, untuned)
+                    }
+                    (Some((_, _, best)), None) if found.at == (0, 0) => {
+                        let untuned = best.scores(1.0);
+                        (found.at, best, untuned)
+                    }
+                    (Some((_, _, best)), None) => {
+                        let untuned = Run::of(wide, mode, 1.0, 1.0)?.scores(1.0);
+                        (found.at, best, untuned)
+                    }
+                    (None, None) => return Ok(None),
+                }
             }
             // The untuned point is the optimum, or failed in the search: run it again (for
             // the error it gives, if it fails).
@@ -751,9 +762,10 @@ pub(crate) fn tune(
                     None if found.at == (0, 0) => found.best.scores(1.0),
                     None => Run::of(&search, mode, 1.0, 1.0)?.scores(1.0),
                 };
-                (found.best, untuned)
+                (found.at, found.best, untuned)
             }
         };
+        let (q, r) = scales_at(at);
         let Some((_, std)) = best.sums().profile() else {
             return Ok(None);
         };
