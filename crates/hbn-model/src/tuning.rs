@@ -381,32 +381,7 @@ const MIN_PIECE: usize = 25;
 /// under [`MIN_PIECE`] samples). Whole blocks, not a short prefix of every block: with many
 /// runs, prefixes of 19 samples made the scales fit start-up transients.
 fn capped<'a>(folds: &[Vec<Block<'a>>], cap: usize) -> Vec<Vec<Block<'a>>> {
-    let total: usize = folds.iter().flatten().map(Block::scored).sum();
-    if total <= cap {
-        return folds.to_vec();
-    }
-    let share = cap / folds.len().max(1);
-    folds
-        .iter()
-        .enumerate()
-        .map(|(j, blocks)| {
-            let mut out = Vec::new();
-            let mut left = share;
-            for i in 0..blocks.len() {
-                let b = blocks[(i + j) % blocks.len()];
-                let keep = b.scored().min(left);
-                if keep < MIN_PIECE.min(b.scored()) {
-                    break;
-                }
-                out.push(b.prefix(keep));
-                left -= keep;
-                if left == 0 {
-                    break;
-                }
-            }
-            out
-        })
-        .collect()
+    share_out(folds, cap, false)
 }
 
 /// The held-out blocks of every fold under a cap of `cap` scored samples, spread over the
@@ -415,6 +390,12 @@ fn capped<'a>(folds: &[Vec<Block<'a>>], cap: usize) -> Vec<Vec<Block<'a>>> {
 /// each; a block shorter than its piece leaves the rest to the next ones. [`capped`] fills
 /// whole blocks instead, which on long runs scores one stretch per fold.
 fn spread<'a>(folds: &[Vec<Block<'a>>], cap: usize) -> Vec<Vec<Block<'a>>> {
+    share_out(folds, cap, true)
+}
+
+/// [`capped`] (`even` false: each block taken whole while the share lasts) and [`spread`]
+/// (`even` true: the share divided among the pieces).
+fn share_out<'a>(folds: &[Vec<Block<'a>>], cap: usize, even: bool) -> Vec<Vec<Block<'a>>> {
     let total: usize = folds.iter().flatten().map(Block::scored).sum();
     if total <= cap {
         return folds.to_vec();
@@ -424,7 +405,11 @@ fn spread<'a>(folds: &[Vec<Block<'a>>], cap: usize) -> Vec<Vec<Block<'a>>> {
         .iter()
         .enumerate()
         .map(|(j, blocks)| {
-            let pieces = (share / MIN_SPREAD_PIECE).clamp(1, blocks.len().max(1));
+            let pieces = if even {
+                (share / MIN_SPREAD_PIECE).clamp(1, blocks.len().max(1))
+            } else {
+                blocks.len()
+            };
             let mut out = Vec::new();
             let mut left = share;
             for i in 0..blocks.len() {
@@ -432,7 +417,12 @@ fn spread<'a>(folds: &[Vec<Block<'a>>], cap: usize) -> Vec<Vec<Block<'a>>> {
                     break;
                 }
                 let b = blocks[(i + j) % blocks.len()];
-                let keep = b.scored().min(left.div_ceil(pieces - out.len()));
+                let piece = if even {
+                    left.div_ceil(pieces - out.len())
+                } else {
+                    left
+                };
+                let keep = b.scored().min(piece);
                 if keep < MIN_PIECE.min(b.scored()) {
                     continue;
                 }
