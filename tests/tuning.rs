@@ -55,6 +55,15 @@ fn tuning_makes_the_uncertainty_honest_on_unseen_data() {
     assert_eq!(report.samples, report.holdout.held_out);
     assert!(report.searched <= hbn::model::tuning::MAX_VALIDATION_SAMPLES);
     assert!(report.searched < report.samples);
+    for row in &report.rows {
+        // The std scale is the root mean NEES of the samples the table scores, so there the
+        // tuned mean NEES is 1; and the identity stands in where it scores better, so tuning
+        // never makes the table's NLPD worse.
+        let tuned = &row.tuned.calibration;
+        assert_eq!(tuned.samples, report.samples, "{row:?}");
+        assert!((tuned.mean_nees - 1.0).abs() < 1e-9, "{row:?}");
+        assert!(tuned.nlpd <= row.untuned.calibration.nlpd + 1e-9, "{row:?}");
+    }
 
     let score = |m: &HbnModel| {
         let est = m
