@@ -82,10 +82,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     ] {
         let r = gp.report();
         println!(
-            "{name}: {} samples, m = {}, {} evaluations, search on {:?}, refinement {:?}, theta {:?}",
+            "{name}: {} samples, m = {}, {} evaluations, search iterations {:?} on {:?}, refinement {:?}, theta {:?}",
             r.n_samples,
             r.n_support,
             r.evaluations,
+            r.starts.iter().map(|s| s.iterations).collect::<Vec<_>>(),
             r.search_samples,
             r.refinement,
             gp.theta()
