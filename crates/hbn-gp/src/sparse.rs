@@ -371,13 +371,14 @@ impl<'a> SparseBound<'a> {
         let uz_by_input = by_input(&uz, d, m);
         let sums: Vec<BlockSums> = (0..self.n_blocks())
             .into_par_iter()
-            .map_init(BlockScratch::new, |scratch, b| {
+            .map(|b| {
                 let (start, end) = self.block_range(b);
-                scratch.shape(m, end - start, d);
-                let BlockScratch { kmn, ux, .. } = scratch;
-                self.cross_block(kernel, &uz_by_input, start, end, kmn, None, ux);
+                let rows = end - start;
+                let mut kmn = Mat::zeros(m, rows);
+                let mut ux = vec![0.0; rows * d];
+                self.cross_block(kernel, &uz_by_input, start, end, &mut kmn, None, &mut ux);
                 solve_lower_triangular_in_place(l_factor, kmn.as_mut(), Par::Seq);
-                let a = &*kmn;
+                let a = kmn;
                 // Q is symmetric: its lower half only (half the multiply-adds of the full
                 // product), mirrored once after the blocks are summed.
                 let mut q = Mat::zeros(m, m);
@@ -502,14 +503,21 @@ impl<'a> SparseBound<'a> {
         let d = kernel.spec().dim;
         let parts: Vec<(f64, f64)> = (0..self.n_blocks())
             .into_par_iter()
-            .map_init(BlockScratch::new, |scratch, b| {
+            .map(|b| {
                 let (start, end) = self.block_range(b);
                 let rows = end - start;
-                scratch.shape(m, rows, d);
-                let BlockScratch {
-                    kmn, a: ck, ux, ..
-                } = scratch;
-                self.cross_block(kernel, &core.uz_by_input, start, end, kmn, None, ux);
+                let mut kmn = Mat::zeros(m, rows);
+                let mut ux = vec![0.0; rows * d];
+                self.cross_block(
+                    kernel,
+                    &core.uz_by_input,
+                    start,
+                    end,
+                    &mut kmn,
+                    None,
+                    &mut ux,
+                );
+                let mut ck = Mat::zeros(m, rows);
                 matmul(
                     ck.as_mut(),
                     Accum::Replace,
@@ -594,24 +602,28 @@ impl<'a> SparseBound<'a> {
         let want_z = self.optimize_z;
         let parts: Vec<(Vec<f64>, Vec<f64>, f64)> = (0..self.n_blocks())
             .into_par_iter()
-            .map_init(BlockScratch::new, |scratch, b| {
+            .map(|b| {
                 let (start, end) = self.block_range(b);
                 let rows = end - start;
-                scratch.shape(m, rows, d);
-                let BlockScratch {
-                    kmn,
-                    cmn,
-                    a,
-                    g,
-                    ux,
-                } = scratch;
-                self.cross_block(&kernel, &core.uz_by_input, start, end, kmn, Some(cmn), ux);
+                let mut kmn = Mat::zeros(m, rows);
+                let mut cmn = Mat::zeros(m, rows);
+                let mut ux = vec![0.0; rows * d];
+                self.cross_block(
+                    &kernel,
+                    &core.uz_by_input,
+                    start,
+                    end,
+                    &mut kmn,
+                    Some(&mut cmn),
+                    &mut ux,
+                );
                 // G = L^{-T} ((I - B^{-1}) A + gamma r^T) / s2 with A = L^{-1} K_mn and the
                 // residuals r = y - A^T gamma: every factor is of moderate size (forming
                 // W K_mn + beta y^T instead subtracts large terms).
-                a.copy_from(&*kmn);
+                let mut a = kmn.clone();
                 solve_lower_triangular_in_place(core.l.as_ref(), a.as_mut(), Par::Seq);
                 let y = &self.data.y[start..end];
+                let mut g = Mat::zeros(m, rows);
                 matmul(
                     g.as_mut(),
                     Accum::Replace,
@@ -815,41 +827,6 @@ impl pulp::WithSimd for UnwarpedGrads<'_> {
                 }
             }
         }
-    }
-}
-
-/// One worker's buffers for a block of the passes over the data: `m x rows` matrices
-/// (`K_mn`, its `dk/dr2`, and two products) and the rows' features. Reused from block to block
-/// (`map_init`) instead of allocated and zeroed afresh for each block: with m = 128 they are
-/// 1 MB each, and `memset` and page faults took about 6% of a 100,000-sample evaluation's
-/// samples under perf, 3% since. Every entry a pass reads it has written first, so reuse
-/// leaves the results bit-identical.
-struct BlockScratch {
-    kmn: Mat<f64>,
-    cmn: Mat<f64>,
-    a: Mat<f64>,
-    g: Mat<f64>,
-    ux: Vec<f64>,
-}
-
-impl BlockScratch {
-    fn new() -> Self {
-        Self {
-            kmn: Mat::new(),
-            cmn: Mat::new(),
-            a: Mat::new(),
-            g: Mat::new(),
-            ux: Vec::new(),
-        }
-    }
-
-    /// Shapes every buffer for a block of `rows` rows (no allocation once the first full block
-    /// has been seen).
-    fn shape(&mut self, m: usize, rows: usize, d: usize) {
-        for mat in [&mut self.kmn, &mut self.cmn, &mut self.a, &mut self.g] {
-            mat.resize_with(m, rows, |_, _| 0.0);
-        }
-        self.ux.resize(rows * d, 0.0);
     }
 }
 
