@@ -438,8 +438,9 @@ pub(crate) struct NegLml<'b, O: Objective>(pub &'b O);
 /// Cost the optimiser sees where the objective cannot be evaluated (a covariance that is not
 /// positive definite even with jitter, or a non-finite value): large enough that the line
 /// search backs off, small enough that its cubic interpolation cannot overflow. Without it,
-/// one failed trial step (the first L-BFGS step is as long as the gradient, easily thousands
-/// of log-units) ended the whole start at its initial point.
+/// one failed trial step ended the whole start at its initial point (the first L-BFGS step
+/// was as long as the gradient, easily thousands of log-units, until session 30; it is now of
+/// unit length, which can still leave the region where the covariance factors).
 const FAILED_COST: f64 = 1e150;
 
 impl<O: Objective> argmin::core::CostFunction for NegLml<'_, O> {

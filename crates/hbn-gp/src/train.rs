@@ -6,8 +6,11 @@ use crate::data::{check_data, column_stats, select_subset, whitening};
 use crate::likelihood::{Likelihood, LikelihoodData, NegLml, Objective, param_of_noise};
 use crate::model::{GaussianProcess, StartReport, TrainingReport};
 use crate::params::{GpParams, MeanFunction};
-use argmin::core::{Executor, State, TerminationReason, TerminationStatus};
-use argmin::solver::linesearch::MoreThuenteLineSearch;
+use argmin::core::{
+    CostFunction, Executor, Gradient, IterState, KV, Problem, Solver, State, TerminationReason,
+    TerminationStatus,
+};
+use argmin::solver::linesearch::{LineSearch, MoreThuenteLineSearch};
 use argmin::solver::quasinewton::LBFGS;
 use hbn_core::kernel::MAX_DIM;
 use hbn_core::rng::Rng;
@@ -550,6 +553,93 @@ fn randomize(p: &mut [f64], spec: &hbn_core::KernelSpec, rng: &mut Rng) {
     p[spec.n_params()] = rng.uniform_in(-4.0 * ln10, -0.5);
 }
 
+/// The More-Thuente line search as L-BFGS-B runs it (Byrd, Lu, Nocedal and Zhu 1995; the
+/// optimiser of scipy's `fmin_l_bfgs_b`, which scikit-learn's GP uses): the first search of a
+/// run tries a step of unit length in parameter space (`1 / |d|` along the steepest-descent
+/// direction `d`, whose length is the gradient's), later ones the quasi-Newton step 1, and a
+/// search ends once its interval of uncertainty is within 10% of the step (`xtol = 0.1`).
+///
+/// argmin's defaults were a first step of `|g|` (thousands of log-units on a 100,000-sample
+/// bound, so the first search spent about eight evaluations backing off and growing again)
+/// and `xtol = 1e-10`. The second matters when the bound's rounding noise exceeds the
+/// decrease a search looks for: measured on a 10,000-sample sensor search with the signal
+/// variance at its bound (noise about 0.02 nats), searches of 30 evaluations at one point
+/// (docs/benchmarks.md, session 30).
+#[derive(Clone)]
+struct LbfgsbLineSearch {
+    inner: MoreThuenteLineSearch<Vec<f64>, Vec<f64>, f64>,
+    searches: u64,
+}
+
+impl LbfgsbLineSearch {
+    /// L-BFGS-B's relative width tolerance of the interval of uncertainty.
+    const WIDTH_TOLERANCE: f64 = 0.1;
+
+    fn new() -> Result<Self, argmin::core::Error> {
+        Ok(Self {
+            inner: MoreThuenteLineSearch::new().with_width_tolerance(Self::WIDTH_TOLERANCE)?,
+            searches: 0,
+        })
+    }
+}
+
+impl LineSearch<Vec<f64>, f64> for LbfgsbLineSearch {
+    /// Called by L-BFGS on its own copy before each search (the search runs on a clone), so
+    /// the count persists across the run's searches.
+    fn search_direction(&mut self, direction: Vec<f64>) {
+        let norm = direction.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let step = if self.searches == 0 && norm.is_finite() && norm > 0.0 {
+            1.0 / norm
+        } else {
+            1.0
+        };
+        self.searches += 1;
+        // `step` is positive and finite here, which is all `initial_step_length` checks.
+        let _ = self.inner.initial_step_length(step);
+        self.inner.search_direction(direction);
+    }
+
+    fn initial_step_length(&mut self, step_length: f64) -> Result<(), argmin::core::Error> {
+        self.inner.initial_step_length(step_length)
+    }
+}
+
+impl<O> Solver<O, LineState> for LbfgsbLineSearch
+where
+    O: CostFunction<Param = Vec<f64>, Output = f64>
+        + Gradient<Param = Vec<f64>, Gradient = Vec<f64>>,
+{
+    fn name(&self) -> &str {
+        "More-Thuente line search (L-BFGS-B settings)"
+    }
+
+    fn init(
+        &mut self,
+        problem: &mut Problem<O>,
+        state: LineState,
+    ) -> Result<(LineState, Option<KV>), argmin::core::Error> {
+        self.inner.init(problem, state)
+    }
+
+    fn next_iter(
+        &mut self,
+        problem: &mut Problem<O>,
+        state: LineState,
+    ) -> Result<(LineState, Option<KV>), argmin::core::Error> {
+        self.inner.next_iter(problem, state)
+    }
+
+    fn terminate(&mut self, state: &LineState) -> TerminationStatus {
+        <MoreThuenteLineSearch<Vec<f64>, Vec<f64>, f64> as Solver<O, LineState>>::terminate(
+            &mut self.inner,
+            state,
+        )
+    }
+}
+
+/// The state argmin's line searches run on.
+type LineState = IterState<Vec<f64>, Vec<f64>, (), (), (), f64>;
+
 /// One L-BFGS start: best parameters, their log marginal likelihood, iterations, and why it
 /// stopped.
 /// `cost_tolerance` ends the start once an iteration improves the objective by less (in
@@ -562,7 +652,7 @@ pub(crate) fn run_lbfgs<O: Objective>(
     max_iters: u64,
     cost_tolerance: f64,
 ) -> Result<(Vec<f64>, f64, u64, Termination), StartFailure> {
-    let linesearch = MoreThuenteLineSearch::new();
+    let linesearch = LbfgsbLineSearch::new().map_err(|e| StartFailure::of(&e))?;
     let solver = LBFGS::new(linesearch, 10)
         .with_tolerance_grad(1e-5)
         .and_then(|s| s.with_tolerance_cost(cost_tolerance))
@@ -590,5 +680,104 @@ impl GaussianProcess {
     /// model holding it) depends only on its data and parameters.
     pub fn forget_timing(&mut self) {
         self.report.seconds = 0.0;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::likelihood::{EvalStats, Evaluation};
+    use std::sync::Mutex;
+
+    /// `-scale * sum ln cosh(p_i - 1)`: a bowl around 1 that grows linearly far away (as a
+    /// log likelihood does in log-parameters), plus a deterministic noise of relative size
+    /// `noise` on the value and the gradient, drawn from the bits of `p` (a bound's rounding
+    /// noise). Records every point evaluated.
+    struct Bowl {
+        scale: f64,
+        noise: f64,
+        points: Mutex<Vec<Vec<f64>>>,
+    }
+
+    impl Bowl {
+        fn new(scale: f64, noise: f64) -> Self {
+            Self {
+                scale,
+                noise,
+                points: Mutex::new(Vec::new()),
+            }
+        }
+
+        fn distinct_points(&self) -> Vec<Vec<f64>> {
+            let mut seen: Vec<Vec<f64>> = Vec::new();
+            for p in self.points.lock().unwrap().iter() {
+                if seen.last() != Some(p) {
+                    seen.push(p.clone());
+                }
+            }
+            seen
+        }
+    }
+
+    impl Objective for Bowl {
+        fn evaluate(&self, p: &[f64]) -> Result<Evaluation, GpError> {
+            self.points.lock().unwrap().push(p.to_vec());
+            let value: f64 = p.iter().map(|v| (v - 1.0).cosh().ln()).sum::<f64>() * -self.scale;
+            let bits = p.iter().fold(0u64, |h, v| {
+                (h ^ v.to_bits()).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            });
+            let unit = (bits >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            Ok(Evaluation {
+                lml: value + unit * self.noise * self.scale * p.len() as f64,
+                grad: p
+                    .iter()
+                    .map(|v| -self.scale * ((v - 1.0).tanh() + unit * self.noise))
+                    .collect(),
+                jitter: 0.0,
+                relative_jitter: 0.0,
+            })
+        }
+
+        fn stats(&self) -> EvalStats {
+            EvalStats::default()
+        }
+    }
+
+    #[test]
+    fn the_first_trial_step_has_unit_length_whatever_the_gradient_scale() {
+        for scale in [1e-3, 1.0, 1e5] {
+            let bowl = Bowl::new(scale, 0.0);
+            let p0 = vec![0.0, 3.0, -2.0];
+            let (p, _, _, _) = run_lbfgs(&bowl, p0.clone(), 100, 1e-12 * scale).unwrap();
+            assert!(p.iter().all(|v| (v - 1.0).abs() < 1e-2), "{p:?}");
+            let points = bowl.distinct_points();
+            let step: f64 = points[1]
+                .iter()
+                .zip(&p0)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            assert!(
+                (step - 1.0).abs() < 1e-12,
+                "scale {scale}: first step {step}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_search_in_rounding_noise_ends_within_a_few_evaluations() {
+        // Noise of 1e-6 of the scale per coordinate: near the optimum no trial point can show
+        // the decrease the line search looks for. With a width tolerance of 1e-10 each search
+        // there halves its interval about 30 times before it gives up.
+        let bowl = Bowl::new(1e5, 1e-6);
+        let p0 = vec![0.0, 3.0, -2.0, 0.5];
+        let (p, _, iterations, _) = run_lbfgs(&bowl, p0, 100, 1e-7 * 1e4).unwrap();
+        assert!(p.iter().all(|v| (v - 1.0).abs() < 1e-2), "{p:?}");
+        let evaluations = bowl.distinct_points().len() as u64;
+        // Measured: 39 evaluations in 10 iterations; 85 in 11 with a width tolerance of 1e-10.
+        assert!(
+            evaluations <= 5 * iterations,
+            "{evaluations} evaluations in {iterations} iterations"
+        );
     }
 }

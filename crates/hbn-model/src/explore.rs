@@ -1510,13 +1510,14 @@ mod tests {
 
     #[test]
     fn a_warm_relearning_stops_at_its_iteration_bound() {
-        // Hyperparameters far from the optimum: re-learning from them cannot finish within
+        // Hyperparameters far from the optimum (every log-parameter 3 below the fit, the noise
+        // 1000 times larger): re-learning from them cannot finish within
         // `RELEARN_MAX_ITERS` iterations (the same start without the bound takes more), so
         // the bound is what stops it, and `observe()` blocks for a bounded time.
         let mut explorer = trained_on_low_inputs();
         let gp = explorer.transition.as_ref().unwrap();
         let far = Hyperparameters {
-            theta: gp.theta().iter().map(|t| t + 4.0).collect(),
+            theta: gp.theta().iter().map(|t| t - 3.0).collect(),
             noise_variance: gp.noise_variance_std() * 1e3,
         };
         explorer.params.params.model.max_iters = 200;
