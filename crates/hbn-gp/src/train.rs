@@ -559,7 +559,7 @@ fn randomize(p: &mut [f64], spec: &hbn_core::KernelSpec, rng: &mut Rng) {
 /// direction `d`, whose length is the gradient's), later ones the quasi-Newton step 1, and a
 /// search ends once its interval of uncertainty is within 10% of the step (`xtol = 0.1`).
 ///
-/// argmin's defaults were a first step of `|g|` (thousands of log-units on a 100,000-sample
+/// argmin's defaults were a first step of `|g|` (hundreds of log-units on a 100,000-sample
 /// bound, so the first search spent about eight evaluations backing off and growing again)
 /// and `xtol = 1e-10`. The second matters when the bound's rounding noise exceeds the
 /// decrease a search looks for: measured on a 10,000-sample sensor search with the signal
