@@ -553,6 +553,9 @@ fn randomize(p: &mut [f64], spec: &hbn_core::KernelSpec, rng: &mut Rng) {
     p[spec.n_params()] = rng.uniform_in(-4.0 * ln10, -0.5);
 }
 
+/// The state argmin's line searches run on.
+type LineState = IterState<Vec<f64>, Vec<f64>, (), (), (), f64>;
+
 /// The More-Thuente line search as L-BFGS-B runs it (Byrd, Lu, Nocedal and Zhu 1995; the
 /// optimiser of scipy's `fmin_l_bfgs_b`, which scikit-learn's GP uses): the first search of a
 /// run tries a step of unit length in parameter space (`1 / |d|` along the steepest-descent
@@ -565,6 +568,9 @@ fn randomize(p: &mut [f64], spec: &hbn_core::KernelSpec, rng: &mut Rng) {
 /// decrease a search looks for: measured on a 10,000-sample sensor search with the signal
 /// variance at its bound (noise about 0.02 nats), searches of 30 evaluations at one point
 /// (docs/benchmarks.md, session 30).
+///
+/// Only `init` and `next_iter` are delegated: argmin's More-Thuente search keeps the
+/// default `terminate` and ends itself from `next_iter`.
 #[derive(Clone)]
 struct LbfgsbLineSearch {
     inner: MoreThuenteLineSearch<Vec<f64>, Vec<f64>, f64>,
@@ -587,14 +593,15 @@ impl LineSearch<Vec<f64>, f64> for LbfgsbLineSearch {
     /// Called by L-BFGS on its own copy before each search (the search runs on a clone), so
     /// the count persists across the run's searches.
     fn search_direction(&mut self, direction: Vec<f64>) {
-        let norm = direction.iter().map(|v| v * v).sum::<f64>().sqrt();
-        let step = if self.searches == 0 && norm.is_finite() && norm > 0.0 {
-            1.0 / norm
+        let unit_step = 1.0 / direction.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let step = if self.searches == 0 && unit_step.is_finite() && unit_step > 0.0 {
+            unit_step
         } else {
             1.0
         };
         self.searches += 1;
-        // `step` is positive and finite here, which is all `initial_step_length` checks.
+        // `step` is positive and finite here (a zero or subnormal direction gives an infinite
+        // `unit_step`, and 1 is used), which is all `initial_step_length` checks.
         let _ = self.inner.initial_step_length(step);
         self.inner.search_direction(direction);
     }
@@ -628,17 +635,7 @@ where
     ) -> Result<(LineState, Option<KV>), argmin::core::Error> {
         self.inner.next_iter(problem, state)
     }
-
-    fn terminate(&mut self, state: &LineState) -> TerminationStatus {
-        <MoreThuenteLineSearch<Vec<f64>, Vec<f64>, f64> as Solver<O, LineState>>::terminate(
-            &mut self.inner,
-            state,
-        )
-    }
 }
-
-/// The state argmin's line searches run on.
-type LineState = IterState<Vec<f64>, Vec<f64>, (), (), (), f64>;
 
 /// One L-BFGS start: best parameters, their log marginal likelihood, iterations, and why it
 /// stopped.
