@@ -45,7 +45,8 @@ use crate::likelihood::{
 use crate::model::{GaussianProcess, SparseFactors, StartReport, TrainingReport};
 use crate::params::{GpParams, SparseParams};
 use crate::train::{
-    COST_TOLERANCE_PER_SAMPLE, FitProgress, Standardised, multi_start, run_lbfgs, starting_point,
+    COST_TOLERANCE_PER_SAMPLE, FitProgress, REFINE_TOLERANCE_PER_SAMPLE, Standardised, multi_start,
+    run_lbfgs_with_stall, starting_point,
 };
 use faer::linalg::matmul::matmul;
 use faer::linalg::matmul::triangular::{self, BlockStructure};
@@ -1191,7 +1192,13 @@ pub(crate) fn fit_sparse(
         let full = bound_on(all, &z_std, &z_dirs, sp, params);
         if sp.refine_iters > 0 && (use_subset || reselect) {
             let initial_lml = full.evaluate(&p).ok().map(|e| e.lml);
-            let run = run_lbfgs(&full, p.clone(), sp.refine_iters, tolerance(n));
+            // Learned inducing inputs keep their absolute tolerance and no stall rule.
+            let stall = if sp.optimize_inducing {
+                0.0
+            } else {
+                REFINE_TOLERANCE_PER_SAMPLE * n as f64
+            };
+            let run = run_lbfgs_with_stall(&full, p.clone(), sp.refine_iters, tolerance(n), stall);
             report.refinement = Some(match run {
                 Ok((q, lml, iterations, _termination)) => {
                     p = q;
