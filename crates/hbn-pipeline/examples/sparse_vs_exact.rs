@@ -14,7 +14,9 @@
 //! support points (default 500; the row's names say it), `SUBSET_POLICY=farthest-point|random`
 //! how it picks them. `SELECT_INDUCING=m` adds a run `select{m}`: exact GPs with `m` inducing
 //! points as the alternative that held-out selection ([`hbn_model::Selection`]) chooses
-//! between. An empty `m,...` list runs no plain sparse model.
+//! between. `DEFAULT_RUN=1` adds a run `default`: `HbnParams::default()` as shipped (model
+//! selection among exact and sparse GPs and the lag, kernels by evidence), with only the
+//! protocol's training set changed. An empty `m,...` list runs no plain sparse model.
 use hbn_model::HbnParams;
 use hbn_pipeline::experiment::{ExperimentConfig, run_case};
 use hbn_sim::SystemKind;
@@ -79,10 +81,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     .then(|| (format!("exact{max_points}"), None, None))
                     .into_iter()
                     .chain(ms.iter().map(|&m| (format!("sparse{m}"), Some(m), None)))
-                    .chain(select.map(|m| (format!("select{m}"), None, Some(m))));
+                    .chain(select.map(|m| (format!("select{m}"), None, Some(m))))
+                    .chain(
+                        std::env::var_os("DEFAULT_RUN")
+                            .map(|_| ("default".to_string(), None, None)),
+                    );
                 for (name, n_inducing, alternative) in runs {
-                    let cfg = ExperimentConfig {
-                        params: HbnParams {
+                    let params = if name == "default" {
+                        HbnParams::default()
+                    } else {
+                        HbnParams {
                             n_inducing,
                             increments,
                             linear_mean,
@@ -95,7 +103,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                                 ..Default::default()
                             },
                             ..HbnParams::default()
-                        },
+                        }
+                    };
+                    let cfg = ExperimentConfig {
+                        params,
                         train_steps,
                         repeats,
                         ..ExperimentConfig::default()
