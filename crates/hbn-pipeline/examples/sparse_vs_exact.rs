@@ -78,16 +78,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 row.insert("seed".into(), seed.into());
                 let exact = std::env::var_os("SPARSE_ONLY").is_none();
                 let runs = exact
-                    .then(|| (format!("exact{max_points}"), None, None))
+                    .then(|| (format!("exact{max_points}"), None, None, false))
                     .into_iter()
-                    .chain(ms.iter().map(|&m| (format!("sparse{m}"), Some(m), None)))
-                    .chain(select.map(|m| (format!("select{m}"), None, Some(m))))
+                    .chain(
+                        ms.iter()
+                            .map(|&m| (format!("sparse{m}"), Some(m), None, false)),
+                    )
+                    .chain(select.map(|m| (format!("select{m}"), None, Some(m), false)))
                     .chain(
                         std::env::var_os("DEFAULT_RUN")
-                            .map(|_| ("default".to_string(), None, None)),
+                            .map(|_| ("default".to_string(), None, None, true)),
                     );
-                for (name, n_inducing, alternative) in runs {
-                    let params = if name == "default" {
+                for (name, n_inducing, alternative, shipped) in runs {
+                    let params = if shipped {
                         HbnParams::default()
                     } else {
                         HbnParams {
