@@ -12,7 +12,9 @@
 //! default's `ExploreParams::pool`), explore-ramps-lagN (the default with its refits beside
 //! the loop, `ExploreParams::lag` = N), explore-ramps-reduction and explore-ramps-variance (the
 //! default with `ExploreParams::criterion` = `Criterion::Reduction` or `Criterion::Variance`;
-//! explore-ramps is the library's default: `Reduction` since session 21, `Variance` before).
+//! explore-ramps is the library's default: `Reduction` since session 21, `Variance` before), and
+//! explore-ramps-alphaA (the default with the seeking weight's end `ExploreParams::alpha_end` =
+//! A, and its start at most A).
 use hbn_model::explore::{Criterion, ExploreParams, Explorer, Strategy};
 use hbn_model::{HbnModel, HbnParams, Sequence, metrics::nrmse};
 use hbn_sim::{
@@ -82,6 +84,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         "explore-ramps" | "explore-ramps-reduction" | "explore-ramps-variance" => {
                             (Strategy::Ramps, None, 0)
                         }
+                        other if other.starts_with("explore-ramps-alpha") => {
+                            (Strategy::Ramps, None, 0)
+                        }
                         other => match (
                             other.strip_prefix("explore-ramps-pool"),
                             other.strip_prefix("explore-ramps-lag"),
@@ -95,7 +100,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     p.seed = seed;
                     (p.strategy, p.pool) = (choice.0, choice.1.unwrap_or(p.pool));
                     p.lag = choice.2;
-                    if let Some(c) = method.strip_prefix("explore-ramps-") {
+                    if let Some(a) = method.strip_prefix("explore-ramps-alpha") {
+                        p.alpha_end = a.parse()?;
+                        p.alpha_start = p.alpha_start.min(p.alpha_end);
+                    } else if let Some(c) = method.strip_prefix("explore-ramps-") {
                         p.criterion = c.parse::<Criterion>().unwrap_or(p.criterion);
                     }
                     let mut explorer = Explorer::new(p)?;
