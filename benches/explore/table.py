@@ -2,9 +2,13 @@
 Markdown tables of docs/exploration.md: mean nRMSE per system, amount of data and method (over
 seeds), each method's ratio to random ramps, the geometric means against random ramps and
 against the thesis' random walk, and the smallest amount of explored data that reaches the
-accuracy of random ramps on the largest amount.
+accuracy of random ramps on the largest amount. Then the paired comparison: for each method
+against random ramps and against the default explorer, the geometric mean over runs of the
+same system, seed and size of the nRMSE ratio, with the standard error of its log and the
+ratio per size (the cell table's ratios are of means over the seeds).
 
-Usage: python benches/explore/table.py RUNS.csv [RUNS2.csv ...]
+Usage: python benches/explore/table.py [--seeds 21,22,...] RUNS.csv [RUNS2.csv ...]
+(`--seeds`: only the runs of these seeds.)
 """
 import csv
 import math
@@ -36,16 +40,47 @@ def geo(v):
     return math.exp(sum(math.log(x) for x in v) / len(v))
 
 
-def main(paths):
+def paired(by_run, methods):
+    """Prints each method against random ramps and against the default explorer, paired on
+    the runs (system, seed, size) both have."""
+    for base in ["random-ramps", "explore-ramps"]:
+        for m in methods:
+            if m in (base, "random-ramps"):
+                continue
+            logs = defaultdict(list)  # samples -> log ratios
+            for (_, _, n), got in by_run.items():
+                if base in got and m in got:
+                    logs[n].append(math.log(got[m] / got[base]))
+            every = [x for v in logs.values() for x in v]
+            if len(every) < 2:
+                continue
+            mu = mean(every)
+            se = math.sqrt(sum((x - mu) ** 2 for x in every) / (len(every) - 1) / len(every))
+            sizes = ", ".join(f"{n} samples {math.exp(mean(v)):.3f}" for n, v in sorted(logs.items()))
+            print(f"- {name(m)} / {name(base)}: {math.exp(mu):.3f} over {len(every)} runs "
+                  f"(standard error of the log {se:.3f}); {sizes}")
+
+
+def main(argv):
+    seeds = None
+    if len(argv) >= 2 and argv[0] == "--seeds":
+        seeds = {int(s) for s in argv[1].split(",")}
+        argv = argv[2:]
     runs = defaultdict(list)  # (system, samples, method) -> [nrmse]
-    for path in paths:
+    by_run = defaultdict(dict)  # (system, seed, samples) -> {method: nrmse}
+    for path in argv:
         with open(path) as f:
             for row in csv.DictReader(f):
                 try:
-                    runs[(row["system"], int(row["samples"]), row["method"])].append(
-                        float(row["nrmse"]))
+                    seed = int(row["seed"])
+                    if seeds is not None and seed not in seeds:
+                        continue
+                    key = (row["system"], int(row["samples"]), row["method"])
+                    value = float(row["nrmse"])
                 except (KeyError, ValueError):
                     continue
+                runs[key].append(value)
+                by_run[(key[0], seed, key[1])][key[2]] = value
     systems = sorted({k[0] for k in runs})
     sizes = sorted({k[1] for k in runs})
     # Known methods in their order, then any other (a variant measured beside them), in the
@@ -97,6 +132,8 @@ def main(paths):
                          if runs.get((s, n, m)) and mean(runs[(s, n, m)]) <= target), None)
             said = f"{need} samples" if need else f"more than {top}"
             print(f"- {s}, {name(m)}: {said} (random ramps: {top} samples, nRMSE {target:.4f})")
+    print("\nPaired on the runs:")
+    paired(by_run, methods)
 
 
 if __name__ == "__main__":
