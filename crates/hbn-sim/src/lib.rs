@@ -60,6 +60,13 @@
 //! So `g = 0` gives exactly the clean signals, and with `g = 1` the state disturbance stays
 //! within `+-0.01 * range_x` with variance `(0.02 range_x)^2 / 12`.
 //!
+//! ## The floor under estimation
+//!
+//! [`oracle_estimate`] gives, for a simulated trajectory, the exact posterior mean of each state
+//! given the input and sensor output so far, the true past states and the simulator itself: no
+//! causal estimator has a lower expected squared error on that trajectory, so it measures how
+//! much any estimator could still gain (`docs/results.md`, "The floor under causal estimation").
+//!
 //! ## Building blocks
 //!
 //! The operators ([`PlayOperator`], [`PrandtlIshlinskii`], [`MaxwellSlip`], [`BoucWen`],
@@ -70,6 +77,7 @@
 
 mod input;
 mod operators;
+mod oracle;
 mod systems;
 
 use hbn_core::rng::Rng;
@@ -79,6 +87,7 @@ pub use operators::{
     BoucWen, BoucWenParams, Duhem, Envelope, Hysteresis, MaxwellSlip, PlayOperator,
     PrandtlIshlinskii, Preisach, PreisachDensity,
 };
+pub use oracle::{ORACLE_GRID, OracleEstimate, oracle_estimate};
 
 /// Admissible input interval of [`simulate`] (inputs are nominally in `[0, 1]`).
 pub const INPUT_RANGE: (f64, f64) = (-0.5, 1.5);
@@ -126,6 +135,16 @@ pub enum SimError {
         lo: f64,
         /// Upper admissible bound.
         hi: f64,
+    },
+    /// A trajectory whose signals differ in length.
+    #[error("trajectory signals differ in length: u {u}, x {x}, y {y} samples")]
+    LengthMismatch {
+        /// Samples of `u`.
+        u: usize,
+        /// Samples of `x`.
+        x: usize,
+        /// Samples of `y`.
+        y: usize,
     },
 }
 
@@ -268,6 +287,18 @@ impl SimConfig {
         }
     }
 
+    /// Width of the state disturbance, `noise_gain * 0.02 * range_x`: `x` is the clean state
+    /// plus this times a uniform draw from `[-0.5, 0.5]` (see the crate docs).
+    pub fn noise_width_x(&self) -> f64 {
+        self.noise_gain * 0.02 * self.system.nominal_range_x()
+    }
+
+    /// Width of the measurement noise, `noise_gain * 0.02 * range_y`: `y` is the sensor's clean
+    /// output plus this times a uniform draw from `[-0.5, 0.5]`.
+    pub fn noise_width_y(&self) -> f64 {
+        self.noise_gain * 0.02 * self.system.nominal_range_y()
+    }
+
     /// Checks `noise_gain` (finite, >= 0) and `rate_hz` (finite, > 0).
     pub fn validate(&self) -> Result<(), SimError> {
         if !(self.noise_gain.is_finite() && self.noise_gain >= 0.0) {
@@ -307,8 +338,8 @@ impl Simulator {
         Ok(Self {
             system: systems::System::new(config.system, 1.0 / config.rate_hz)?,
             rng: Rng::new(config.seed ^ NOISE_SALT),
-            noise_x: config.noise_gain * 0.02 * config.system.nominal_range_x(),
-            noise_y: config.noise_gain * 0.02 * config.system.nominal_range_y(),
+            noise_x: config.noise_width_x(),
+            noise_y: config.noise_width_y(),
             steps: 0,
         })
     }
@@ -349,20 +380,7 @@ impl Simulator {
 /// [`INPUT_RANGE`]. An empty input gives an empty trajectory.
 pub fn simulate(config: &SimConfig, u: &[f64]) -> Result<Trajectory, SimError> {
     config.validate()?;
-    let (lo, hi) = INPUT_RANGE;
-    for (index, &value) in u.iter().enumerate() {
-        if !value.is_finite() {
-            return Err(SimError::NonFiniteInput { index, value });
-        }
-        if !(lo..=hi).contains(&value) {
-            return Err(SimError::InputOutOfRange {
-                index,
-                value,
-                lo,
-                hi,
-            });
-        }
-    }
+    check_input(u)?;
     let mut sim = Simulator::new(config)?;
     let mut x = Vec::with_capacity(u.len());
     let mut y = Vec::with_capacity(u.len());
@@ -377,6 +395,25 @@ pub fn simulate(config: &SimConfig, u: &[f64]) -> Result<Trajectory, SimError> {
         y,
         rate_hz: config.rate_hz,
     })
+}
+
+/// Rejects the first input sample that is not finite or lies outside [`INPUT_RANGE`].
+fn check_input(u: &[f64]) -> Result<(), SimError> {
+    let (lo, hi) = INPUT_RANGE;
+    for (index, &value) in u.iter().enumerate() {
+        if !value.is_finite() {
+            return Err(SimError::NonFiniteInput { index, value });
+        }
+        if !(lo..=hi).contains(&value) {
+            return Err(SimError::InputOutOfRange {
+                index,
+                value,
+                lo,
+                hi,
+            });
+        }
+    }
+    Ok(())
 }
 
 /// Convenience: generate_input(RandomRamps, steps, default increment 0.02, seed) then simulate.

@@ -362,4 +362,10 @@ impl System {
     pub(crate) fn sense(&mut self, x: f64) -> f64 {
         self.sen.step(x)
     }
+
+    /// The clean output [`System::sense`] would give for `x`, without moving the sensor's
+    /// state (a trial on a copy of it).
+    pub(crate) fn sense_trial(&self, x: f64) -> f64 {
+        self.sen.clone().step(x)
+    }
 }
