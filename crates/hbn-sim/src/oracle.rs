@@ -45,8 +45,16 @@ pub struct OracleEstimate {
 
 /// The exact posterior of each recorded state `x[k]` of `traj`, a trajectory of `config`'s
 /// system, given `u[0..=k]`, `y[0..=k]`, the simulator's model and the true past states
-/// `x[0..k]` (see the [module docs](self) for why its error is a floor under any causal
-/// estimator's).
+/// `x[0..k]`.
+///
+/// Why its error is a floor: `x[k]` is the clean state, a deterministic function of `u[0..=k]`,
+/// plus a uniform disturbance drawn afresh at every sample; `y[k]` is the sensor's reading of
+/// `x[k]`, whose state depends on the past states, plus uniform noise. Given the true past, the
+/// only unknown is the current disturbance, and its posterior is uniform on the values that
+/// explain `y[k]` within the noise's bound; the estimate is its mean, found on a grid of
+/// [`ORACLE_GRID`] + 1 points. A causal estimator (a filter, an LSTM) sees `u[0..=k]` and
+/// `y[0..=k]` only, a subset of what this posterior conditions on, so none has a lower expected
+/// squared error on the trajectory.
 ///
 /// `traj` must come from [`crate::simulate`] with `config` (the same system, rate and noise
 /// gain; the noise seed is not used). With `noise_gain = 0` the estimate is the clean state,
