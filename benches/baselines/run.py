@@ -12,7 +12,11 @@ Methods (see ``docs/baselines.md``):
 * ``sk-gp-ekf``: scikit-learn SE-ARD GPs on 600 random rows of each training set driving a
   numpy EKF (``gp_ekf.py``);
 * ``lstm``: a causal 2-layer LSTM ``(u, y) -> x`` in torch (``lstm.py``; skipped with a notice
-  when torch is not installed).
+  when torch is not installed);
+* ``floor`` (simulated logs only: ``--simulate`` and ``--grid``, where it is on by default):
+  ``hbn.oracle_estimate``, the exact posterior of the state given ``u`` and ``y`` so far, the true
+  past states and the simulator itself. No causal estimator has a lower expected squared error,
+  so ``hbn / floor`` says how much any method could still gain.
 
 Every method is trained on the training logs only and scored on the test log by the same
 code (``common.score``): RMSE, nRMSE, 1- and 2-sigma coverage, mean NEES, NLPD (``null`` for
@@ -63,8 +67,12 @@ import common  # noqa: E402
 import gp_ekf  # noqa: E402
 import lstm  # noqa: E402
 
-#: Every method, in report order.
+#: Every method that trains on the logs, in report order (the default of ``--train``/``--test``).
 METHODS: Tuple[str, ...] = ("hbn", "hbn-ekf", "hbn-ekf-blr", "hbn-open-loop", "sk-gp-ekf", "lstm")
+#: The floor under causal estimation (``hbn.oracle_estimate``): needs the simulator of the logs.
+FLOOR = "floor"
+#: Every method, in report order; the default of ``--simulate`` and ``--grid``.
+ALL_METHODS: Tuple[str, ...] = METHODS + (FLOOR,)
 #: hbn's filter methods: the default mode, then each mode (compared with the baselines).
 HBN_METHODS: Tuple[str, ...] = ("hbn", "hbn-ekf", "hbn-ekf-blr")
 #: Everything one hbn fit gives: the filter methods and the open-loop GP simulation from ``u``
@@ -278,18 +286,22 @@ def evaluate(
     lstm_config: Optional[lstm.LstmConfig] = None,
     log: Any = None,
     hbn_params: Optional[Mapping[str, Any]] = None,
+    simulated: Optional[Tuple[str, float]] = None,
 ) -> Dict[str, Any]:
     """Trains every method in ``methods`` on ``train_paths`` and scores it on ``test_path``
-    (hbn with the training parameters ``hbn_params``, see :func:`run_hbn`).
+    (hbn with the training parameters ``hbn_params``, see :func:`run_hbn`). ``simulated``: the
+    ``(system, noise gain)`` of simulated logs, which the method ``floor`` needs.
 
     Returns ``{"rate", "train_logs", "test_log", "seed", "n_train", "n_test", "notices",
     "methods": {name: {metrics..., "samples", extra}}}``; a method that fails gets
     ``{"error": message}`` instead of metrics (and a notice), a skipped LSTM is absent from
     ``methods`` and its reason is in ``notices``.
     """
-    unknown = set(methods) - set(METHODS)
+    unknown = set(methods) - set(ALL_METHODS)
     if unknown:
-        raise ValueError(f"unknown methods {sorted(unknown)}; choose from {', '.join(METHODS)}")
+        raise ValueError(f"unknown methods {sorted(unknown)}; choose from {', '.join(ALL_METHODS)}")
+    if FLOOR in methods and simulated is None:
+        raise ValueError("the method `floor` needs simulated logs (--simulate or --grid): it runs the simulator")
     train, test = common.read_logs(train_paths, test_path, paths)
     report: Dict[str, Any] = {
         "rate": train[0].rate,
@@ -333,7 +345,13 @@ def evaluate(
             except Exception as e:
                 raw["lstm"] = {"error": f"{type(e).__name__}: {e}"}
                 note(f"lstm failed: {e}")
-    for name in METHODS:
+    if FLOOR in methods and simulated is not None:
+        try:
+            raw[FLOOR] = run_floor(test, *simulated)
+        except Exception as e:
+            raw[FLOOR] = {"error": f"{type(e).__name__}: {e}"}
+            note(f"floor failed: {e}")
+    for name in ALL_METHODS:
         if name not in raw:
             continue
         r = raw[name]
@@ -346,6 +364,16 @@ def evaluate(
         extra = {k: v for k, v in r.items() if k not in ("x", "x_std", "train_seconds", "estimate_seconds")}
         report["methods"][name] = {k: _finite_or_none(v) for k, v in {**scores, **extra}.items()}
     return report
+
+
+def run_floor(test: common.Log, system: str, gain: float) -> Dict[str, Any]:
+    """The floor under causal estimation on the simulated test log (``hbn.oracle_estimate``;
+    nothing is trained)."""
+    import hbn
+
+    t0 = time.perf_counter()
+    o = hbn.oracle_estimate(system, test.u, test.x, test.y, noise_gain=gain, rate=test.rate)
+    return {"x": o["mean"], "x_std": o["std"], "train_seconds": 0.0, "estimate_seconds": time.perf_counter() - t0}
 
 
 def _forget_tmp(report: Dict[str, Any]) -> None:
@@ -392,14 +420,15 @@ def _mean(vals: Sequence[Optional[float]]) -> Optional[float]:
 def summarise(runs: Sequence[Mapping[str, Any]]) -> List[Dict[str, Any]]:
     """Per (system, gain): the number of runs, and per method the mean and standard deviation
     of nRMSE and the mean coverages and NEES over the runs; plus ``ratio_<hbn mode>`` = mean
-    nRMSE of that hbn mode / the best (lowest) mean nRMSE among the baselines present."""
+    nRMSE of that hbn mode / the best (lowest) mean nRMSE among the baselines present, and
+    ``floor_ratio_hbn`` = hbn's (default mode) / the floor's."""
     cells: Dict[Tuple[str, float], List[Mapping[str, Any]]] = {}
     for r in runs:
         cells.setdefault((r["system"], float(r["gain"])), []).append(r)
     rows = []
     for (system, gain), rs in sorted(cells.items()):
         row: Dict[str, Any] = {"system": system, "gain": gain, "runs": len(rs), "methods": {}}
-        for name in METHODS:
+        for name in ALL_METHODS:
             ms = [r["report"]["methods"].get(name) for r in rs]
             ms = [m for m in ms if m is not None and "error" not in m]
             if not ms:
@@ -420,6 +449,9 @@ def summarise(runs: Sequence[Mapping[str, Any]]) -> List[Dict[str, Any]]:
             hm = row["methods"].get(h)
             ok = hm is not None and hm["nrmse"] is not None and best is not None and best > 0
             row[f"ratio_{h}"] = hm["nrmse"] / best if ok else None
+        hm, fl = row["methods"].get("hbn"), row["methods"].get(FLOOR)
+        ok = hm is not None and fl is not None and hm["nrmse"] is not None and fl["nrmse"] is not None and fl["nrmse"] > 0
+        row["floor_ratio_hbn"] = hm["nrmse"] / fl["nrmse"] if ok else None
         rows.append(row)
     return rows
 
@@ -434,8 +466,8 @@ def markdown_tables(rows: Sequence[Mapping[str, Any]]) -> str:
         return format(m[key], fmt)
 
     out = [
-        "| system | gain | runs | nRMSE hbn (default mode) | nRMSE hbn EKF | nRMSE hbn EKF+BLR | nRMSE hbn open loop | nRMSE sklearn GP-EKF | nRMSE LSTM | hbn / best baseline | hbn EKF / best baseline | hbn EKF+BLR / best baseline |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| system | gain | runs | nRMSE hbn (default mode) | nRMSE hbn EKF | nRMSE hbn EKF+BLR | nRMSE hbn open loop | nRMSE sklearn GP-EKF | nRMSE LSTM | hbn / best baseline | hbn EKF / best baseline | hbn EKF+BLR / best baseline | nRMSE floor | hbn / floor |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         ms = r["methods"]
@@ -449,7 +481,8 @@ def markdown_tables(rows: Sequence[Mapping[str, Any]]) -> str:
         out.append(
             f"| {r['system']} | {r['gain']:g} | {r['runs']} | " + " | ".join(nr)
             + f" | {cell(r, 'ratio_hbn', '.2f')} | {cell(r, 'ratio_hbn-ekf', '.2f')}"
-            + f" | {cell(r, 'ratio_hbn-ekf-blr', '.2f')} |"
+            + f" | {cell(r, 'ratio_hbn-ekf-blr', '.2f')}"
+            + f" | {cell(ms.get(FLOOR), 'nrmse', '.4f')} | {cell(r, 'floor_ratio_hbn', '.2f')} |"
         )
     out += [
         "",
@@ -473,7 +506,7 @@ def grid(
     seeds: Sequence[int],
     out_dir: Path,
     steps: int = 1000,
-    methods: Sequence[str] = METHODS,
+    methods: Sequence[str] = ALL_METHODS,
     gp_rows: int = gp_ekf.GP_ROWS,
     lstm_config: Optional[lstm.LstmConfig] = None,
     keep_logs: bool = False,
@@ -502,7 +535,7 @@ def grid(
                 with tempfile.TemporaryDirectory(prefix="hbn-baselines-") as tmp:
                     wd = out_dir / "logs" / f"{system}-g{gain:g}-s{seed}" if keep_logs else Path(tmp)
                     train, test = simulate_logs(system, gain, seed, wd, steps=steps)
-                    rep = evaluate(train, test, seed=seed, methods=methods, gp_rows=gp_rows, lstm_config=lstm_config, log=log, hbn_params=hbn_params)
+                    rep = evaluate(train, test, seed=seed, methods=methods, gp_rows=gp_rows, lstm_config=lstm_config, log=log, hbn_params=hbn_params, simulated=(system, float(gain)))
                 if not keep_logs:
                     _forget_tmp(rep)
                 doc["runs"].append({"system": system, "gain": float(gain), "seed": seed, "report": rep})
@@ -543,7 +576,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument("--systems", default="bouc-wen,maxwell-slip", help="--grid systems")
     ap.add_argument("--gains", default="1,10", help="--grid noise gains")
     ap.add_argument("--seeds", default="1,2", help="--grid seeds")
-    ap.add_argument("--methods", default=",".join(METHODS), help=f"subset of {','.join(METHODS)}")
+    ap.add_argument("--methods", default=None,
+                    help=f"subset of {','.join(ALL_METHODS)}; default all (without {FLOOR} for --train/--test logs)")  # fmt: skip
     ap.add_argument("--no-lstm", action="store_true", help="leave the LSTM out")
     ap.add_argument("--gp-rows", type=int, default=gp_ekf.GP_ROWS, help="rows per scikit-learn GP")
     ap.add_argument("--lstm-steps", type=int, default=lstm.LstmConfig().max_steps, help="most LSTM updates")
@@ -556,7 +590,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if not isinstance(a.hbn_params, dict):
         ap.error("--hbn-params must be a JSON object")
 
-    methods = [m for m in _csv(a.methods, str) if not (a.no_lstm and m == "lstm")]
+    default_methods = METHODS if (a.train or a.test) else ALL_METHODS
+    chosen = default_methods if a.methods is None else _csv(a.methods, str)
+    methods = [m for m in chosen if not (a.no_lstm and m == "lstm")]
     paths = {"u": a.u, "x": a.x, "y": a.y}
     cfg = lstm.LstmConfig(max_steps=a.lstm_steps)
     modes = sum([bool(a.train or a.test), a.simulate is not None, a.grid, a.table is not None])
@@ -578,7 +614,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         with tempfile.TemporaryDirectory(prefix="hbn-baselines-") as tmp:
             wd = a.workdir if a.workdir is not None else Path(tmp)
             train, test = simulate_logs(a.simulate, a.gain, seed, wd, steps=a.steps)
-            rep = evaluate(train, test, paths, seed=seed, methods=methods, gp_rows=a.gp_rows, lstm_config=cfg, hbn_params=a.hbn_params)
+            rep = evaluate(train, test, paths, seed=seed, methods=methods, gp_rows=a.gp_rows, lstm_config=cfg, hbn_params=a.hbn_params,
+                           simulated=(a.simulate, a.gain))  # fmt: skip
         if a.workdir is None:  # the temporary directory is gone: keep the file names only
             _forget_tmp(rep)
         rep.update({"system": a.simulate, "gain": a.gain, "protocol": protocol_seeds(seed)})

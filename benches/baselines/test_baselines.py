@@ -401,6 +401,24 @@ def test_grid_writes_json_and_a_markdown_table(tmp_path: Path, capsys: pytest.Ca
     assert capsys.readouterr().out == md
 
 
+def test_the_floor_is_scored_on_simulated_logs_and_refused_on_others(tmp_path: Path) -> None:
+    _hbn_or_skip()
+    doc = run.grid(["duhem"], [3.0], [1], tmp_path, steps=150, methods=["sk-gp-ekf", "floor"], gp_rows=60)
+    (row,) = doc["summary"]
+    floor, sk = row["methods"]["floor"], row["methods"]["sk-gp-ekf"]
+    # The floor conditions on more than any causal estimator: the baseline cannot beat it.
+    assert floor["nrmse"] < sk["nrmse"]
+    assert 0.85 <= floor["coverage_2sigma"] <= 1.0 and 0.6 < floor["mean_nees"] < 1.6
+    md = (tmp_path / "grid.md").read_text()
+    assert f"| {floor['nrmse']:.4f} | - |" in md  # no hbn in this run: no hbn / floor ratio
+    with pytest.raises(ValueError, match="simulated logs"):
+        run.evaluate(*_logs_for_floor(tmp_path), methods=["floor"])
+
+
+def _logs_for_floor(tmp_path: Path) -> Tuple[List[str], str]:
+    return run.simulate_logs("duhem", 1.0, 1, tmp_path / "logs", steps=60)
+
+
 def test_summary_ratio_uses_the_best_baseline() -> None:
     def rep(nr: Dict[str, float]) -> Dict[str, object]:
         return {"methods": {k: {"nrmse": v, "coverage_1sigma": None, "coverage_2sigma": None,
@@ -411,6 +429,7 @@ def test_summary_ratio_uses_the_best_baseline() -> None:
         {"system": "s", "gain": 1.0, "seed": 2, "report": rep({"hbn-ekf": 0.04, "sk-gp-ekf": 0.06, "lstm": 0.03})},
     ]
     (row,) = run.summarise(runs)
+    assert row["floor_ratio_hbn"] is None  # neither hbn's default mode nor the floor ran
     # Means: hbn 0.03, sklearn 0.05, LSTM 0.04 -> best baseline 0.04.
     assert row["ratio_hbn-ekf"] == pytest.approx(0.75)
     assert row["ratio_hbn-ekf-blr"] is None

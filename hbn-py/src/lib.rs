@@ -1429,6 +1429,34 @@ fn simulate<'py>(
     ))
 }
 
+/// The floor under causal estimation on a simulated trajectory
+/// ([`hbn_sim::oracle_estimate`]): the posterior `(mean, std)` of each `x[k]` given `u` and `y`
+/// up to `k`, the true past states and the simulator itself.
+#[pyfunction]
+#[pyo3(signature = (system, u, x, y, noise_gain, rate))]
+fn oracle_estimate<'py>(
+    py: Python<'py>,
+    system: &str,
+    u: PyReadonlyArray1<'_, f64>,
+    x: PyReadonlyArray1<'_, f64>,
+    y: PyReadonlyArray1<'_, f64>,
+    noise_gain: Option<f64>,
+    rate: Option<f64>,
+) -> PyResult<(Arr<'py>, Arr<'py>)> {
+    let cfg = sim_config(py, system, None, noise_gain, rate)?;
+    let traj = hbn_sim::Trajectory {
+        u: slice(&u, "u")?.to_vec(),
+        x: slice(&x, "x")?.to_vec(),
+        y: slice(&y, "y")?.to_vec(),
+        rate_hz: cfg.rate_hz,
+    };
+    let est = detached(py, move || Ok(hbn_sim::oracle_estimate(&cfg, &traj)?))?;
+    Ok((
+        PyArray1::from_vec(py, est.mean),
+        PyArray1::from_vec(py, est.std),
+    ))
+}
+
 /// Scores of an estimate against a reference: RMSE, nRMSE and the calibration of its standard
 /// deviation (`hbn_model::metrics`), as a dict.
 #[pyfunction]
@@ -1592,6 +1620,7 @@ fn _hbn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<SimulatorCore>()?;
     m.add_function(wrap_pyfunction!(default_explore_params, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(oracle_estimate, m)?)?;
     m.add_function(wrap_pyfunction!(systems, m)?)?;
     m.add_function(wrap_pyfunction!(score, m)?)?;
     m.add_function(wrap_pyfunction!(read_mcap, m)?)?;

@@ -56,6 +56,7 @@ __all__ = [
     "Explorer",
     "Simulator",
     "simulate",
+    "oracle_estimate",
     "read_mcap",
     "list_topics",
     "default_params",
@@ -1185,6 +1186,41 @@ def simulate(
         str(system), n, GaussianProcess._count(seed, "seed"), _opt_float(noise_gain), _opt_float(rate)
     )
     return {"u": u, "x": x, "y": y}
+
+
+def oracle_estimate(
+    system: str,
+    u: Any,
+    x: Any,
+    y: Any,
+    noise_gain: Optional[float] = None,
+    rate: Optional[float] = None,
+) -> Dict[str, np.ndarray]:
+    """The floor under causal state estimation on a simulated log: how low any estimator's
+    error can go.
+
+    ``u``, ``x``, ``y``: a trajectory of the simulator ``system`` (from :func:`simulate`,
+    :class:`Simulator` or ``hbn simulate``) with the same ``noise_gain`` and ``rate`` (``None``
+    takes the simulator's defaults: noise-free, 100 Hz; the noise seed is not needed). Returns
+    ``{"mean", "std"}``: the exact posterior of each ``x[k]`` given ``u`` and ``y`` up to ``k``,
+    the true past states ``x[:k]`` and the simulator itself. An estimator that sees only ``u``
+    and ``y`` up to ``k`` (hbn's filters, any causal baseline) conditions on less, so none has
+    a lower expected squared error than ``mean`` on the same log: the ratio of an estimator's
+    RMSE to this one's is what it could still gain. Noise-free logs give ``mean == x``.
+    :class:`DataError` if the arrays differ in length or an input lies outside the simulator's
+    range; :class:`ConfigError` for an unknown system or a bad setting.
+
+    >>> import hbn, numpy as np
+    >>> d = hbn.simulate("bouc-wen", 400, seed=3, noise_gain=3.0)
+    >>> o = hbn.oracle_estimate("bouc-wen", d["u"], d["x"], d["y"], noise_gain=3.0)
+    >>> rmse = float(np.sqrt(np.mean((o["mean"] - d["x"]) ** 2)))
+    >>> bool(rmse < 0.06 / np.sqrt(12))  # below the disturbance's own standard deviation
+    True
+    """
+    mean, std = _hbn.oracle_estimate(
+        str(system), _vector(u, "u"), _vector(x, "x"), _vector(y, "y"), _opt_float(noise_gain), _opt_float(rate)
+    )
+    return {"mean": mean, "std": std}
 
 
 def list_topics(path: PathLike) -> List[Dict[str, Any]]:

@@ -15,6 +15,7 @@ __all__ = [
     "Filter",
     "FilterOutput",
     "simulate",
+    "oracle_estimate",
     "read_mcap",
     "list_topics",
     "default_params",
@@ -278,6 +279,14 @@ def simulate(
     system: str,
     steps: int,
     seed: Optional[int] = None,
+    noise_gain: Optional[float] = None,
+    rate: Optional[float] = None,
+) -> Dict[str, FloatArray]: ...
+def oracle_estimate(
+    system: str,
+    u: ArrayLike,
+    x: ArrayLike,
+    y: ArrayLike,
     noise_gain: Optional[float] = None,
     rate: Optional[float] = None,
 ) -> Dict[str, FloatArray]: ...

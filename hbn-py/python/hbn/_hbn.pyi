@@ -208,6 +208,14 @@ class HysteresisModelCore:
 def simulate(
     system: str, steps: int, seed: Optional[int], noise_gain: Optional[float], rate: Optional[float]
 ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
+def oracle_estimate(
+    system: str,
+    u: npt.NDArray[np.float64],
+    x: npt.NDArray[np.float64],
+    y: npt.NDArray[np.float64],
+    noise_gain: Optional[float],
+    rate: Optional[float],
+) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
 def systems() -> List[str]: ...
 def read_mcap(
     path: str,
