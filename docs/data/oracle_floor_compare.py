@@ -2,7 +2,7 @@
 
 usage: python3 docs/data/oracle_floor_compare.py FLOOR.jsonl GRID.json[,GRID2.json] [BASELINES.json[,...]]
 
-FLOOR.jsonl: the lines of `cargo run --release -p hbn-sim --example oracle_floor -- SYSTEMS GAINS
+FLOOR.jsonl: the lines of `cargo run --release -p hbn-pipeline --example oracle_floor -- SYSTEMS GAINS
 SEEDS` (the exact posterior mean of x_k given u, y up to k, the true past states and the true
 simulator: no causal estimator has a lower expected squared error). GRID: a run of
 `benches/baselines/run.py --grid` with the methods hbn, sk-gp-ekf and lstm on the same seeds;

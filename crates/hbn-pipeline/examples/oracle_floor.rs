@@ -1,12 +1,14 @@
 //! The floor under causal estimation on the judged grid's test logs ([`hbn_sim::oracle_estimate`]):
 //! for every system x noise gain x seed `S`, the protocol's test log (`benches/baselines/run.py`:
 //! input seed `S + 1`, noise seed `10 S + 11`, random ramps) is simulated and the oracle's nRMSE
-//! (RMSE over the log's range of `x`, as `benches/baselines/common.py` scores) printed as one JSON
-//! object per line, beside the clean state's (the model simulated from `u` alone, exactly).
+//! (`hbn_model::metrics::nrmse`, which `benches/baselines/common.py` matches) printed as one JSON
+//! object per line, beside the clean state's (the model simulated from `u` alone, exactly) and
+//! the oracle's mean NEES.
 //!
-//!     cargo run --release -p hbn-sim --example oracle_floor -- \
+//!     cargo run --release -p hbn-pipeline --example oracle_floor -- \
 //!         bouc-wen,duhem,preisach,soft-actuator 1,3,10 10,11,12 [STEPS]
 
+use hbn_model::metrics::{calibration, nrmse};
 use hbn_sim::{DEFAULT_MAX_INCREMENT, InputKind, SimConfig, SystemKind, generate_input};
 
 fn list<T: std::str::FromStr>(arg: Option<String>, what: &str) -> Vec<T> {
@@ -14,21 +16,6 @@ fn list<T: std::str::FromStr>(arg: Option<String>, what: &str) -> Vec<T> {
     arg.split(',')
         .map(|s| s.parse().unwrap_or_else(|_| panic!("bad {what} `{s}`")))
         .collect()
-}
-
-fn nrmse(estimate: &[f64], truth: &[f64]) -> f64 {
-    let mse = estimate
-        .iter()
-        .zip(truth)
-        .map(|(e, t)| (e - t) * (e - t))
-        .sum::<f64>()
-        / truth.len() as f64;
-    let (lo, hi) = truth
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &t| {
-            (lo.min(t), hi.max(t))
-        });
-    mse.sqrt() / (hi - lo)
 }
 
 fn main() {
@@ -54,22 +41,12 @@ fn main() {
                 .expect("input");
                 let traj = hbn_sim::simulate(&config, &u).expect("simulation");
                 let est = hbn_sim::oracle_estimate(&config, &traj).expect("oracle");
-                let clean = hbn_sim::simulate(
-                    &SimConfig {
-                        noise_gain: 0.0,
-                        ..config.clone()
-                    },
-                    &u,
-                )
-                .expect("simulation");
-                let nees = traj
-                    .x
-                    .iter()
-                    .zip(est.mean.iter().zip(&est.std))
-                    .filter(|(_, (_, s))| **s > 0.0)
-                    .map(|(x, (m, s))| ((x - m) / s).powi(2))
-                    .sum::<f64>()
-                    / steps as f64;
+                let clean = SimConfig {
+                    noise_gain: 0.0,
+                    ..config.clone()
+                };
+                let clean = hbn_sim::simulate(&clean, &u).expect("simulation");
+                let nees = calibration(&est.mean, &est.std, &traj.x).mean_nees;
                 println!(
                     "{{\"system\": \"{system}\", \"gain\": {gain}, \"seed\": {seed}, \"nrmse_oracle\": {:.6e}, \
                      \"nrmse_clean\": {:.6e}, \"mean_nees\": {nees:.4}, \"unresolved\": {}}}",
