@@ -2,7 +2,8 @@
 //! this thread and only around the step loop, must see zero allocations over 20,000 steps in
 //! each mode (EKF and EKF+BLR), with exact and with sparse GPs, for the borrowing core
 //! `Estimator` and for the owned `hbn::Filter` (after construction; its first step, the prior
-//! from the first measurement, included).
+//! from the first measurement, included); and for a sensor of the state only (two inputs),
+//! exact and sparse, in every mode.
 
 mod common;
 
@@ -55,7 +56,22 @@ fn the_step_never_allocates() {
     let sparse = common::train_model_kind(SystemKind::BoucWen, 1.0, 120, Some(32), 3).0;
     assert!(!exact.transition().is_sparse() && sparse.transition().is_sparse());
     assert!(!exact.sensor().is_sparse() && sparse.sensor().is_sparse());
+    let state_sensor = |n_inducing| {
+        common::train_model_with(SystemKind::BoucWen, 1.0, 120, 3, |p| {
+            p.n_inducing = n_inducing;
+            p.select = hbn::model::Selection::default();
+            p.sensor_inputs = hbn::model::SensorInputs::State;
+        })
+        .0
+    };
+    let (state_exact, state_sparse) = (state_sensor(None), state_sensor(Some(32)));
+    assert_eq!(state_exact.sensor().kernel().dim, 2);
+    assert!(state_sparse.sensor().is_sparse());
     let (exact, sparse) = (std::sync::Arc::new(exact), std::sync::Arc::new(sparse));
+    let (state_exact, state_sparse) = (
+        std::sync::Arc::new(state_exact),
+        std::sync::Arc::new(state_sparse),
+    );
     // Include the guard paths: NaN inputs and measurements now and then.
     let u = |k: usize| if k % 5001 == 17 { f64::NAN } else { test.u[k] };
     let y = |k: usize| if k % 7001 == 23 { f64::NAN } else { test.y[k] };
@@ -66,12 +82,18 @@ fn the_step_never_allocates() {
         (&sparse, Mode::EkfBlr),
         (&exact, Mode::Ukf),
         (&sparse, Mode::Ukf),
+        (&state_exact, Mode::Ekf),
+        (&state_exact, Mode::EkfBlr),
+        (&state_exact, Mode::Ukf),
+        (&state_sparse, Mode::EkfBlr),
+        (&state_sparse, Mode::Ukf),
     ] {
         let view = model.view().unwrap();
-        let kind = if model.transition().is_sparse() {
-            "sparse"
-        } else {
-            "exact"
+        let kind = match (model.transition().is_sparse(), model.sensor().kernel().dim) {
+            (true, 2) => "sparse, state-only sensor",
+            (false, 2) => "exact, state-only sensor",
+            (true, _) => "sparse",
+            (false, _) => "exact",
         };
         let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
         let mut est = Estimator::new(view, model.ekf_config(mode), &mut scratch).unwrap();

@@ -528,31 +528,41 @@ fn model_selection_lists_print_their_table() {
         "exact,4",
         "--verbose",
     ];
-    hbn_cli::run_with(args, &mut out, &mut err).expect("train with three candidates");
+    hbn_cli::run_with(args, &mut out, &mut err).expect("train with four candidates");
     let (out, err) = (String::from_utf8_lossy(&out), String::from_utf8_lossy(&err));
     // The kernels are chosen by evidence before the candidates train, so the notice names
     // the candidates without them (it once named Matern 5/2 for candidates that became SE-ARD).
     assert!(
         err.contains(
-            "model selection: training 3 candidates side by side (exact, m=4, m=4 lags=1, \
-             each GP's kernel chosen by evidence first)"
+            "model selection: training 4 candidates side by side (exact, m=4, m=4 lags=1, \
+             exact sensor=state, each GP's kernel chosen by evidence first)"
         ),
         "announced on stderr: {err}"
     );
-    // The sparse GPs also with the default lag set.
+    // The sparse GPs also with the default lag set, the exact ones with a sensor of the
+    // state only.
     assert!(
-        out.contains("model selection, 3 candidates")
+        out.contains("model selection, 4 candidates")
             && out.contains(" exact")
             && out.contains(" m=4 ")
-            && out.contains(" m=4 lags=1"),
+            && out.contains(" m=4 lags=1")
+            && out.contains(" exact sensor=state"),
         "{out}"
     );
     assert_eq!(out.matches("* chosen").count(), 1, "{out}");
     let (e, out) = hbn(&["inspect", &m2]);
     assert!(e.is_none(), "{e:?}");
-    assert!(out.contains("model selection, 3 candidates"), "{out}");
+    assert!(out.contains("model selection, 4 candidates"), "{out}");
     // `--lags` given once trains that set alone; given again, the others are tried.
-    let (e, out) = train(&["--inducing", "exact,4", "--lags", "none", "--verbose"]);
+    let (e, out) = train(&[
+        "--inducing",
+        "exact,4",
+        "--lags",
+        "none",
+        "--sensor-inputs",
+        "thesis",
+        "--verbose",
+    ]);
     assert!(e.is_none(), "{e:?}");
     assert!(out.contains("model selection, 2 candidates"), "{out}");
     let (e, out) = train(&[
@@ -562,6 +572,8 @@ fn model_selection_lists_print_their_table() {
         "none",
         "--lags",
         "0.5",
+        "--sensor-inputs",
+        "thesis",
         "--verbose",
     ]);
     assert!(e.is_none(), "{e:?}");
@@ -647,6 +659,54 @@ fn lags_flag_sets_the_low_pass_inputs_and_names_itself_when_wrong() {
         let (e, _) = train_small(&log, &m2, bad);
         let text = e.unwrap_or_else(|| panic!("{bad:?} accepted"));
         assert!(text.contains("--lags"), "{bad:?}: {text}");
+    }
+}
+
+#[test]
+fn sensor_inputs_flag_sets_what_the_sensor_reads_and_names_itself_when_wrong() {
+    let (_dir, log, m) = small_model();
+    let dir = tempfile::tempdir().unwrap();
+    let m2 = dir.path().join("m2.hbn").to_string_lossy().into_owned();
+    let sensor_inputs = |v: &serde_json::Value| -> Vec<String> {
+        v["sensor"]["inputs"]
+            .as_array()
+            .map(|a| {
+                a.iter()
+                    .filter_map(|n| n.as_str().map(String::from))
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    // The default model's sensor is one of the two.
+    let default = sensor_inputs(&inspect(&m)).len();
+    assert!(default == 3 || default == 2, "{default}");
+    let (e, _) = train_small(&log, &m2, &["--sensor-inputs", "thesis"]);
+    assert!(e.is_none(), "{e:?}");
+    assert_eq!(sensor_inputs(&inspect(&m2)).len(), 3);
+    let (e, _) = train_small(&log, &m2, &["--sensor-inputs", "state"]);
+    assert!(e.is_none(), "{e:?}");
+    let v = inspect(&m2);
+    let names = sensor_inputs(&v);
+    assert_eq!(names.len(), 2, "{names:?}");
+    assert!(
+        names[0].ends_with("[k-1]") && names[1].ends_with("[k]"),
+        "{names:?}"
+    );
+    assert_eq!(
+        v["sensor"]["length_scales"].as_array().map(|a| a.len()),
+        Some(2)
+    );
+    // The estimate runs on it.
+    let est = dir.path().join("e.csv").to_string_lossy().into_owned();
+    let (e, _) = hbn(&["estimate", "--model", &m2, "--log", &log, "--csv", &est]);
+    assert!(e.is_none(), "{e:?}");
+    for bad in ["level", "thesis,x"] {
+        let (e, _) = train_small(&log, &m2, &["--sensor-inputs", bad]);
+        let text = e.unwrap_or_else(|| panic!("--sensor-inputs {bad} accepted"));
+        assert!(
+            text.contains("--sensor-inputs") && text.contains("thesis or state"),
+            "{bad}: {text}"
+        );
     }
 }
 

@@ -190,6 +190,7 @@ fn selection_returns_the_candidate_with_the_best_held_out_score() {
                 kernels: vec![],
                 inducing: vec![alternative],
                 lags: vec![],
+                sensor_inputs: vec![],
             },
             ..base.clone()
         };

@@ -6,7 +6,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use hbn_core::Mode;
 use hbn_gp::SubsetPolicy;
 use hbn_io::{SignalPath, TimeSource};
-use hbn_model::{HbnParams, KernelChoice, LinearMean};
+use hbn_model::{HbnParams, KernelChoice, LinearMean, SensorInputs};
 use hbn_pipeline::LogOptions;
 use hbn_sim::{SimConfig, SystemKind};
 
@@ -337,6 +337,23 @@ fn parse_inducing(s: &str) -> Result<Inducing, String> {
     }
 }
 
+/// The primary sensor inputs and the alternatives model selection tries: the first given and
+/// the rest, else the library's defaults (the thesis' sensor, with a sensor of the state only
+/// tried).
+pub fn sensor_inputs_choice(given: &[SensorInputs]) -> (SensorInputs, Vec<SensorInputs>) {
+    match given.split_first() {
+        Some((first, rest)) => (*first, rest.to_vec()),
+        None => {
+            let d = params();
+            (d.sensor_inputs, d.select.sensor_inputs)
+        }
+    }
+}
+
+fn parse_sensor_inputs(s: &str) -> Result<SensorInputs, String> {
+    s.parse()
+}
+
 fn parse_non_negative(s: &str) -> Result<f64, String> {
     match s.trim().parse::<f64>() {
         Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
@@ -515,6 +532,12 @@ pub struct TrainArgs {
     /// cost observability. docs/sparse.md.
     #[arg(long, value_parser = parse_linear_mean, default_value_t = params().linear_mean, value_name = "none|transition|both")]
     pub linear_mean: LinearMean,
+    /// What the sensor GP reads: `thesis` ([x_{k-1}, y_{k-1}, x_k]) or `state` ([x_{k-1},
+    /// x_k], so every measurement pins the state's level); several, comma-separated, are
+    /// chosen among on held-out data, the first being the primary one (default
+    /// `thesis,state`; `--sensor-inputs thesis` alone tries no other). docs/tuning.md.
+    #[arg(long, value_parser = parse_sensor_inputs, value_delimiter = ',', value_name = "thesis|state[,..]")]
+    pub sensor_inputs: Vec<SensorInputs>,
     /// Largest signal variance of both GPs, as a multiple of the variance of what each kernel
     /// models, or `none` for only the 1e5 box: keeps a near-linear fit from extrapolating like
     /// a polynomial. docs/sparse.md.
@@ -865,6 +888,10 @@ pub struct ExperimentArgs {
     /// Which GPs have a linear prior mean: `none`, `transition` or `both` (as `hbn train`).
     #[arg(long, value_parser = parse_linear_mean, default_value_t = params().linear_mean, value_name = "none|transition|both")]
     pub linear_mean: LinearMean,
+    /// What the sensor GP reads, `thesis` or `state`; several are chosen among on held-out
+    /// data (as `hbn train`).
+    #[arg(long, value_parser = parse_sensor_inputs, value_delimiter = ',', value_name = "thesis|state[,..]")]
+    pub sensor_inputs: Vec<SensorInputs>,
     /// Write all rows as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,

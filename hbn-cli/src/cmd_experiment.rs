@@ -81,17 +81,21 @@ pub fn run(ui: &mut Ui<'_>, args: &ExperimentArgs) -> anyhow::Result<Vec<Experim
         params: {
             let (n_inducing, inducing) = crate::cli::inducing_choice(&args.inducing);
             let (lags, select_lags) = crate::cli::lags_choice(&args.lags);
+            let (sensor_inputs, select_sensors) =
+                crate::cli::sensor_inputs_choice(&args.sensor_inputs);
             HbnParams {
                 n_inducing,
                 select: hbn_model::Selection {
                     kernels: Vec::new(),
                     inducing,
                     lags: select_lags,
+                    sensor_inputs: select_sensors,
                 },
                 max_points: args.max_points,
                 memory: args.memory.0.clone(),
                 lags,
                 linear_mean: args.linear_mean,
+                sensor_inputs,
                 ..HbnParams::default()
             }
         },

@@ -11,7 +11,7 @@ use crate::glossary::{self, Term};
 
 /// The inputs of one GP by the model's signal names: `x[k-1], x[k-2], u[k-1], u[k-2]` for the
 /// transition (which predicts `x[k]`), `x[k-1], y[k-1], x[k]` for the sensor (which predicts
-/// `y[k]`).
+/// `y[k]`; `x[k-1], x[k]` for a sensor of the state only).
 pub fn input_names(model: &HbnModel, role: GpRole) -> Vec<String> {
     let s = model.signals();
     let (u, x, y) = (&s.input.name, &s.state.name, &s.output.name);
@@ -41,7 +41,14 @@ pub fn input_names(model: &HbnModel, role: GpRole) -> Vec<String> {
             );
             names
         }
-        GpRole::Sensor => vec![format!("{x}[k-1]"), format!("{y}[k-1]"), format!("{x}[k]")],
+        GpRole::Sensor => {
+            let thesis = [format!("{x}[k-1]"), format!("{y}[k-1]"), format!("{x}[k]")];
+            let columns = model.params().sensor_inputs.columns();
+            columns
+                .iter()
+                .filter_map(|&j| thesis.get(j).cloned())
+                .collect()
+        }
     }
 }
 

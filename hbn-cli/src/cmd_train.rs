@@ -17,6 +17,7 @@ impl TrainArgs {
         let kernel = self.kernel.first().copied();
         let (n_inducing, inducing) = crate::cli::inducing_choice(&self.inducing);
         let (lags, select_lags) = crate::cli::lags_choice(&self.lags);
+        let (sensor_inputs, select_sensors) = crate::cli::sensor_inputs_choice(&self.sensor_inputs);
         HbnParams {
             transition_kernel: self
                 .transition_kernel
@@ -28,6 +29,7 @@ impl TrainArgs {
                 kernels: self.kernel.iter().skip(1).copied().collect(),
                 inducing,
                 lags: select_lags,
+                sensor_inputs: select_sensors,
             },
             max_points: self.max_points,
             subset_policy: self.subset.into(),
@@ -41,6 +43,7 @@ impl TrainArgs {
             memory: self.memory.0.clone(),
             lags,
             linear_mean: self.linear_mean,
+            sensor_inputs,
             max_signal_variance: self.max_signal_variance.0,
             // A kernel named on the command line is used as named.
             kernel_evidence: if self.kernel.is_empty()

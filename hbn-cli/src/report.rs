@@ -31,6 +31,7 @@ pub fn flag(setting: Setting) -> &'static str {
             Param::Lags => "--lags",
             Param::LinearMean => "--linear-mean",
             Param::MaxSignalVariance => "--max-signal-variance",
+            Param::SensorInputs => "--sensor-inputs",
         },
         Setting::Log(o) => match o {
             LogOption::Rate => "--rate",

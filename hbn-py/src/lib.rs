@@ -63,6 +63,7 @@ fn param_keyword(p: Param) -> &'static str {
         Param::Memory => "memory",
         Param::Lags => "lags",
         Param::LinearMean => "linear_mean",
+        Param::SensorInputs => "sensor_inputs",
         Param::MaxSignalVariance => "max_signal_variance",
     }
 }

@@ -108,7 +108,7 @@ def test_defaults_come_from_the_library():
     m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=60)
     got = m.params
     for k, v in p.items():
-        if k not in ("max_points", "signals", "n_inducing", "lags"):
+        if k not in ("max_points", "signals", "n_inducing", "lags", "sensor_inputs"):
             assert got[k] == v, k
     assert got["max_points"] == 60
     # The default lists the inducing settings chosen among on held-out data (exact GPs first);
@@ -117,6 +117,8 @@ def test_defaults_come_from_the_library():
     assert got["n_inducing"] in p["n_inducing"]
     # Likewise the lag sets (the primary one first).
     assert p["lags"] == [[], [1.0]] and got["lags"] in p["lags"]
+    # And the sensor's inputs (the thesis' sensor first, a sensor of the state only tried).
+    assert p["sensor_inputs"] == ["thesis", "state"] and got["sensor_inputs"] in p["sensor_inputs"]
     o = hbn.default_log_options()
     assert o["rate"] is None and o["max_gap"] > 0 and o["time_source"] == "log"
     assert hbn.default_gp_params()["n_restarts"] >= 1
@@ -159,6 +161,8 @@ BAD_PARAMS = [
     ("linear_mean", 1),
     ("max_signal_variance", 0.0),
     ("max_signal_variance", "lots"),
+    ("sensor_inputs", "level"),
+    ("sensor_inputs", 2),
 ]
 
 
@@ -206,6 +210,25 @@ def test_linear_mean_sets_the_gps_prior_means():
         estimates.append(x)
     assert not np.array_equal(estimates[0], estimates[1])
     assert not np.array_equal(estimates[1], estimates[2])
+
+
+def test_sensor_inputs_set_what_the_sensor_gp_reads():
+    d = hbn.simulate("maxwell-slip", 300, seed=1, noise_gain=1.0)
+    fast = dict(max_points=80, n_restarts=1, max_iter=30, validation=0.0)
+    thesis = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], **fast)
+    assert thesis.params["sensor_inputs"] == "thesis"
+    state = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], sensor_inputs="state", **fast)
+    assert state.params["sensor_inputs"] == "state"
+    te = hbn.simulate("maxwell-slip", 200, seed=2, noise_gain=1.0)
+    a, _ = thesis.estimate(te["u"], te["y"])
+    b, b_std = state.estimate(te["u"], te["y"])
+    assert np.all(np.isfinite(b)) and np.all(b_std > 0)
+    assert not np.array_equal(a, b)
+    # A list: the first is the primary one, the rest tried on held-out data.
+    both = hbn.HysteresisModel.fit(
+        d["u"], d["x"], d["y"], sensor_inputs=["state", "thesis"], **fast
+    )
+    assert both.params["sensor_inputs"] == "state"  # validation=0: the primary one
 
 
 @pytest.mark.parametrize("keyword,value", BAD_PARAMS)

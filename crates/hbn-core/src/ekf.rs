@@ -312,6 +312,15 @@ pub const EXTRAPOLATION_RATIO: f64 = 0.5;
 /// Without an [`InitPrior`], or with a non-finite measurement, nothing happens.
 pub const LOST_AFTER: u32 = 10;
 
+/// Inputs of the thesis' sensor GP, `[x_{k-1}, y_{k-1}, x_k]`.
+pub const SENSOR_DIM: usize = 3;
+
+/// Inputs of a sensor GP of the state only, `[x_{k-1}, x_k]`: the output's level is a
+/// function of the state's, so a filter can recover a drifted state from `y` alone (the
+/// thesis' sensor, which also reads `y_{k-1}`, can learn increments only; docs/results.md,
+/// "A sensor of the state only").
+pub const SENSOR_STATE_DIM: usize = 2;
+
 /// Prior of `x_0` from the first measurement: training `(y, x)` pairs sorted by `y`. Hysteresis
 /// makes `x` given `y` ambiguous; the spread of `x` over the training samples whose `y` is
 /// nearest says how much. Checked once by [`InitPrior::new`]; [`InitPrior::prior`] is
@@ -443,7 +452,8 @@ pub struct HbnView<'a> {
     /// Transition GP, inputs `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}]` and then the plays
     /// after `u_{k-1}` (one input per play operator, [`crate::play`]).
     pub transition: GpView<'a>,
-    /// Sensor GP, inputs `[x_{k-1}, y_{k-1}, x_k]`.
+    /// Sensor GP, inputs `[x_{k-1}, y_{k-1}, x_k]` (the thesis), or `[x_{k-1}, x_k]` (a
+    /// sensor that reads the state only, [`SENSOR_STATE_DIM`]): its dimension says which.
     pub sensor: GpView<'a>,
     /// Training samples and index for the transition's local regression (EKF+BLR only).
     pub transition_local: Option<Neighbourhood<'a>>,
@@ -461,8 +471,9 @@ pub struct HbnView<'a> {
 
 impl HbnView<'_> {
     /// Checks that the GPs have the HBN's input dimensions: 4 plus one per play operator for
-    /// the transition, 3 for the sensor; the local regression of the transition reads its
-    /// first 4 inputs.
+    /// the transition, 3 ([`SENSOR_DIM`]) or 2 ([`SENSOR_STATE_DIM`]) for the sensor; the
+    /// local regression of the transition reads its first 4 inputs, the sensor's the sensor
+    /// GP's inputs.
     pub fn validate(&self) -> Result<(), CoreError> {
         let transition_dim = 4 + self.plays.len();
         if self.transition.dim() != transition_dim {
@@ -471,10 +482,11 @@ impl HbnView<'_> {
                 got: self.transition.dim(),
             });
         }
-        if self.sensor.dim() != 3 {
+        let sensor_dim = self.sensor.dim();
+        if sensor_dim != SENSOR_DIM && sensor_dim != SENSOR_STATE_DIM {
             return Err(CoreError::DimensionMismatch {
-                expected: 3,
-                got: self.sensor.dim(),
+                expected: SENSOR_DIM,
+                got: sensor_dim,
             });
         }
         if let Some(n) = &self.transition_local
@@ -486,10 +498,10 @@ impl HbnView<'_> {
             });
         }
         if let Some(n) = &self.sensor_local
-            && n.dim() != 3
+            && n.dim() != sensor_dim
         {
             return Err(CoreError::DimensionMismatch {
-                expected: 3,
+                expected: sensor_dim,
                 got: n.dim(),
             });
         }
@@ -841,7 +853,7 @@ impl<'m> Ekf<'m> {
         let xk = clamp_flag(t.mean, cfg.x_bounds, flags);
         let a1 = clamp_jac(t.grad[0], cfg.jac_max, flags);
         let a2 = clamp_jac(t.grad[1], cfg.jac_max, flags);
-        let b_in = [x1, s1, xk];
+        let b_in = self.sensor_input(x1, s1, xk);
         let (f_mat, g_vec, q_x, q_s, r, s_pred) =
             match self.linearise(Relation::Sensor, &b_in, scratch, flags) {
                 Some(s) => {
@@ -913,7 +925,12 @@ impl<'m> Ekf<'m> {
             return self.random_walk(st);
         };
         let xk_mean = clamp_to(t.mean, cfg.x_bounds.0, cfg.x_bounds.1);
-        let Some(s) = self.linearise(Relation::Sensor, &[x1, s1, xk_mean], scratch, flags) else {
+        let Some(s) = self.linearise(
+            Relation::Sensor,
+            &self.sensor_input(x1, s1, xk_mean),
+            scratch,
+            flags,
+        ) else {
             *flags |= Flags::MODEL_INVALID;
             return self.random_walk(st);
         };
@@ -960,7 +977,8 @@ impl<'m> Ekf<'m> {
             let xk = xk + w;
             // A point pushed into the box flags it, as a clamped EKF prediction does.
             let x_in = clamp_flag(xk, cfg.x_bounds, flags);
-            let Some(sk) = self.mean_of(Relation::Sensor, &[a, c, x_in], scratch) else {
+            let Some(sk) = self.mean_of(Relation::Sensor, &self.sensor_input(a, c, x_in), scratch)
+            else {
                 ok = false;
                 break;
             };
@@ -1020,6 +1038,16 @@ impl<'m> Ekf<'m> {
     /// come from the state (all [`MAX_DIM`] values; the GP reads its first `dim`).
     fn transition_input(&self, st: &EkfState, x1: f64, x2: f64) -> [f64; MAX_DIM] {
         transition_input(x1, x2, st.u_last, st.u_prev, &st.plays)
+    }
+
+    /// The sensor GP's input at `x_{k-1} = x1`, `s_{k-1} = s1`, `x_k = xk`: `[x1, s1, xk]`,
+    /// or `[x1, xk, 0]` for a sensor of the state only (the GP reads its first two).
+    fn sensor_input(&self, x1: f64, s1: f64, xk: f64) -> [f64; SENSOR_DIM] {
+        if self.model.sensor.dim() == SENSOR_STATE_DIM {
+            [x1, xk, 0.0]
+        } else {
+            [x1, s1, xk]
+        }
     }
 
     /// The GP mean of one relation at `input` (no variance, no gradient), `None` on failure.
@@ -1118,6 +1146,11 @@ impl<'m> Ekf<'m> {
         {
             *flags |= Flags::MODEL_INVALID;
             return None;
+        }
+        // A sensor of the state only reads `[x_{k-1}, x_k]`: its gradients go where the
+        // thesis' sensor has them (w.r.t. `x_{k-1}, s_{k-1}, x_k`), none for `s_{k-1}`.
+        if which == Relation::Sensor && d == SENSOR_STATE_DIM {
+            out.grad = [out.grad[0], 0.0, out.grad[1], 0.0];
         }
         Some(out)
     }
@@ -1508,6 +1541,136 @@ mod tests {
             noise_var: 1e-6,
         })
         .unwrap()
+    }
+
+    /// A sensor of the state only (`[x_{k-1}, x_k]`, dimension 2) steps as the thesis' sensor
+    /// (`[x_{k-1}, y_{k-1}, x_k]`) whose mean has no slope in `y_{k-1}` and whose kernel does
+    /// not vary along it: same estimates, standard deviations and Jacobians in every mode that
+    /// runs without local data. Fails if the two-input sensor read `s_{k-1}` where it reads
+    /// `x_k`, or if its gradient w.r.t. `x_k` landed elsewhere than the Jacobian's `f`.
+    #[test]
+    fn a_sensor_of_the_state_only_steps_as_the_thesis_sensor_blind_to_y() {
+        let (zeros, ones) = ([0.0; 4], [1.0; 4]);
+        let theta_t = [0.0, 3.0, 3.0, 3.0, 3.0];
+        // The long length scale along y_{k-1} makes the 3-input kernel equal the 2-input one.
+        let theta_s3 = [0.0, 3.0, 40.0, 3.0];
+        let theta_s2 = [0.0, 3.0, 3.0];
+        let slopes_t = [0.8, 0.1, 0.3, -0.2];
+        let (slopes_s3, slopes_s2) = ([-0.6, 0.0, 1.4], [-0.6, 1.4]);
+        let transition = linear_gp(&theta_t, &zeros, &ones, &slopes_t);
+        let thesis = HbnView {
+            transition,
+            sensor: linear_gp(&theta_s3, &zeros, &ones, &slopes_s3),
+            transition_local: None,
+            sensor_local: None,
+            blr: LocalRegression::default(),
+            init: None,
+            plays: Plays::NONE,
+        };
+        let state_only = HbnView {
+            sensor: linear_gp(&theta_s2, &zeros, &ones, &slopes_s2),
+            ..thesis
+        };
+        assert_eq!(state_only.sensor.dim(), SENSOR_STATE_DIM);
+        state_only.validate().unwrap();
+        for mode in [Mode::Ekf, Mode::Ukf] {
+            let cfg = EkfConfig {
+                mode,
+                ..gate_config(1e9)
+            };
+            let (a, b) = (
+                Ekf::new(thesis, cfg).unwrap(),
+                Ekf::new(state_only, cfg).unwrap(),
+            );
+            let mut scratch = [0.0; 64];
+            assert!(a.scratch_len() <= 64 && b.scratch_len() <= 64);
+            let (mut sa, mut sb) = (None, None);
+            let mut moved = 0.0;
+            for k in 0..60 {
+                let u = (k as f64 * 0.3).sin();
+                let y = 0.5 * (k as f64 * 0.2).cos();
+                let oa = a.step(&mut sa, &mut scratch, u, y);
+                let ob = b.step(&mut sb, &mut scratch, u, y);
+                let tol = 1e-9 * (1.0 + oa.x.abs());
+                assert!(
+                    (oa.x - ob.x).abs() < tol,
+                    "{mode:?} step {k}: {oa:?} {ob:?}"
+                );
+                assert!((oa.x_std - ob.x_std).abs() < tol, "{mode:?} step {k}");
+                assert!(
+                    (oa.jacobian - ob.jacobian).abs().max() < 1e-9,
+                    "{mode:?} {k}"
+                );
+                moved += (oa.x - 0.0).abs();
+            }
+            // The comparison is of filters that move.
+            assert!(moved > 1.0, "{mode:?}: {moved}");
+        }
+        // The sensor's row of F: c + f a1, f a2, e = (-0.6 + 1.4 * 0.8, 1.4 * 0.1, 0).
+        let cfg = gate_config(1e9);
+        let ekf = Ekf::new(state_only, cfg).unwrap();
+        let mut scratch = [0.0; 64];
+        let mut st = None;
+        ekf.step(&mut st, &mut scratch, 0.1, 0.2);
+        let out = ekf.step(&mut st, &mut scratch, 0.2, 0.3);
+        let j = out.jacobian;
+        assert!((j.m31 - (-0.6 + 1.4 * 0.8)).abs() < 1e-9, "{j}");
+        assert!((j.m32 - 1.4 * 0.1).abs() < 1e-9, "{j}");
+        assert!(j.m33.abs() < 1e-12, "{j}");
+    }
+
+    /// A sensor GP of neither 3 nor 2 inputs is refused, and so is a sensor's local data of
+    /// another dimension than its GP's.
+    #[test]
+    fn the_sensor_dimension_is_checked() {
+        let (zeros, ones) = ([0.0; 4], [1.0; 4]);
+        let theta = [0.0, 3.0, 3.0, 3.0, 3.0];
+        let slopes_t = [0.8, 0.1, 0.3, -0.2];
+        let one = [1.0];
+        let view = HbnView {
+            transition: linear_gp(&theta, &zeros, &ones, &slopes_t),
+            sensor: linear_gp(&theta[..2], &zeros, &ones, &one),
+            transition_local: None,
+            sensor_local: None,
+            blr: LocalRegression::default(),
+            init: None,
+            plays: Plays::NONE,
+        };
+        assert_eq!(
+            view.validate(),
+            Err(CoreError::DimensionMismatch {
+                expected: SENSOR_DIM,
+                got: 1
+            })
+        );
+        let (inputs, targets, keys, start) = ([0.0; 3], [0.0], [0u64], [0u32, 1]);
+        let (origin, hw, var) = ([0.0; 3], [1.0; 3], [1.0; 3]);
+        let local3 = Neighbourhood::new(
+            3,
+            crate::blr::NeighbourhoodParts {
+                inputs: &inputs,
+                targets: &targets,
+                cell_keys: &keys,
+                cell_start: &start,
+                origin: &origin,
+                half_window: &hw,
+                input_var: &var,
+            },
+        )
+        .unwrap();
+        let slopes_s2 = [-0.6, 1.4];
+        let mismatched = HbnView {
+            sensor: linear_gp(&theta[..3], &zeros, &ones, &slopes_s2),
+            sensor_local: Some(local3),
+            ..view
+        };
+        assert_eq!(
+            mismatched.validate(),
+            Err(CoreError::DimensionMismatch {
+                expected: 2,
+                got: 3
+            })
+        );
     }
 
     /// A filter whose model throws the state out of its box holds it at the edge; after

@@ -892,6 +892,11 @@ mod tests {
     }
 
     fn model(inducing: Option<usize>) -> HbnModel {
+        model_with(inducing, hbn_model::SensorInputs::Thesis)
+    }
+
+    /// [`model`] with the sensor's inputs (no model selection of them).
+    fn model_with(inducing: Option<usize>, sensor_inputs: hbn_model::SensorInputs) -> HbnModel {
         let cfg = SimConfig {
             noise_gain: 1.0,
             ..SimConfig::new(SystemKind::BoucWen)
@@ -902,13 +907,16 @@ mod tests {
             n_inducing: inducing,
             n_starts: 1,
             max_iters: 40,
+            sensor_inputs,
             ..HbnParams::default()
         };
+        let mut params = params;
+        params.select.sensor_inputs.clear();
         HbnModel::fit(&[Sequence::new(&log.u, &log.x, &log.y)], &params).unwrap()
     }
 
     /// The step on the f64 tables equals the model's own estimate bit for bit, every mode,
-    /// exact and sparse; the f32 tables read back (how close they stay depends on the model's
+    /// exact and sparse, with the thesis' sensor and with a sensor of the state only; the f32 tables read back (how close they stay depends on the model's
     /// conditioning: `f32_tables_stay_close` and tests/firmware.rs measure it on trained
     /// models; this small one is poorly conditioned).
     #[test]
@@ -922,7 +930,9 @@ mod tests {
             300,
         )
         .unwrap();
-        for m in [model(None), model(Some(16))] {
+        let state = model_with(None, hbn_model::SensorInputs::State);
+        assert_eq!(state.sensor().kernel().dim, 2);
+        for m in [model(None), model(Some(16)), state] {
             for mode in Mode::ALL {
                 let est = m.estimate(&test.u, &test.y, mode).unwrap();
                 let t = model_tables(&m, mode).unwrap();

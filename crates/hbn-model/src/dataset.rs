@@ -122,6 +122,25 @@ impl Table {
         }
     }
 
+    /// The table of the input columns `columns`, in that order (each below `dim`; others are
+    /// skipped): the sensor table of a sensor that reads fewer inputs
+    /// ([`crate::SensorInputs::columns`]).
+    pub fn columns(&self, columns: &[usize]) -> Table {
+        let keep: Vec<usize> = columns.iter().copied().filter(|&j| j < self.dim).collect();
+        if keep.len() == self.dim && keep.iter().enumerate().all(|(i, &j)| i == j) {
+            return self.clone();
+        }
+        Table {
+            dim: keep.len(),
+            inputs: self
+                .inputs
+                .chunks_exact(self.dim.max(1))
+                .flat_map(|row| keep.iter().map(move |&j| row[j]))
+                .collect(),
+            targets: self.targets.clone(),
+        }
+    }
+
     /// Number of rows.
     pub fn len(&self) -> usize {
         self.targets.len()
@@ -229,6 +248,14 @@ mod tests {
         let plays_col: Vec<f64> = d.transition.inputs.chunks(5).map(|r| r[4]).collect();
         assert_eq!(plays_col, vec![0.0, 2.0, 2.0]);
         assert_eq!(&d.transition.inputs[..4], &[0.0, 0.0, 1.0, 0.0]);
+        let state_sensor = d.sensor.columns(&[0, 2]);
+        assert_eq!(state_sensor.dim, 2);
+        assert_eq!(state_sensor.targets, d.sensor.targets);
+        let pairs: Vec<&[f64]> = state_sensor.inputs.chunks(2).collect();
+        let thesis: Vec<&[f64]> = d.sensor.inputs.chunks(3).collect();
+        for (p, t) in pairs.iter().zip(&thesis) {
+            assert_eq!(*p, &[t[0], t[2]][..]);
+        }
         let first4 = d.transition.first_columns(4);
         assert_eq!(first4.dim, 4);
         assert_eq!(first4.inputs.len(), 12);

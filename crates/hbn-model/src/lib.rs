@@ -63,6 +63,6 @@ pub use model::{
 pub use params::{
     Candidate, CheckedHbnParams, ConfigError, DEFAULT_EVIDENCE_KERNELS, DEFAULT_INDUCING,
     DEFAULT_LAGS, DEFAULT_MEMORY, HbnParams, Increments, KernelChoice, KernelFamily, LinearMean,
-    Param, ParamValue, Problem, Selection, SignalInfo, Signals, UnknownKernel,
+    Param, ParamValue, Problem, Selection, SensorInputs, SignalInfo, Signals, UnknownKernel,
 };
 pub use tuning::{CandidateRow, FilterTuning, NoiseScales, ValidationReport};

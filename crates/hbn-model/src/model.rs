@@ -1,9 +1,7 @@
 //! The HBN model: both GPs, their local training data, the signals and the rate.
 
 use crate::ModelError;
-use crate::dataset::{
-    SENSOR_DIM, SENSOR_DIRECTION, Sequence, TRANSITION_DIM, TRANSITION_DIRECTION, build_dataset,
-};
+use crate::dataset::{Sequence, TRANSITION_DIM, TRANSITION_DIRECTION, build_dataset};
 use crate::error::ModelFileProblem;
 use crate::evidence::{KernelEvidence, Prefit};
 use crate::local::LocalData;
@@ -218,6 +216,10 @@ pub(crate) struct ExactStart<'a> {
     /// Where the sparse sensor GP that starts from `sensor` is kept for the other candidates
     /// that fit the same one ([`SharedSensor`]).
     pub sensor_fit: Option<&'a SharedSensor>,
+    /// The transition GP itself with its optimiser starts, fitted on the same runs with the
+    /// same settings (for a candidate that differs from the first one in its sensor only):
+    /// taken as it is.
+    pub transition_fit: Option<&'a (GaussianProcess, Vec<StartSummary>)>,
 }
 
 /// A sparse sensor GP fitted once for every candidate that would fit the same one, with its
@@ -449,16 +451,32 @@ impl HbnModel {
         let warms = |c: &crate::Candidate| {
             first.n_inducing.is_none()
                 && c.n_inducing.is_some()
-                && (c.transition_kernel, c.sensor_kernel)
-                    == (first.transition_kernel, first.sensor_kernel)
+                && (c.transition_kernel, c.sensor_kernel, c.sensor_inputs)
+                    == (
+                        first.transition_kernel,
+                        first.sensor_kernel,
+                        first.sensor_inputs,
+                    )
         };
-        let phase_one = candidates.iter().skip(1).any(warms);
+        // A candidate that differs from the first one in its sensor's inputs only fits the
+        // first one's transition GP again: it takes that GP as it is.
+        let same_transition = |c: &crate::Candidate| {
+            c.sensor_inputs != first.sensor_inputs
+                && crate::Candidate {
+                    sensor_inputs: first.sensor_inputs,
+                    ..c.clone()
+                } == *first
+        };
+        let phase_one = candidates
+            .iter()
+            .skip(1)
+            .any(|c| warms(c) || same_transition(c));
         // Trained beside the first one's GPs: the candidates that start from nothing, and
         // the exact transition GPs of the warm ones with other lags.
         let (fresh, other_lags): (Vec<usize>, Vec<usize>) = if phase_one {
             (
                 (1..candidates.len())
-                    .filter(|&i| !warms(&candidates[i]))
+                    .filter(|&i| !warms(&candidates[i]) && !same_transition(&candidates[i]))
                     .collect(),
                 (1..candidates.len())
                     .filter(|&i| warms(&candidates[i]) && candidates[i].lags != first.lags)
@@ -474,7 +492,9 @@ impl HbnModel {
                      before: f64,
                      observe: &mut dyn FnMut(GpRole, &FitProgress)| {
             let p = match start {
-                Start::FromExact(_) => params.starting_from_exact(&candidates[i]),
+                Start::FromExact(e) if e.transition_fit.is_none() => {
+                    params.starting_from_exact(&candidates[i])
+                }
                 _ => params.for_candidate(&candidates[i]),
             };
             let t = Instant::now();
@@ -551,6 +571,16 @@ impl HbnModel {
                 transition: exact.as_ref().map(|(m, _)| m.transition.hyperparameters()),
                 sensor: exact.as_ref().map(|(m, _)| m.sensor.hyperparameters()),
                 sensor_fit: None,
+                transition_fit: None,
+            };
+            let first_transition = exact.as_ref().map(|(m, _)| {
+                let starts = m.summary.starts.iter();
+                let own = starts.filter(|s| s.gp == GpRole::Transition).cloned();
+                (m.transition.clone(), own.collect::<Vec<_>>())
+            });
+            let shared_transition = ExactStart {
+                transition_fit: first_transition.as_ref(),
+                ..ExactStart::default()
             };
             // A panic is a bug: it propagates, as it would without the threads.
             fn join<T>(h: std::thread::ScopedJoinHandle<'_, T>) -> T {
@@ -586,6 +616,9 @@ impl HbnModel {
                     (Some((model, seconds)), _) => (i, Start::Fitted(Box::new(model)), seconds),
                     (None, Some((_, start, seconds))) if have_exact && warms(c) => {
                         (i, Start::FromExact(start), *seconds)
+                    }
+                    (None, _) if have_exact && same_transition(c) => {
+                        (i, Start::FromExact(&shared_transition), 0.0)
                     }
                     (None, _) => (i, Start::Fresh, 0.0),
                 });
@@ -764,8 +797,12 @@ impl HbnModel {
                 data.transition.increments(mean_input),
             ),
             GpRole::Sensor => (
-                params.sensor_kernel.spec(SENSOR_DIM, SENSOR_DIRECTION),
-                data.sensor.increments(mean_input),
+                params
+                    .sensor_kernel
+                    .spec(params.sensor_inputs.dim(), params.sensor_inputs.direction()),
+                data.sensor
+                    .columns(params.sensor_inputs.columns())
+                    .increments(mean_input),
             ),
         }
     }
@@ -837,6 +874,14 @@ impl HbnModel {
                     gp_params.n_starts = 1;
                 }
             }
+            // The same transition GP, fitted already for another candidate.
+            let given = exact
+                .and_then(|e| e.transition_fit)
+                .filter(|_| which == GpRole::Transition && fixed.is_none());
+            if let Some((gp, own)) = given {
+                starts.extend(own.iter().cloned());
+                return Ok::<_, ModelError>(gp.clone());
+            }
             let mut fit_one = || Self::fit_gp(which, &gp_params, table, observe);
             // A sparse sensor GP another candidate fits the same: fitted once.
             let shared = exact.and_then(|e| e.sensor_fit).filter(|_| {
@@ -860,7 +905,10 @@ impl HbnModel {
             &data.transition.first_columns(TRANSITION_DIM),
             params.blr_window,
         )?;
-        let sensor_local = LocalData::build(&data.sensor, params.blr_window)?;
+        let sensor_local = LocalData::build(
+            &data.sensor.columns(params.sensor_inputs.columns()),
+            params.blr_window,
+        )?;
         let cat = |f: fn(&Sequence<'_>) -> Vec<f64>| {
             trajectories.iter().flat_map(f).collect::<Vec<f64>>()
         };
@@ -1318,6 +1366,7 @@ mod sparse_start_tests {
                 kernels: Vec::new(),
                 inducing: vec![Some(16)],
                 lags,
+                sensor_inputs: Vec::new(),
             },
             ..HbnParams::default()
         }
@@ -1362,6 +1411,58 @@ mod sparse_start_tests {
             .unwrap();
         assert_eq!(own.transition.report().starts.len(), 2);
         assert_ne!(own.to_json().unwrap(), alone.to_json().unwrap());
+    }
+
+    /// A candidate with a sensor of the state only takes the first candidate's transition GP
+    /// (its starts too) instead of fitting it again, fits its own two-input sensor GP, and is
+    /// the model its recorded parameters train alone, bit for bit.
+    #[test]
+    fn a_state_sensor_candidate_shares_the_transition_and_is_the_model_its_parameters_train() {
+        let data = runs();
+        let seqs = sequences(&data);
+        let mut params = small_selection(Vec::new()).into_inner();
+        params.select.sensor_inputs = vec![crate::SensorInputs::State];
+        let params = params.check().unwrap();
+        let candidates = params.candidates();
+        assert_eq!(candidates.len(), 3);
+        assert_eq!(
+            (candidates[2].n_inducing, candidates[2].sensor_inputs),
+            (None, crate::SensorInputs::State)
+        );
+        assert_eq!(candidates[2].to_string(), "matern52 exact sensor=state");
+        let mut events = [0usize; 2];
+        let trained = HbnModel::fit_candidates(&seqs, &params, &candidates, &[], &mut |role, _| {
+            events[usize::from(role == GpRole::Sensor)] += 1;
+        });
+        // Transition: the first candidate's two starts and the sparse one's one; none for
+        // the state sensor's candidate. Sensor: two, one, and the state sensor's two.
+        assert_eq!(events, [3, 5]);
+        let state = trained[2].0.as_ref().unwrap();
+        let first = trained[0].0.as_ref().unwrap();
+        assert_eq!(state.params().sensor_inputs, crate::SensorInputs::State);
+        assert!(!state.params().sparse_from_exact);
+        assert_eq!(state.sensor.kernel().dim, 2);
+        assert_eq!(state.sensor_local.view().unwrap().dim(), 2);
+        assert_eq!(
+            serde_json::to_string(&state.transition).unwrap(),
+            serde_json::to_string(&first.transition).unwrap()
+        );
+        assert_ne!(
+            serde_json::to_string(&state.sensor).unwrap(),
+            serde_json::to_string(&first.sensor).unwrap()
+        );
+        let alone =
+            HbnModel::fit_tuned(&seqs, &params.for_candidate(&candidates[2]), &mut |_, _| {})
+                .unwrap();
+        assert_eq!(state.to_json().unwrap(), alone.to_json().unwrap());
+        // Every mode runs on it, and the model file reads back as the same model.
+        for mode in Mode::ALL {
+            let run = state.estimate(&data[0].0, &data[0].2, mode).unwrap();
+            assert!(run.x.iter().all(|v| v.is_finite()), "{mode:?}");
+        }
+        let back = HbnModel::from_json(&state.to_json().unwrap(), "test").unwrap();
+        assert_eq!(back.to_json().unwrap(), state.to_json().unwrap());
+        assert_eq!(back.view().unwrap().sensor.dim(), 2);
     }
 
     /// What model selection counts: a filter that follows its training runs loses the state

@@ -252,6 +252,82 @@ impl std::str::FromStr for Increments {
     }
 }
 
+/// What the sensor GP reads ([`HbnParams::sensor_inputs`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SensorInputs {
+    /// `[x_{k-1}, y_{k-1}, x_k]`, the thesis' sensor (Eq. 16); model files from before this
+    /// option. With `y_{k-1}` among its inputs the GP can learn the output's increments from
+    /// the state's, and then `y` does not pin the state's level: a drift of the estimate is
+    /// never corrected (docs/results.md, "A sensor of the state only").
+    #[default]
+    Thesis,
+    /// `[x_{k-1}, x_k]`: the output as a function of the state's last two values, so every
+    /// measurement says where the state is. It cannot model a sensor's own memory beyond what
+    /// `x_{k-1}` carries. With [`Increments::Both`] this sensor would have no `y_{k-1}` to
+    /// learn increments from: [`HbnParams::check`] refuses the pair, and model selection
+    /// leaves this alternative out.
+    State,
+}
+
+impl SensorInputs {
+    /// Every choice, in the order of their names.
+    pub const ALL: [SensorInputs; 2] = [SensorInputs::Thesis, SensorInputs::State];
+
+    /// `thesis` or `state`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            SensorInputs::Thesis => "thesis",
+            SensorInputs::State => "state",
+        }
+    }
+
+    /// Whether this is the thesis' sensor (the default, which model files do not write).
+    pub fn is_thesis(&self) -> bool {
+        *self == SensorInputs::Thesis
+    }
+
+    /// The input dimension ([`hbn_core::SENSOR_DIM`] or [`hbn_core::SENSOR_STATE_DIM`]).
+    pub const fn dim(self) -> usize {
+        match self {
+            SensorInputs::Thesis => hbn_core::SENSOR_DIM,
+            SensorInputs::State => hbn_core::SENSOR_STATE_DIM,
+        }
+    }
+
+    /// The columns of the thesis' sensor row `[x_{k-1}, y_{k-1}, x_k]` this sensor reads.
+    pub const fn columns(self) -> &'static [usize] {
+        match self {
+            SensorInputs::Thesis => &[0, 1, 2],
+            SensorInputs::State => &[0, 2],
+        }
+    }
+
+    /// The direction pair of the advantage kernel, `sgn(x_k - x_{k-1})`, in these inputs.
+    pub const fn direction(self) -> [usize; 2] {
+        match self {
+            SensorInputs::Thesis => SENSOR_DIRECTION,
+            SensorInputs::State => [1, 0],
+        }
+    }
+}
+
+impl std::fmt::Display for SensorInputs {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for SensorInputs {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        SensorInputs::ALL
+            .into_iter()
+            .find(|i| i.name().eq_ignore_ascii_case(s.trim()))
+            .ok_or_else(|| format!("unknown sensor inputs `{s}`; choose thesis or state"))
+    }
+}
+
 /// Which GPs have a linear prior mean ([`MeanFunction::Linear`]): the targets' least-squares
 /// plane on the GP's inputs, subtracted before the kernel and added back in prediction.
 ///
@@ -367,6 +443,12 @@ pub struct HbnParams {
     /// as [`LinearMean::None`].
     #[serde(default)]
     pub linear_mean: LinearMean,
+    /// What the sensor GP reads ([`SensorInputs`]): the thesis' `[x_{k-1}, y_{k-1}, x_k]` (the
+    /// default), or the state's `[x_{k-1}, x_k]` alone. [`HbnParams::select`] may choose the
+    /// other on held-out data. Model files written before this option read as
+    /// [`SensorInputs::Thesis`] (and that value is not written).
+    #[serde(default, skip_serializing_if = "SensorInputs::is_thesis")]
+    pub sensor_inputs: SensorInputs,
     /// Largest signal variance of both GPs, relative to the variance of what each kernel
     /// models (the targets', or with a linear mean the residual's), or `None` for only the
     /// `1e5` box ([`hbn_gp::GpParams::max_signal_variance`]). Model files written before this
@@ -462,12 +544,22 @@ pub struct Selection {
     /// without lag choices are as before).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub lags: Vec<Vec<f64>>,
+    /// Sensor inputs ([`SensorInputs`]) to try besides the primary one, each with the primary
+    /// configuration only (kernels, inducing setting, lags): one more candidate each. None
+    /// with [`Increments::Both`] when the alternative is [`SensorInputs::State`] (it has no
+    /// `y_{k-1}` to learn increments from). Older files read as empty (and an empty list is
+    /// not written).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sensor_inputs: Vec<SensorInputs>,
 }
 
 impl Selection {
     /// No alternatives.
     pub fn is_empty(&self) -> bool {
-        self.kernels.is_empty() && self.inducing.is_empty() && self.lags.is_empty()
+        self.kernels.is_empty()
+            && self.inducing.is_empty()
+            && self.lags.is_empty()
+            && self.sensor_inputs.is_empty()
     }
 }
 
@@ -484,10 +576,14 @@ pub struct Candidate {
     /// lags were chosen read as empty (and empty lags are not written).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub lags: Vec<f64>,
+    /// What the sensor GP reads. Rows written before this choice read as
+    /// [`SensorInputs::Thesis`] (and that value is not written).
+    #[serde(default, skip_serializing_if = "SensorInputs::is_thesis")]
+    pub sensor_inputs: SensorInputs,
 }
 
 /// `matern52 exact`, `se-ard m=64`; both kernels when they differ (`se,matern52 exact`); lags
-/// last (`matern52 m=64 lags=1`).
+/// and then a sensor of the state only last (`matern52 m=64 lags=1`, `se exact sensor=state`).
 impl std::fmt::Display for Candidate {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         if self.transition_kernel == self.sensor_kernel {
@@ -510,6 +606,9 @@ impl Candidate {
         if !self.lags.is_empty() {
             let taus: Vec<String> = self.lags.iter().map(|t| t.to_string()).collect();
             out.push_str(&format!(" lags={}", taus.join(",")));
+        }
+        if !self.sensor_inputs.is_thesis() {
+            out.push_str(&format!(" sensor={}", self.sensor_inputs));
         }
         out
     }
@@ -534,6 +633,7 @@ impl Default for HbnParams {
             validation: 0.25,
             increments: Increments::None,
             linear_mean: LinearMean::None,
+            sensor_inputs: SensorInputs::Thesis,
             max_signal_variance: None,
             memory: DEFAULT_MEMORY.to_vec(),
             lags: Vec::new(),
@@ -541,6 +641,7 @@ impl Default for HbnParams {
                 kernels: Vec::new(),
                 inducing: vec![Some(DEFAULT_INDUCING)],
                 lags: vec![DEFAULT_LAGS.to_vec()],
+                sensor_inputs: vec![SensorInputs::State],
             },
             sparse_from_exact: false,
             kernel_evidence: DEFAULT_EVIDENCE_KERNELS.to_vec(),
@@ -592,11 +693,14 @@ pub enum Param {
     LinearMean,
     /// [`HbnParams::max_signal_variance`] (a number, or `none`).
     MaxSignalVariance,
+    /// [`HbnParams::sensor_inputs`] (`thesis` or `state`, or a list of them: the first is the
+    /// primary one, the rest [`Selection::sensor_inputs`]).
+    SensorInputs,
 }
 
 impl Param {
     /// Every parameter, in the order front ends list them.
-    pub const ALL: [Param; 19] = [
+    pub const ALL: [Param; 20] = [
         Param::Rate,
         Param::Kernel,
         Param::TransitionKernel,
@@ -616,6 +720,7 @@ impl Param {
         Param::Lags,
         Param::LinearMean,
         Param::MaxSignalVariance,
+        Param::SensorInputs,
     ];
 
     /// The Rust name (the field of [`HbnParams`]; `kernel` for the shorthand).
@@ -640,6 +745,7 @@ impl Param {
             Param::Lags => "lags",
             Param::LinearMean => "linear_mean",
             Param::MaxSignalVariance => "max_signal_variance",
+            Param::SensorInputs => "sensor_inputs",
         }
     }
 }
@@ -869,12 +975,14 @@ impl HbnParams {
             sensor_kernel: self.sensor_kernel,
             n_inducing: self.n_inducing,
             lags: self.lags.clone(),
+            sensor_inputs: self.sensor_inputs,
         }
     }
 
     /// Every configuration model selection trains ([`Selection`]), the primary one first, then
     /// kernel by kernel, each with every inducing setting (with the primary lags), then the
-    /// alternative lag sets with every sparse one of those; no configuration twice.
+    /// alternative lag sets with every sparse one of those, then the primary configuration
+    /// with each alternative sensor ([`Selection::sensor_inputs`]); no configuration twice.
     pub fn candidates(&self) -> Vec<Candidate> {
         let kernels = std::iter::once((self.transition_kernel, self.sensor_kernel))
             .chain(self.select.kernels.iter().map(|&k| (k, k)));
@@ -888,6 +996,7 @@ impl HbnParams {
                     sensor_kernel,
                     n_inducing,
                     lags: self.lags.clone(),
+                    sensor_inputs: self.sensor_inputs,
                 };
                 if !out.contains(&c) {
                     out.push(c);
@@ -911,6 +1020,19 @@ impl HbnParams {
                 }
             }
         }
+        // Other sensors go with the primary configuration only.
+        for &sensor_inputs in &self.select.sensor_inputs {
+            if sensor_inputs == SensorInputs::State && self.increments == Increments::Both {
+                continue;
+            }
+            let c = Candidate {
+                sensor_inputs,
+                ..self.candidate()
+            };
+            if !out.contains(&c) {
+                out.push(c);
+            }
+        }
         out
     }
 
@@ -922,6 +1044,7 @@ impl HbnParams {
             sensor_kernel: c.sensor_kernel,
             n_inducing: c.n_inducing,
             lags: c.lags.clone(),
+            sensor_inputs: c.sensor_inputs,
             select: Selection::default(),
             kernel_evidence: Vec::new(),
             ..self.clone()
@@ -979,6 +1102,16 @@ impl HbnParams {
             }
         };
         positive(Param::Rate, self.rate_hz)?;
+        if self.sensor_inputs == SensorInputs::State && self.increments == Increments::Both {
+            return Err(ConfigError::new(
+                Param::SensorInputs,
+                Problem::Invalid {
+                    reason: "a sensor of the state only has no y_{k-1} to learn increments \
+                             from: use increments `transition` or `none`, or sensor inputs \
+                             `thesis`",
+                },
+            ));
+        }
         at_least(
             Param::MaxPoints,
             self.max_points as u64,
@@ -1075,11 +1208,19 @@ impl HbnParams {
             (
                 Param::SensorKernel,
                 self.sensor_kernel,
-                SENSOR_DIM,
-                SENSOR_DIRECTION,
+                self.sensor_inputs.dim(),
+                self.sensor_inputs.direction(),
             ),
         ]
         .into_iter()
+        .chain(self.select.sensor_inputs.iter().map(|s| {
+            (
+                Param::SensorInputs,
+                self.sensor_kernel,
+                s.dim(),
+                s.direction(),
+            )
+        }))
         .chain(
             self.select
                 .kernels
@@ -1094,6 +1235,12 @@ impl HbnParams {
                             TRANSITION_DIRECTION,
                         ),
                         (Param::Kernel, k, SENSOR_DIM, SENSOR_DIRECTION),
+                        (
+                            Param::Kernel,
+                            k,
+                            SensorInputs::State.dim(),
+                            SensorInputs::State.direction(),
+                        ),
                     ]
                 }),
         ) {
@@ -1157,6 +1304,23 @@ impl HbnParams {
                 param,
                 Problem::WrongType {
                     expected: "a kernel name",
+                },
+            )),
+        };
+        let sensor_inputs = |v: ParamValue| match v {
+            ParamValue::Text(t) => t.parse::<SensorInputs>().map_err(|_| {
+                ConfigError::new(
+                    param,
+                    Problem::Unknown {
+                        given: t,
+                        choices: "thesis, state",
+                    },
+                )
+            }),
+            _ => Err(ConfigError::new(
+                param,
+                Problem::WrongType {
+                    expected: "thesis or state, or a list of them",
                 },
             )),
         };
@@ -1295,6 +1459,15 @@ impl HbnParams {
                 })?;
             }
             (Param::LinearMean, _) => return wrong("none, transition or both"),
+            (Param::SensorInputs, ParamValue::List(v)) => {
+                let (primary, alternatives) = primary_and_rest(param, v, sensor_inputs)?;
+                self.sensor_inputs = primary;
+                self.select.sensor_inputs = alternatives;
+            }
+            (Param::SensorInputs, v) => {
+                self.sensor_inputs = sensor_inputs(v)?;
+                self.select.sensor_inputs.clear();
+            }
             (Param::MaxSignalVariance, ParamValue::Real(v)) => self.max_signal_variance = Some(v),
             (Param::MaxSignalVariance, ParamValue::Int(v)) => {
                 self.max_signal_variance = Some(v as f64);
@@ -1374,6 +1547,13 @@ impl HbnParams {
                 ParamValue::List(self.lags.iter().map(|&r| ParamValue::Real(r)).collect())
             }
             Param::LinearMean => ParamValue::Text(self.linear_mean.name().to_owned()),
+            Param::SensorInputs if !self.select.sensor_inputs.is_empty() => ParamValue::List(
+                std::iter::once(self.sensor_inputs)
+                    .chain(self.select.sensor_inputs.iter().copied())
+                    .map(|s| ParamValue::Text(s.name().to_owned()))
+                    .collect(),
+            ),
+            Param::SensorInputs => ParamValue::Text(self.sensor_inputs.name().to_owned()),
             Param::MaxSignalVariance => match self.max_signal_variance {
                 Some(v) => ParamValue::Real(v),
                 None => ParamValue::Text("none".to_owned()),
@@ -1494,14 +1674,26 @@ mod tests {
 
     /// The default model is chosen on held-out data between exact GPs (the primary, trained
     /// alone when nothing is held out) and sparse GPs of `DEFAULT_INDUCING` points, without
-    /// and with the `DEFAULT_LAGS`.
+    /// and with the `DEFAULT_LAGS`, and the exact GPs with a sensor of the state only.
     #[test]
     fn the_default_chooses_between_exact_and_sparse_gps() {
         let p = HbnParams::default();
         let names: Vec<String> = p.candidates().iter().map(|c| c.to_string()).collect();
         assert_eq!(
             names,
-            ["matern52 exact", "matern52 m=64", "matern52 m=64 lags=1"]
+            [
+                "matern52 exact",
+                "matern52 m=64",
+                "matern52 m=64 lags=1",
+                "matern52 exact sensor=state"
+            ]
+        );
+        assert_eq!(
+            p.get(Param::SensorInputs),
+            Some(ParamValue::List(vec![
+                ParamValue::Text("thesis".into()),
+                ParamValue::Text("state".into())
+            ]))
         );
         assert_eq!(p.candidate().n_inducing, None);
         assert!(p.validation > 0.0);
@@ -1542,7 +1734,8 @@ mod tests {
                 "matern52 m=32",
                 "matern52 exact",
                 "se-ard m=32 lags=1",
-                "matern52 m=32 lags=1"
+                "matern52 m=32 lags=1",
+                "se-ard m=32 sensor=state"
             ]
         );
         assert!(p.check_ref().is_ok());
@@ -1556,7 +1749,8 @@ mod tests {
             ParamValue::List(vec![text("exact"), text("exact")]),
         )
         .unwrap();
-        assert_eq!(p.candidates().len(), 2);
+        // Kernels se-ard and matern52, exact, and the primary with the state-only sensor.
+        assert_eq!(p.candidates().len(), 3);
         let e = p
             .set(
                 Param::Kernel,
@@ -1571,6 +1765,8 @@ mod tests {
         p.set(Param::Kernel, text("se")).unwrap();
         p.set(Param::Inducing, ParamValue::Int(8)).unwrap();
         p.set(Param::Lags, text("none")).unwrap();
+        assert!(!p.select.is_empty());
+        p.set(Param::SensorInputs, text("thesis")).unwrap();
         assert!(p.select.is_empty());
         assert_eq!(p.candidates().len(), 1);
     }
@@ -1581,10 +1777,15 @@ mod tests {
         let names: Vec<String> = d.candidates().iter().map(|c| c.to_string()).collect();
         assert_eq!(
             names,
-            ["matern52 exact", "matern52 m=64", "matern52 m=64 lags=1"]
+            [
+                "matern52 exact",
+                "matern52 m=64",
+                "matern52 m=64 lags=1",
+                "matern52 exact sensor=state"
+            ]
         );
         // Every configuration exact: no lag set is tried (`n_inducing=None` in Python trains
-        // exact GPs without a choice).
+        // exact GPs, choosing only the sensor's inputs).
         let exact = HbnParams {
             select: Selection {
                 inducing: Vec::new(),
@@ -1592,7 +1793,11 @@ mod tests {
             },
             ..d.clone()
         };
-        assert_eq!(exact.candidates(), vec![exact.candidate()]);
+        let state = Candidate {
+            sensor_inputs: SensorInputs::State,
+            ..exact.candidate()
+        };
+        assert_eq!(exact.candidates(), vec![exact.candidate(), state]);
         // A list of lists: the primary set, then the alternatives; read back the same way.
         let mut p = HbnParams::default();
         let set =
@@ -1639,5 +1844,60 @@ mod tests {
             ..HbnParams::default()
         };
         assert_eq!(too_many.check().unwrap_err().param, Param::Lags);
+    }
+
+    /// Sensor inputs set by name (a list: the primary, then the alternatives), read back the
+    /// same way; the state-only sensor cannot learn increments of y (refused as the primary,
+    /// left out as an alternative), and a model file without the field reads as the thesis'.
+    #[test]
+    fn sensor_inputs_are_set_checked_and_chosen() {
+        let text = |t: &str| ParamValue::Text(t.to_owned());
+        let mut p = HbnParams::default();
+        p.set(Param::SensorInputs, text("state")).unwrap();
+        assert_eq!(p.sensor_inputs, SensorInputs::State);
+        assert!(p.select.sensor_inputs.is_empty());
+        assert_eq!(p.get(Param::SensorInputs), Some(text("state")));
+        let both = ParamValue::List(vec![text("state"), text("thesis")]);
+        p.set(Param::SensorInputs, both.clone()).unwrap();
+        assert_eq!(p.get(Param::SensorInputs), Some(both));
+        assert_eq!(p.candidate().sensor_inputs, SensorInputs::State);
+        assert!(p.check_ref().is_ok());
+        let e = p.set(Param::SensorInputs, text("level")).unwrap_err();
+        assert_eq!(e.param, Param::SensorInputs);
+        assert!(e.to_string().contains("thesis, state"), "{e}");
+        let e = p.set(Param::SensorInputs, ParamValue::Int(2)).unwrap_err();
+        assert_eq!(e.param, Param::SensorInputs);
+        // Increments of y need y_{k-1}.
+        p.set(Param::SensorInputs, text("state")).unwrap();
+        p.increments = Increments::Both;
+        let e = p.check_ref().unwrap_err();
+        assert_eq!(e.param, Param::SensorInputs);
+        p.increments = Increments::Transition;
+        assert!(p.check_ref().is_ok());
+        let d = HbnParams {
+            increments: Increments::Both,
+            ..HbnParams::default()
+        };
+        assert!(
+            d.candidates()
+                .iter()
+                .all(|c| c.sensor_inputs == SensorInputs::Thesis)
+        );
+        assert!(d.check_ref().is_ok());
+        // Not written when it is the thesis' sensor, so older readers and files agree.
+        let json = serde_json::to_string(&HbnParams {
+            select: Selection::default(),
+            ..HbnParams::default()
+        })
+        .unwrap();
+        assert!(!json.contains("sensor_inputs"), "{json}");
+        let back: HbnParams = serde_json::from_str(&json).unwrap();
+        assert_eq!(back.sensor_inputs, SensorInputs::Thesis);
+        let state = serde_json::to_string(&HbnParams {
+            sensor_inputs: SensorInputs::State,
+            ..HbnParams::default()
+        })
+        .unwrap();
+        assert!(state.contains("\"sensor_inputs\":\"state\""), "{state}");
     }
 }

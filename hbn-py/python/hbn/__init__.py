@@ -640,15 +640,20 @@ class HysteresisModel:
     with the sparse GPs; ``[]`` trains without lags and tries none; see ``docs/memory.md``),
     ``linear_mean`` (which GPs have a linear prior mean: ``"none"``,
     ``"transition"`` or ``"both"``; see :class:`GaussianProcess` and ``docs/sparse.md``),
+    ``sensor_inputs`` (what the sensor GP reads: ``"thesis"``, ``[x_{k-1}, y_{k-1}, x_k]``, or
+    ``"state"``, ``[x_{k-1}, x_k]``, so that every measurement pins the state's level; a list
+    is chosen among on held-out data; default ``["thesis", "state"]``: the thesis' sensor, with
+    the exact GPs and a sensor of the state only tried; see ``docs/tuning.md``),
     ``max_signal_variance`` (largest GP signal variance, as a multiple
     of the variance each kernel models, or ``"none"`` for only the ``1e5`` box). They are
     the flags of ``hbn train``. A bad value
     raises :class:`ConfigError` whose ``keyword`` names it.
 
     Model selection: ``kernel`` and ``n_inducing`` also take a list (``kernel=["matern52",
-    "se-ard"]``, ``n_inducing=[None, 64]``, ``None`` being the exact GP), and ``lags`` a list of
-    lag sets (``lags=[[], [1.0]]``, the first the primary one). Every combination of kernel and
-    inducing setting is trained, each sparse one also with every further lag set, and its
+    "se-ard"]``, ``n_inducing=[None, 64]``, ``None`` being the exact GP), ``lags`` a list of
+    lag sets (``lags=[[], [1.0]]``, the first the primary one) and ``sensor_inputs`` a list of
+    sensors. Every combination of kernel and inducing setting is trained, each sparse one also
+    with every further lag set, the first one also with every further sensor, and its
     filter tuned on the same held-out data; the one whose default mode has the lowest held-out
     NLPD among those at least as accurate held out (nRMSE) as the first becomes the model,
     leaving out candidates whose filter loses the state on their own training runs (a row's
