@@ -276,9 +276,11 @@ class NumpyEkf:
         # Play operators of the input (docs/memory.md): their radii, in the input's units
         # (absent in model files from before them).
         self.radii = np.asarray(model.get("play_radii", []), dtype=float)
-        if self.tr.d != 4 + len(self.radii) or self.se.d != 3:
+        # The sensor reads [x_{k-1}, y_{k-1}, x_k] (the thesis) or [x_{k-1}, x_k] (a sensor of
+        # the state only, `sensor_inputs = state`).
+        if self.tr.d != 4 + len(self.radii) or self.se.d not in (2, 3):
             raise ValueError(
-                "not an HBN model (transition needs 4 inputs plus one per play, sensor 3)"
+                "not an HBN model (transition needs 4 inputs plus one per play, sensor 3 or 2)"
             )
         self.cfg = ekf_config(model)
         self.model = model
@@ -324,10 +326,13 @@ class NumpyEkf:
         if t is not None:
             left_box = not (c["x_bounds"][0] <= t[0] <= c["x_bounds"][1])
             xk = _clamp(t[0], c["x_bounds"])
-            s = self._linearise(self.se, np.array([x1, s1, xk]))
+            state_only = self.se.d == 2
+            s = self._linearise(self.se, np.array([x1, xk] if state_only else [x1, s1, xk]))
             if s is not None:
                 a1, a2 = _clamp_jac(t[2][0], jm), _clamp_jac(t[2][1], jm)
-                cc, e, f = (_clamp_jac(s[2][0], jm), _clamp_jac(s[2][1], jm), _clamp_jac(s[2][2], jm))
+                # The gradient w.r.t. x_{k-1}, s_{k-1}, x_k (none for s_{k-1} without it).
+                grad = [s[2][0], 0.0, s[2][1]] if state_only else list(s[2])
+                cc, e, f = (_clamp_jac(grad[0], jm), _clamp_jac(grad[1], jm), _clamp_jac(grad[2], jm))
                 fm = np.array([[a1, a2, 0.0], [1.0, 0.0, 0.0], [cc + f * a1, f * a2, e]])
                 g = np.array([1.0, 0.0, f])
                 q_x = _floor(

@@ -138,7 +138,15 @@ def test_model_selection_among_inducing_settings():
     # Matern 5/2 named: with SE-ARD (which the choice by evidence takes here) three inducing
     # points on the near-linear ridge score as well held out as the exact GP.
     model = hbn.HysteresisModel.fit(
-        u, x, y, n_inducing=[3, None], lags=[], max_points=120, n_restarts=1, kernel="matern52"
+        u,
+        x,
+        y,
+        n_inducing=[3, None],
+        lags=[],
+        sensor_inputs="thesis",
+        max_points=120,
+        n_restarts=1,
+        kernel="matern52",
     )
     rows = model.summary["validation"]["candidates"]
     assert [r["candidate"]["n_inducing"] for r in rows] == [3, None]
@@ -175,10 +183,21 @@ def test_n_inducing_none_trains_exact_gps_without_selection():
     quick = dict(max_points=80, n_restarts=1, seed=1)
     exact = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], n_inducing=None, **quick)
     assert not exact.transition.is_sparse and not exact.sensor.is_sparse
-    assert exact.summary["validation"]["candidates"] == []
+    # Exact GPs only: the sensor's inputs are still chosen (both candidates exact).
+    rows = exact.summary["validation"]["candidates"]
+    assert [r["candidate"]["n_inducing"] for r in rows] == [None, None]
+    assert [r["candidate"].get("sensor_inputs", "thesis") for r in rows] == ["thesis", "state"]
+    alone = hbn.HysteresisModel.fit(
+        tr["u"], tr["x"], tr["y"], n_inducing=None, sensor_inputs="thesis", **quick
+    )
+    assert alone.summary["validation"]["candidates"] == []
     default = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], **quick)
     rows = default.summary["validation"]["candidates"]
-    assert [r["candidate"]["n_inducing"] for r in rows] == [None] + [hbn.DEFAULT_INDUCING] * 2
-    # The sparse GPs also with the default lag set, which ``lags=[[], [1.0]]`` spells out.
-    assert [r["candidate"].get("lags", []) for r in rows] == [[], [], [1.0]]
+    assert [r["candidate"]["n_inducing"] for r in rows] == [None] + [hbn.DEFAULT_INDUCING] * 2 + [
+        None
+    ]
+    # The sparse GPs also with the default lag set, which ``lags=[[], [1.0]]`` spells out, and
+    # the exact GPs with a sensor of the state only.
+    assert [r["candidate"].get("lags", []) for r in rows] == [[], [], [1.0], []]
+    assert rows[3]["candidate"]["sensor_inputs"] == "state"
     assert hbn.default_params()["lags"] == [[], [1.0]]

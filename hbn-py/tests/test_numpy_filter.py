@@ -86,3 +86,29 @@ def test_numpy_filter_matches_hbn_with_linear_means(tmp_path):
     x_np, std_np = numpy_filter.numpy_estimate(doc, test["u"], test["y"])
     assert np.max(np.abs(x_np - est.x)) < 1e-6
     assert np.max(np.abs(std_np - est.x_std)) < 1e-6
+
+
+def test_numpy_filter_matches_hbn_with_a_sensor_of_the_state_only(tmp_path):
+    """A sensor GP on [x_{k-1}, x_k] (``sensor_inputs="state"``): the numpy filter, written
+    apart from hbn-core, builds the sensor's input and its Jacobian row itself, and the two
+    filters agree."""
+    train = hbn.simulate("maxwell-slip", 800, seed=3, noise_gain=1.0)
+    model = hbn.HysteresisModel.fit(
+        train["u"],
+        train["x"],
+        train["y"],
+        max_points=200,
+        n_restarts=1,
+        n_inducing=None,
+        lags=[],
+        sensor_inputs="state",
+    )
+    path = tmp_path / "model.hbn"
+    model.save(path)
+    doc = numpy_filter.load_model_json(str(path))
+    assert len(doc["sensor"]["input_mean"]) == 2
+    test = hbn.simulate("maxwell-slip", 300, seed=4, noise_gain=1.0)
+    est = model.estimate(test["u"], test["y"], mode="ekf")
+    x_np, std_np = numpy_filter.numpy_estimate(doc, test["u"], test["y"])
+    assert np.max(np.abs(x_np - est.x)) < 1e-6
+    assert np.max(np.abs(std_np - est.x_std)) < 1e-6
