@@ -308,8 +308,15 @@ fn candidate_table(rows: &[hbn_model::CandidateRow]) -> String {
     if rows.is_empty() {
         return String::new();
     }
+    // The first column as wide as the longest name (with its `*`), at least 24.
+    let w = rows
+        .iter()
+        .map(|r| r.candidate.to_string().chars().count() + 1)
+        .max()
+        .unwrap_or(0)
+        .max(24);
     let mut s = format!(
-        "  model selection, {} candidates on the same held-out data:\n    {:<24} {:<8} {:>8} {:>8} \
+        "  model selection, {} candidates on the same held-out data:\n    {:<w$} {:<8} {:>8} {:>8} \
          {:>8} {:>8} {:>5}\n",
         rows.len(),
         "candidate",
@@ -325,7 +332,7 @@ fn candidate_table(rows: &[hbn_model::CandidateRow]) -> String {
         let name = format!("{}{star}", r.candidate);
         match (&r.scored, &r.note) {
             (Some((mode, sc)), _) => s.push_str(&format!(
-                "    {name:<24} {:<8} {:>8.4} {:>7.1}% {:>8.3} {:>8} {:>5}\n",
+                "    {name:<w$} {:<8} {:>8.4} {:>7.1}% {:>8.3} {:>8} {:>5}\n",
                 mode.name(),
                 sc.nrmse,
                 100.0 * sc.calibration.coverage_2sigma,
@@ -339,7 +346,7 @@ fn candidate_table(rows: &[hbn_model::CandidateRow]) -> String {
                 r.lost
             )),
             (None, note) => s.push_str(&format!(
-                "    {name:<24} not scored: {}\n",
+                "    {name:<w$} not scored: {}\n",
                 note.as_deref().unwrap_or("no held-out score")
             )),
         }
