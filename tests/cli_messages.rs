@@ -700,6 +700,19 @@ fn sensor_inputs_flag_sets_what_the_sensor_reads_and_names_itself_when_wrong() {
     let est = dir.path().join("e.csv").to_string_lossy().into_owned();
     let (e, _) = hbn(&["estimate", "--model", &m2, "--log", &log, "--csv", &est]);
     assert!(e.is_none(), "{e:?}");
+    // Listed by the user without held-out data: the first one trains, and the summary says so.
+    let (e, out) = train_small(
+        &log,
+        &m2,
+        &["--sensor-inputs", "state,thesis", "--validation", "0"],
+    );
+    assert!(e.is_none(), "{e:?}");
+    assert!(
+        out.contains("no model selection: validation is 0")
+            && out.contains("sensor=state) trained"),
+        "{out}"
+    );
+    assert_eq!(sensor_inputs(&inspect(&m2)).len(), 2);
     for bad in ["level", "thesis,x"] {
         let (e, _) = train_small(&log, &m2, &["--sensor-inputs", bad]);
         let text = e.unwrap_or_else(|| panic!("--sensor-inputs {bad} accepted"));

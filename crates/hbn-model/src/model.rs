@@ -281,7 +281,7 @@ impl HbnModel {
             let primary = params.for_candidate(&params.candidate());
             let mut model =
                 Self::fit_tuned_from(trajectories, &primary, Start::Fresh, prefit, observe)?;
-            // The default's alternatives (sparse GPs, a lag) are the library's offer, not the
+            // The default's alternatives (sparse GPs, a lag, the state-only sensor) are the library's offer, not the
             // user's request: with nothing held out they are dropped silently (`validation = 0` says
             // so, and too little data has its own warning below). Alternatives the user listed
             // are warned about.
@@ -292,7 +292,12 @@ impl HbnModel {
                     .inducing
                     .iter()
                     .any(|m| !offered.inducing.contains(m))
-                || params.select.lags.iter().any(|l| !offered.lags.contains(l));
+                || params.select.lags.iter().any(|l| !offered.lags.contains(l))
+                || params
+                    .select
+                    .sensor_inputs
+                    .iter()
+                    .any(|s| !offered.sensor_inputs.contains(s));
             if candidates.len() > 1 && listed {
                 let why = if params.validation > 0.0 {
                     format!(
