@@ -281,10 +281,10 @@ impl HbnModel {
             let primary = params.for_candidate(&params.candidate());
             let mut model =
                 Self::fit_tuned_from(trajectories, &primary, Start::Fresh, prefit, observe)?;
-            // The default's alternatives (sparse GPs, a lag, the state-only sensor) are the library's offer, not the
-            // user's request: with nothing held out they are dropped silently (`validation = 0` says
-            // so, and too little data has its own warning below). Alternatives the user listed
-            // are warned about.
+            // The default's alternatives (sparse GPs, a lag, the state-only sensor) are the
+            // library's offer, not the user's request: with nothing held out they are dropped
+            // silently (`validation = 0` says so, and too little data has its own warning
+            // below). Alternatives the user listed are warned about.
             let offered = HbnParams::default().select;
             let listed = !params.select.kernels.is_empty()
                 || params
@@ -432,7 +432,9 @@ impl HbnModel {
     /// exact optima ([`Self::fit_gps`], [`HbnParams::sparse_from_exact`]), which they would
     /// otherwise fit again. One with other lags starts from the first one's sensor GP (which
     /// does not read the lags) and from an exact transition GP with its own lags, fitted on
-    /// a second thread meanwhile. A third trains the candidates that start from nothing
+    /// a second thread meanwhile. One that differs from the first one in its sensor's inputs
+    /// only takes the first one's transition GP as it is. A third trains the candidates that
+    /// start from nothing
     /// (other kernels), one after the other, without progress reports. Then as many
     /// workers as the machine has cores take the rest (the first one's tuning, the warm
     /// candidates) from a queue, so that a core whose candidate finished goes on to the next.
