@@ -432,12 +432,12 @@ impl HbnModel {
     /// exact optima ([`Self::fit_gps`], [`HbnParams::sparse_from_exact`]), which they would
     /// otherwise fit again. One with other lags starts from the first one's sensor GP (which
     /// does not read the lags) and from an exact transition GP with its own lags, fitted on
-    /// a second thread meanwhile. One that differs from the first one in its sensor's inputs
-    /// only takes the first one's transition GP as it is. A third trains the candidates that
-    /// start from nothing
-    /// (other kernels), one after the other, without progress reports. Then as many
+    /// a second thread meanwhile. A third thread trains the candidates that start from
+    /// nothing (other kernels), one after the other, without progress reports. Then as many
     /// workers as the machine has cores take the rest (the first one's tuning, the warm
     /// candidates) from a queue, so that a core whose candidate finished goes on to the next.
+    /// A candidate that differs from the first one in its sensor's inputs only is warm too:
+    /// it takes the first one's transition GP as it is and fits its own sensor GP.
     fn fit_candidates(
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
