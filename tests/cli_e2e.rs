@@ -81,6 +81,9 @@ fn simulate_train_inspect_estimate_eval() {
         "250",
         "--inducing",
         "exact",
+        // The thesis' sensor, whose inputs the inspect checks below name.
+        "--sensor-inputs",
+        "thesis",
         "--seed",
         "3",
         "--out",
