@@ -18,8 +18,9 @@ use hbn_core::{MAX_PLAYS, Plays, transition_input};
 
 /// Inputs of the transition GP without play operators (with them: one more per play).
 pub const TRANSITION_DIM: usize = 4;
-/// Inputs of the sensor GP.
-pub const SENSOR_DIM: usize = 3;
+/// Inputs of the thesis' sensor GP (the rows [`build_dataset`] writes; a sensor of the state
+/// only reads two of them, [`crate::SensorInputs::columns`]).
+pub const SENSOR_DIM: usize = hbn_core::SENSOR_DIM;
 /// Direction pair of the transition: `sgn(u_{k-1} - u_{k-2})`.
 pub const TRANSITION_DIRECTION: [usize; 2] = [2, 3];
 /// Direction pair of the sensor: `sgn(x_k - x_{k-1})`.

@@ -290,7 +290,7 @@ impl SensorInputs {
     /// The input dimension ([`hbn_core::SENSOR_DIM`] or [`hbn_core::SENSOR_STATE_DIM`]).
     pub const fn dim(self) -> usize {
         match self {
-            SensorInputs::Thesis => hbn_core::SENSOR_DIM,
+            SensorInputs::Thesis => SENSOR_DIM,
             SensorInputs::State => hbn_core::SENSOR_STATE_DIM,
         }
     }
@@ -1234,7 +1234,12 @@ impl HbnParams {
                             self.transition_dim(),
                             TRANSITION_DIRECTION,
                         ),
-                        (Param::Kernel, k, SENSOR_DIM, SENSOR_DIRECTION),
+                        (
+                            Param::Kernel,
+                            k,
+                            SensorInputs::Thesis.dim(),
+                            SensorInputs::Thesis.direction(),
+                        ),
                         (
                             Param::Kernel,
                             k,
