@@ -6,7 +6,9 @@
 //!
 //! Usage: cargo run --release -p hbn-model --example explore_eval -- SYSTEMS SIZES SEEDS [METHODS]
 //! e.g. `-- bouc-wen,preisach,soft-actuator 500,1000,2000 1,2,3`; prints one CSV line per run.
-//! METHODS (default all): random-ramps, random-walk (the thesis' random inputs: a bounded
+//! METHODS (default all): random-ramps, random-ramps-b (a second, independent draw of random
+//! ramps, simulator seed 2000 + SEED: random ramps against themselves, an A/A comparison),
+//! random-walk (the thesis' random inputs: a bounded
 //! random walk, `hbn_sim::InputKind::RandomWalk`), explore-ramps, explore-steps, and
 //! explore-ramps-poolN (the ramps strategy with a pool of N random ramps instead of the
 //! default's `ExploreParams::pool`), explore-ramps-lagN (the default with its refits beside
@@ -58,8 +60,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 for method in &methods {
                     let t0 = std::time::Instant::now();
                     let choice = match method.as_str() {
-                        "random-ramps" => {
-                            let tr = simulate_random(&cfg, n)?;
+                        "random-ramps" | "random-ramps-b" => {
+                            // `-b`: a second, independent draw (another input and noise seed):
+                            // random ramps against themselves, the comparison's own spread.
+                            let draw = if method == "random-ramps-b" {
+                                SimConfig {
+                                    seed: 2000 + seed,
+                                    ..cfg.clone()
+                                }
+                            } else {
+                                cfg.clone()
+                            };
+                            let tr = simulate_random(&draw, n)?;
                             let seqs = [Sequence::new(&tr.u, &tr.x, &tr.y)];
                             let s = score(&HbnModel::fit(&seqs, &HbnParams::default())?)?;
                             let t = t0.elapsed().as_secs_f64();
