@@ -220,25 +220,6 @@ pub(crate) struct ExactStart<'a> {
     /// same settings (for a candidate that differs from the first one in its sensor only):
     /// taken as it is.
     pub transition_fit: Option<&'a (GaussianProcess, Vec<StartSummary>)>,
-    /// The first candidate's learned filter tuning, once it has one (`None` inside: it has
-    /// none): the filter's search starts there and only refines it ([`crate::tuning::tune`]).
-    /// Given to a candidate that differs from the first one in its sensor's inputs only.
-    pub tuning_from: Option<&'a TuningCell>,
-}
-
-/// The first candidate's filter tuning, set when its training ends (`None` inside when it
-/// has no learned tuning), for the candidates that start their search from it.
-pub(crate) type TuningCell = std::sync::OnceLock<Option<crate::tuning::FilterTuning>>;
-
-/// Sets a [`TuningCell`] to `None` when dropped unset, so that a candidate waiting on it is
-/// never left waiting (the first candidate's training failed before setting it, or panicked).
-struct SetOnDrop<'a>(&'a TuningCell);
-
-impl Drop for SetOnDrop<'_> {
-    fn drop(&mut self) {
-        // Already set: the first candidate's tuning stands.
-        let _ = self.0.set(None);
-    }
 }
 
 /// A sparse sensor GP fitted once for every candidate that would fit the same one, with its
@@ -456,11 +437,7 @@ impl HbnModel {
     /// workers as the machine has cores take the rest (the first one's tuning, the warm
     /// candidates) from a queue, so that a core whose candidate finished goes on to the next.
     /// A candidate that differs from the first one in its sensor's inputs only is warm too:
-    /// it takes the first one's transition GP as it is, fits its own sensor GP, and starts
-    /// its filter's search from the first one's learned noise scales (waiting for them if
-    /// need be), refining them only: about a third of the filter runs of a full search
-    /// (docs/tuning.md, "A sensor of the state only"). The first one is the queue's first
-    /// job, so it has started (or finished) whenever such a candidate waits for it.
+    /// it takes the first one's transition GP as it is and fits its own sensor GP.
     fn fit_candidates(
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
@@ -540,8 +517,6 @@ impl HbnModel {
                 let _ = tx.send((role, prog.clone()));
             }
         };
-        // The first candidate's learned tuning, for the candidates whose search starts there.
-        let first_tuning = TuningCell::new();
         let done = std::thread::scope(|scope| {
             let side_transitions = (!other_lags.is_empty()).then(|| {
                 scope.spawn(|| {
@@ -604,7 +579,6 @@ impl HbnModel {
                 sensor: exact.as_ref().map(|(m, _)| m.sensor.hyperparameters()),
                 sensor_fit: None,
                 transition_fit: None,
-                tuning_from: None,
             };
             let first_transition = exact.as_ref().map(|(m, _)| {
                 let starts = m.summary.starts.iter();
@@ -613,7 +587,6 @@ impl HbnModel {
             });
             let shared_transition = ExactStart {
                 transition_fit: first_transition.as_ref(),
-                tuning_from: Some(&first_tuning),
                 ..ExactStart::default()
             };
             // A panic is a bug: it propagates, as it would without the threads.
@@ -663,7 +636,7 @@ impl HbnModel {
                 let workers: Vec<_> = (0..threads.min(n_jobs))
                     .map(|_| {
                         let mut progress = report(&tx);
-                        let (queue, timed, first_tuning) = (&queue, &timed, &first_tuning);
+                        let (queue, timed) = (&queue, &timed);
                         inner.spawn(move || {
                             let mut finished = Vec::new();
                             // A poisoned lock means another worker panicked: that panic
@@ -671,19 +644,7 @@ impl HbnModel {
                             while let Some((i, start, before)) =
                                 queue.lock().ok().and_then(|mut q| q.next())
                             {
-                                let first = (i == 0).then(|| SetOnDrop(first_tuning));
-                                let done = timed(i, start, before, &mut progress);
-                                if first.is_some() {
-                                    let learned = done
-                                        .1
-                                        .0
-                                        .as_ref()
-                                        .ok()
-                                        .filter(|m| m.summary.validation.is_some());
-                                    let _ = first_tuning.set(learned.map(|m| m.tuning));
-                                }
-                                drop(first);
-                                finished.push(done);
+                                finished.push(timed(i, start, before, &mut progress));
                             }
                             finished
                         })
@@ -731,10 +692,6 @@ impl HbnModel {
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
         let plays = Self::plays_for(trajectories, params)?;
-        let tuning_from = match &start {
-            Start::FromExact(e) => e.tuning_from,
-            Start::Fresh | Start::Fitted(_) => None,
-        };
         let mut model = match start {
             Start::Fitted(model) => *model,
             Start::Fresh => {
@@ -774,11 +731,7 @@ impl HbnModel {
                         })
                     })
                     .collect::<Result<Vec<_>, ModelError>>()?;
-                // The first candidate's tuning, for a candidate that starts from it: waited
-                // for here, after this one's own GPs (the first candidate's training sets
-                // it, or leaves it empty, before its worker takes another job).
-                let from = tuning_from.and_then(|cell| cell.wait().as_ref());
-                match crate::tuning::tune(trials, &split.holdout, from)? {
+                match crate::tuning::tune(trials, &split.holdout)? {
                     Some((tuning, report)) => {
                         model.tuning = tuning;
                         model.summary.validation = Some(report);
@@ -1505,39 +1458,10 @@ mod sparse_start_tests {
             serde_json::to_string(&state.sensor).unwrap(),
             serde_json::to_string(&first.sensor).unwrap()
         );
-        // Its filter's search started from the first candidate's learned scales and refined
-        // them only (one round per mode); trained alone from those scales, it is the same model.
-        let first_rows = &first.summary.validation.as_ref().unwrap().rows;
-        let rows = &state.summary.validation.as_ref().unwrap().rows;
-        assert_eq!(rows.len(), Mode::ALL.len());
-        assert!(rows.iter().all(|r| r.evaluations <= 6), "{rows:?}");
-        assert!(
-            first_rows[0].evaluations > 6,
-            "the first one searched in full"
-        );
-        let cell = TuningCell::new();
-        cell.set(Some(first.tuning)).unwrap();
-        let from_first = ExactStart {
-            tuning_from: Some(&cell),
-            ..ExactStart::default()
-        };
-        let alone = HbnModel::fit_tuned_from(
-            &seqs,
-            &params.for_candidate(&candidates[2]),
-            Start::FromExact(&from_first),
-            &[],
-            &mut |_, _| {},
-        )
-        .unwrap();
+        let alone =
+            HbnModel::fit_tuned(&seqs, &params.for_candidate(&candidates[2]), &mut |_, _| {})
+                .unwrap();
         assert_eq!(state.to_json().unwrap(), alone.to_json().unwrap());
-        // A search of its own (from nothing) is another model: the start mattered.
-        let own = HbnModel::fit_tuned(&seqs, &params.for_candidate(&candidates[2]), &mut |_, _| {})
-            .unwrap();
-        assert_eq!(
-            serde_json::to_string(&own.sensor).unwrap(),
-            serde_json::to_string(&state.sensor).unwrap()
-        );
-        assert!(own.summary.validation.as_ref().unwrap().rows[0].evaluations > 6);
         // Every mode runs on it, and the model file reads back as the same model.
         for mode in Mode::ALL {
             let run = state.estimate(&data[0].0, &data[0].2, mode).unwrap();

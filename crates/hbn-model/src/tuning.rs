@@ -527,21 +527,6 @@ type Point = (i32, i32);
 /// The search's lattice spacing in decades: the grid, every step and the bounds are multiples.
 const LATTICE: f64 = 0.05;
 
-/// The lattice point nearest to `scales`' `(q, r)`, within the search's bounds (a point the
-/// search learned maps back to itself exactly).
-fn point_of(scales: NoiseScales) -> Point {
-    let lattice = |v: f64| -> i32 {
-        let k = (v.log10() / LATTICE).round();
-        // NaN and the infinities (not from a search) land on the bounds' side or at 1.
-        if k.is_nan() {
-            0
-        } else {
-            k.clamp(f64::from(LOG_MIN), f64::from(LOG_MAX)) as i32
-        }
-    };
-    (lattice(scales.q), lattice(scales.r))
-}
-
 /// The scales `(q, r)` at a lattice point.
 fn scales_at((lq, lr): Point) -> (f64, f64) {
     let decades = |k: i32| f64::from(k) * LATTICE;
@@ -596,9 +581,6 @@ const SCALE_PENALTY: f64 = 0.1;
 const MAX_EVALUATIONS: usize = 45;
 /// Filter runs at most of a mode that starts from the first mode's optimum.
 const MAX_EVALUATIONS_FROM_START: usize = 16;
-/// Filter runs at most of a mode that starts from given scales ([`Origin::Given`]): the
-/// untuned point, the given one and one round of its four neighbours.
-const MAX_EVALUATIONS_GIVEN: usize = 6;
 /// Bounds of the search, in lattice units (-3 and 4 decades).
 const LOG_MIN: i32 = -60;
 const LOG_MAX: i32 = 80;
@@ -609,17 +591,6 @@ const GRID: [i32; 3] = [-30, 5, 40];
 const FIRST_STEP: i32 = 16;
 const FIRST_STEP_FROM_START: i32 = 8;
 const LAST_STEP: i32 = 2;
-
-/// Where the search of one mode starts, which sets its first step and its budget.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Origin {
-    /// The first mode: a grid over the scales, then up to [`MAX_EVALUATIONS`] runs.
-    Grid,
-    /// A later mode: the first mode's optimum, up to [`MAX_EVALUATIONS_FROM_START`] runs.
-    FirstMode(Point),
-    /// Scales given from outside (another configuration's): up to [`MAX_EVALUATIONS_GIVEN`].
-    Given(Point),
-}
 
 /// What the search of one mode found.
 struct Found<R> {
@@ -633,22 +604,21 @@ struct Found<R> {
 }
 
 /// Pattern search on the lattice for the lowest objective that `evaluate` returns (with the
-/// best `std` scale and the run behind it; `None` for a failed run): a grid (or, from a
-/// point, only the untuned point and that one), then a compass search from the best point,
-/// its step halved when no neighbour improves, down to [`LAST_STEP`], within the `origin`'s
-/// budget of runs.
+/// best `std` scale and the run behind it; `None` for a failed run): a grid (or, with
+/// `start`, only the untuned point and `start`), then a compass search from the best point,
+/// its step halved when no neighbour improves, down to [`LAST_STEP`], within `budget` runs.
 /// `evaluate` gets each batch of points at once (they may run in parallel) and is never asked
 /// for a point twice: the search comes back to points it has left (the centre it moved
 /// from), and those are looked up.
 fn pattern_search<R>(
-    origin: Origin,
+    start: Option<Point>,
     mut evaluate: impl FnMut(&[Point]) -> Vec<Option<(f64, f64, R)>>,
 ) -> Option<Found<R>> {
     let mut points: Vec<Point> = vec![(0, 0)];
-    match origin {
-        Origin::FirstMode(p) | Origin::Given(p) if p != (0, 0) => points.push(p),
-        Origin::FirstMode(_) | Origin::Given(_) => {}
-        Origin::Grid => {
+    match start {
+        Some(p) if p != (0, 0) => points.push(p),
+        Some(_) => {}
+        None => {
             for &lq in &GRID {
                 for &lr in &GRID {
                     points.push((lq, lr));
@@ -673,12 +643,11 @@ fn pattern_search<R>(
     };
     let mut evaluations = points.len();
     let mut current = take(&mut seen, &points);
-    // From the first mode's optimum or given scales the search only refines: a smaller first
-    // step and budget.
-    let (mut step, budget) = match origin {
-        Origin::Grid => (FIRST_STEP, MAX_EVALUATIONS),
-        Origin::FirstMode(_) => (FIRST_STEP_FROM_START, MAX_EVALUATIONS_FROM_START),
-        Origin::Given(_) => (FIRST_STEP_FROM_START, MAX_EVALUATIONS_GIVEN),
+    // From the first mode's optimum the search only refines: a smaller first step and budget.
+    let (mut step, budget) = if start.is_some() {
+        (FIRST_STEP_FROM_START, MAX_EVALUATIONS_FROM_START)
+    } else {
+        (FIRST_STEP, MAX_EVALUATIONS)
     };
     while step >= LAST_STEP && evaluations < budget {
         let ((lq, lr), j0, _) = current?;
@@ -716,14 +685,9 @@ fn pattern_search<R>(
 /// the default mode come from the learned `(q, r)` run over at most
 /// [`MAX_CALIBRATION_SAMPLES`] ([`spread`]; the same samples when there are few). The scales
 /// are common to all folds.
-///
-/// With `from` (another configuration's learned scales, [`HbnModel::fit_candidates`]), each
-/// mode's search starts at that mode's scales there and only refines them
-/// ([`Origin::Given`]): about a third of the filter runs of a full search.
 pub(crate) fn tune(
     trials: Vec<Trial<'_>>,
     holdout: &Holdout,
-    from: Option<&FilterTuning>,
 ) -> Result<Option<(FilterTuning, ValidationReport)>, ModelError> {
     let blocks: Vec<Vec<Block<'_>>> = trials.iter().map(|t| t.blocks.clone()).collect();
     let count = |set: &[Scored<'_, '_>]| -> usize {
@@ -740,12 +704,8 @@ pub(crate) fn tune(
     let mut rows = Vec::new();
     let mut first_optimum: Option<Point> = None;
     for mode in Mode::ALL {
-        let origin = match (from, first_optimum) {
-            (Some(t), _) => Origin::Given(point_of(t.scales(mode))),
-            (None, Some(p)) => Origin::FirstMode(p),
-            (None, None) => Origin::Grid,
-        };
-        let Some(found) = pattern_search(origin, |points| evaluate_many(&search, mode, points))
+        let Some(found) =
+            pattern_search(first_optimum, |points| evaluate_many(&search, mode, points))
         else {
             return Ok(None);
         };
@@ -1018,11 +978,11 @@ mod tests {
     /// Runs the pattern search on `objective` and returns what it found and every batch it
     /// asked for.
     fn searched(
-        origin: Origin,
+        start: Option<Point>,
         objective: impl Fn(Point) -> Option<f64>,
     ) -> (Option<Found<Point>>, Vec<Vec<Point>>) {
         let mut batches = Vec::new();
-        let found = pattern_search(origin, |points| {
+        let found = pattern_search(start, |points| {
             batches.push(points.to_vec());
             points
                 .iter()
@@ -1038,7 +998,7 @@ mod tests {
         let bowl = |(q, r): Point| {
             Some(f64::from((q - floor.0).pow(2)) + 0.5 * f64::from((r - floor.1).pow(2)))
         };
-        let (found, batches) = searched(Origin::Grid, bowl);
+        let (found, batches) = searched(None, bowl);
         let found = found.expect("found");
         // The compass search ends where no neighbour at the last step (2 units) is lower:
         // within one unit of the floor in each direction.
@@ -1067,7 +1027,7 @@ mod tests {
         let objective = |(q, r): Point| {
             (q <= 20 && (q, r) != (0, 0)).then(|| f64::from((q - 30).pow(2) + (r - 8).pow(2)))
         };
-        let (found, batches) = searched(Origin::FirstMode((16, 8)), objective);
+        let (found, batches) = searched(Some((16, 8)), objective);
         let found = found.expect("found");
         assert_eq!(batches[0], vec![(0, 0), (16, 8)]);
         // The first ring is 8 units (0.4 decades) from the start.
@@ -1077,38 +1037,7 @@ mod tests {
         assert_eq!(found.untuned, None, "the untuned point failed");
         assert!(found.evaluations <= MAX_EVALUATIONS_FROM_START + 3);
         // Nothing runs at all: nothing found.
-        assert!(searched(Origin::Grid, |_| None).0.is_none());
-    }
-
-    #[test]
-    fn from_given_scales_the_search_takes_one_round_of_neighbours() {
-        let floor = (13, -7);
-        let bowl = |(q, r): Point| Some(f64::from((q - floor.0).pow(2) + (r - floor.1).pow(2)));
-        let (found, batches) = searched(Origin::Given((4, -7)), bowl);
-        let found = found.expect("found");
-        assert_eq!(batches[0], vec![(0, 0), (4, -7)]);
-        assert_eq!(
-            batches[1],
-            vec![(12, -7), (-4, -7), (4, 1), (4, -15)],
-            "one ring at the refining step"
-        );
-        assert_eq!(batches.len(), 2, "one round only");
-        assert_eq!(found.evaluations, MAX_EVALUATIONS_GIVEN);
-        assert_eq!(found.at, (12, -7), "the best of the round");
-        // A later mode's search from the same point goes on with smaller steps.
-        let (full, _) = searched(Origin::FirstMode((4, -7)), bowl);
-        assert!(full.expect("found").evaluations > MAX_EVALUATIONS_GIVEN);
-    }
-
-    #[test]
-    fn learned_scales_map_back_to_their_lattice_point() {
-        for p in [(0, 0), (GRID[0], GRID[2]), (13, -7), (LOG_MIN, LOG_MAX)] {
-            let (q, r) = scales_at(p);
-            assert_eq!(point_of(NoiseScales { q, r, std: 1.0 }), p);
-        }
-        let odd = |q: f64, r: f64| point_of(NoiseScales { q, r, std: 1.0 });
-        assert_eq!(odd(f64::NAN, 1e9), (0, LOG_MAX));
-        assert_eq!(odd(0.0, f64::INFINITY), (LOG_MIN, LOG_MAX));
+        assert!(searched(None, |_| None).0.is_none());
     }
 
     #[test]
