@@ -6,13 +6,16 @@
 # default mode, the chosen candidate and the training's wall seconds.
 #   docs/data/sensor_inputs_session35.sh SYSTEMS GAINS SEEDS OUT.jsonl
 #   python3 docs/data/sensor_inputs_summary_session35.py OUT.jsonl [MORE.jsonl]
+# VARIANTS="default" trains the default only (session 36: its state candidate changed, the
+# thesis-only variant did not).
 H=${HBN_BIN:-target/release/hbn}
+VARIANTS=${VARIANTS:-default thesis}
 out=$4
 for sys in ${1//,/ }; do for g in ${2//,/ }; do for S in ${3//,/ }; do
   d=$(mktemp -d)
   for k in 1 2 3; do $H -q simulate --system $sys --steps 1000 --input-seed $S --seed $((10*S+k)) --noise-gain $g --out $d/tr$k.mcap >/dev/null; done
   $H -q simulate --system $sys --steps 1000 --input-seed $((S+1)) --seed $((10*S+11)) --noise-gain $g --out $d/te.mcap >/dev/null
-  for variant in default thesis; do
+  for variant in $VARIANTS; do
     flag=""; [ $variant = thesis ] && flag="--sensor-inputs thesis"
     t0=$(date +%s.%N)
     $H -q train --log $d/tr1.mcap --log $d/tr2.mcap --log $d/tr3.mcap --seed $S $flag --out $d/m.hbn >/dev/null 2>&1
