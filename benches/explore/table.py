@@ -7,9 +7,17 @@ against random ramps and against the default explorer, the geometric mean over r
 same system, seed and size of the nRMSE ratio, with the standard error of its log and the
 ratio per size (the cell table's ratios are of means over the seeds).
 
+With `random-ramps-b` in the runs (a second, independent draw of random ramps: an A/A
+comparison, session 36), it ends with what that says about the exploration issue's bar (no
+worse than random ramps in every cell): the spread of one run's log nRMSE ratio between two
+draws, and the true ratio a method would need in every cell to pass the bar in 12 cells with
+probability 0.9, for cells of 3 and of 6 seeds (normal approximation of the cell mean's log
+ratio). And, for each explorer, its paired ratio to both draws' geometric mean.
+
 Usage: python benches/explore/table.py [--seeds 21,22,...] RUNS.csv [RUNS2.csv ...]
 (`--seeds`: only the runs of these seeds.)
 """
+from statistics import NormalDist
 import csv
 import math
 import sys
@@ -134,6 +142,48 @@ def main(argv):
             print(f"- {s}, {name(m)}: {said} (random ramps: {top} samples, nRMSE {target:.4f})")
     print("\nPaired on the runs:")
     paired(by_run, methods)
+    if "random-ramps-b" in methods:
+        same_draw(by_run, methods)
+
+
+def same_draw(by_run, methods, cells=12, chance=0.9):
+    """Random ramps against a second draw of themselves (the A/A comparison), what effect the
+    every-cell bar needs, and each explorer against both draws' geometric mean."""
+    logs = [math.log(g["random-ramps-b"] / g["random-ramps"]) for g in by_run.values()
+            if "random-ramps" in g and "random-ramps-b" in g]
+    if len(logs) < 3:
+        return
+    mu = mean(logs)
+    sd = math.sqrt(sum((x - mu) ** 2 for x in logs) / (len(logs) - 1))
+    # Each of `cells` cells must come out no worse: per cell probability chance^(1/cells).
+    z = NormalDist().inv_cdf(chance ** (1.0 / cells))
+    print(f"\nTwo draws of random ramps: one run's log nRMSE ratio has standard deviation "
+          f"{sd:.3f} (a factor {math.exp(sd):.2f}) over {len(logs)} runs.")
+    for k in (3, 6):
+        # A cell's log ratio (method over random ramps) has variance sd^2 / k: sd^2 already
+        # holds both runs' spread.
+        need = math.exp(-z * sd / math.sqrt(k))
+        print(f"- to be no worse in all {cells} cells of {k} seeds with probability {chance}, "
+              f"a method needs a true ratio of {need:.2f} or less in every cell")
+    for m in methods:
+        if not m.startswith("explore"):
+            continue
+        by_size = defaultdict(list)  # samples -> log ratios
+        for (_, _, n), g in by_run.items():
+            if m in g and "random-ramps" in g and "random-ramps-b" in g:
+                by_size[n].append(math.log(g[m])
+                                  - 0.5 * (math.log(g["random-ramps"]) + math.log(g["random-ramps-b"])))
+        both = [x for v in by_size.values() for x in v]
+        if len(both) < 2:
+            continue
+
+        def interval(v):
+            mb = mean(v)
+            se = math.sqrt(sum((x - mb) ** 2 for x in v) / (len(v) - 1) / len(v))
+            return (f"{math.exp(mb):.3f} over {len(v)} runs (standard error of the log {se:.3f}; "
+                    f"95% interval {math.exp(mb - 1.96 * se):.3f} to {math.exp(mb + 1.96 * se):.3f})")
+        sizes = "; ".join(f"{n} samples {interval(v)}" for n, v in sorted(by_size.items()) if len(v) > 1)
+        print(f"- {name(m)} / both draws' geometric mean: {interval(both)}; {sizes}")
 
 
 if __name__ == "__main__":
