@@ -14,7 +14,7 @@
 //! inline assembly, which stalls inside the AVX2 code on some CPUs.
 //!
 //! And it holds one kernel written with AVX2 intrinsics, the sparse GP's `T k`
-//! ([`lower_packed_times_rows4`]), where the compiler's own vectorisation chose a poor layout.
+//! (`lower_packed_times_rows4`), where the compiler's own vectorisation chose a poor layout.
 //!
 //! This module holds the crate's only `unsafe` code: the calls of `#[target_feature]` functions,
 //! made only after the CPU was seen to support the feature, the SSE2 square root (SSE2 is

@@ -221,11 +221,12 @@ pub struct CandidateRow {
 pub const MAX_VALIDATION_SAMPLES: usize = 750;
 /// Held-out samples at most that the learned `(q, r)` of each mode are run over once more to
 /// set the `std` scale, the held-out table's scores and the default mode (all folds together,
-/// spread over the runs: [`spread`]). The search of `(q, r)` makes dozens of filter runs and
-/// keeps to [`MAX_VALIDATION_SAMPLES`]; these two runs per mode can afford more. Measured on
-/// logs of 5 x 10,000 samples (session 29): the filter's error varies by 5x from one stretch of
-/// 500 samples to the next, so the 750 samples the search scores (four stretches of 187) had
-/// set `std` scales that put 44-86% of fresh logs' truth inside the 2-sigma band.
+/// spread over the runs, whole blocks or pieces of them). The search of `(q, r)` makes dozens
+/// of filter runs and keeps to [`MAX_VALIDATION_SAMPLES`]; these two runs per mode can afford
+/// more. Measured on logs of 5 x 10,000 samples (session 29): the filter's error varies by 5x
+/// from one stretch of 500 samples to the next, so the 750 samples the search scores (four
+/// stretches of 187) had set `std` scales that put 44-86% of fresh logs' truth inside the
+/// 2-sigma band.
 pub const MAX_CALIBRATION_SAMPLES: usize = 4000;
 /// Shortest piece of a held-out block that [`spread`] scores, where the cap forces pieces.
 const MIN_SPREAD_PIECE: usize = 200;
