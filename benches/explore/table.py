@@ -48,6 +48,12 @@ def geo(v):
     return math.exp(sum(math.log(x) for x in v) / len(v))
 
 
+def spread(v):
+    """Mean of `v` and its sample standard deviation."""
+    mu = mean(v)
+    return mu, math.sqrt(sum((x - mu) ** 2 for x in v) / (len(v) - 1))
+
+
 def paired(by_run, methods):
     """Prints each method against random ramps and against the default explorer, paired on
     the runs (system, seed, size) both have."""
@@ -62,8 +68,8 @@ def paired(by_run, methods):
             every = [x for v in logs.values() for x in v]
             if len(every) < 2:
                 continue
-            mu = mean(every)
-            se = math.sqrt(sum((x - mu) ** 2 for x in every) / (len(every) - 1) / len(every))
+            mu, sd = spread(every)
+            se = sd / math.sqrt(len(every))
             sizes = ", ".join(f"{n} samples {math.exp(mean(v)):.3f}" for n, v in sorted(logs.items()))
             print(f"- {name(m)} / {name(base)}: {math.exp(mu):.3f} over {len(every)} runs "
                   f"(standard error of the log {se:.3f}); {sizes}")
@@ -153,8 +159,7 @@ def same_draw(by_run, methods, cells=12, chance=0.9):
             if "random-ramps" in g and "random-ramps-b" in g]
     if len(logs) < 3:
         return
-    mu = mean(logs)
-    sd = math.sqrt(sum((x - mu) ** 2 for x in logs) / (len(logs) - 1))
+    _, sd = spread(logs)
     # Each of `cells` cells must come out no worse: per cell probability chance^(1/cells).
     z = NormalDist().inv_cdf(chance ** (1.0 / cells))
     print(f"\nTwo draws of random ramps: one run's log nRMSE ratio has standard deviation "
@@ -178,8 +183,8 @@ def same_draw(by_run, methods, cells=12, chance=0.9):
             continue
 
         def interval(v):
-            mb = mean(v)
-            se = math.sqrt(sum((x - mb) ** 2 for x in v) / (len(v) - 1) / len(v))
+            mb, sd = spread(v)
+            se = sd / math.sqrt(len(v))
             return (f"{math.exp(mb):.3f} over {len(v)} runs (standard error of the log {se:.3f}; "
                     f"95% interval {math.exp(mb - 1.96 * se):.3f} to {math.exp(mb + 1.96 * se):.3f})")
         sizes = "; ".join(f"{n} samples {interval(v)}" for n, v in sorted(by_size.items()) if len(v) > 1)
