@@ -6,7 +6,7 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use hbn::core::{Estimator, Mode};
-use hbn::model::{HbnModel, HbnParams, Selection};
+use hbn::model::{HbnParams, HysteresisModel, Selection};
 use hbn::pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
 use hbn::pipeline::sequences;
 use hbn::sim::SystemKind;
@@ -46,7 +46,7 @@ fn bench_step(c: &mut Criterion) {
             kernel_evidence: Vec::new(),
             ..HbnParams::default()
         };
-        let model = HbnModel::fit(&seqs, &params).unwrap();
+        let model = HysteresisModel::fit(&seqs, &params).unwrap();
         let n = n_inducing.unwrap_or(max_points);
         assert_eq!(model.transition().n_support(), n);
         assert_eq!(model.sensor().n_support(), n);

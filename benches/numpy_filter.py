@@ -11,7 +11,7 @@ and reimplements, with numpy only:
   gradient by the chain rule through the features and the standardisation;
 * the EKF step (``crates/hbn-core/src/ekf.rs``): state ``[x_k, x_{k-1}, s_k]``, transition and
   sensor linearisation, the guards (state box, Jacobian bound, noise floors, Gershgorin test and
-  eigenvalue clamp of P, Joseph update) and the default settings of ``HbnModel::ekf_config``
+  eigenvalue clamp of P, Joseph update) and the default settings of ``HysteresisModel::ekf_config``
   (``crates/hbn-model/src/model.rs``).
 
 Kernels: the ``se`` / ``se-ard`` / ``matern52`` / ``mahalanobis`` / ``warped`` families, each
@@ -180,7 +180,7 @@ class NumpyGP:
 
 
 # ------------------------------------------------------------------------------------------------
-# EKF step (hbn-core ekf.rs) with the default settings of HbnModel::ekf_config
+# EKF step (hbn-core ekf.rs) with the default settings of HysteresisModel::ekf_config
 # ------------------------------------------------------------------------------------------------
 
 
@@ -189,7 +189,7 @@ def _span(st: Dict[str, float]) -> float:
 
 
 def ekf_config(model: Dict[str, Any]) -> Dict[str, Any]:
-    """``HbnModel::ekf_config(Mode::Ekf)``, with the noise scales learned at training."""
+    """``HysteresisModel::ekf_config(Mode::Ekf)``, with the noise scales learned at training."""
     xs, ys = model["x_stats"], model["y_stats"]
     sx, sy = _span(xs), _span(ys)
     scales = model.get("tuning", {}).get("ekf", {"q": 1.0, "r": 1.0, "std": 1.0})
@@ -253,7 +253,7 @@ def _bound_cov(p: np.ndarray, lo: float, hi: float) -> np.ndarray:
 
 
 def initial_state(model: Dict[str, Any], y0: float) -> Optional[Tuple[float, float]]:
-    """``HbnModel::initial_state`` (``hbn_core::InitPrior``): mean and variance of x over the 50
+    """``HysteresisModel::initial_state`` (``hbn_core::InitPrior``): mean and variance of x over the 50
     training samples whose y is nearest ``y0`` (ties by index)."""
     pairs = np.asarray(model.get("init_pairs", []), dtype=float).reshape(-1, 2)
     if not math.isfinite(y0) or len(pairs) == 0:

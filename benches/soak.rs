@@ -12,7 +12,7 @@
 
 use hbn::core::rng::Rng;
 use hbn::core::{Estimator, Mode};
-use hbn::model::{HbnModel, HbnParams};
+use hbn::model::{HbnParams, HysteresisModel};
 use hbn::pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
 use hbn::pipeline::sequences;
 use hbn::sim::SystemKind;
@@ -53,7 +53,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ..ExperimentConfig::default()
     };
     let runs = training_set(system, 1.0, 5, &cfg)?;
-    let model = HbnModel::fit(&sequences(&runs), &cfg.params)?;
+    let model = HysteresisModel::fit(&sequences(&runs), &cfg.params)?;
     let test = test_trajectory(system, 1.0, 5, &cfg)?;
     if test.u.len() != 20_000 {
         return Err(format!("the test run has {} samples, not 20,000", test.u.len()).into());

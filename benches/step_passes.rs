@@ -8,7 +8,7 @@
 //! like `benches/ekf.rs`'s, over a 5000-sample test log.
 
 use hbn::core::{Estimator, Mode};
-use hbn::model::{HbnModel, HbnParams, Selection};
+use hbn::model::{HbnParams, HysteresisModel, Selection};
 use hbn::pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
 use hbn::pipeline::sequences;
 use hbn::sim::SystemKind;
@@ -39,7 +39,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             kernel_evidence: Vec::new(),
             ..HbnParams::default()
         };
-        let model = HbnModel::fit(&seqs, &params)?;
+        let model = HysteresisModel::fit(&seqs, &params)?;
         let view = model.view()?;
         let mut per_mode = Vec::new();
         for (name, mode) in [("EKF", Mode::Ekf), ("EKF+BLR", Mode::EkfBlr)] {

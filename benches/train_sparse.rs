@@ -8,7 +8,7 @@
 //! `MAX_SIGNAL_VARIANCE=v` in the environment set [`HbnParams::linear_mean`] and
 //! [`HbnParams::max_signal_variance`].
 
-use hbn::model::{HbnModel, HbnParams, Selection, Sequence};
+use hbn::model::{HbnParams, HysteresisModel, Selection, Sequence};
 use hbn::sim::{InputKind, SimConfig, SystemKind, generate_input, simulate};
 use std::time::Instant;
 
@@ -67,7 +67,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let checked = params.check()?;
     let t0 = Instant::now();
-    let model = HbnModel::fit_checked(&seqs, &checked, &mut |role, progress| {
+    let model = HysteresisModel::fit_checked(&seqs, &checked, &mut |role, progress| {
         println!(
             "  {:6.2} s: {role} GP, search start {} of {} ended",
             t0.elapsed().as_secs_f64(),

@@ -2,7 +2,7 @@
 //! in small, and the CLI run in-process.
 #![allow(dead_code)]
 
-use hbn::model::{HbnModel, HbnParams, Selection};
+use hbn::model::{HbnParams, HysteresisModel, Selection};
 use hbn::pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
 use hbn::pipeline::sequences;
 use hbn::sim::{SystemKind, Trajectory};
@@ -42,7 +42,7 @@ pub fn train_model(
     noise_gain: f64,
     max_points: usize,
     seed: u64,
-) -> (HbnModel, Vec<Trajectory>) {
+) -> (HysteresisModel, Vec<Trajectory>) {
     train_model_with(system, noise_gain, max_points, seed, |_| {})
 }
 
@@ -54,13 +54,16 @@ pub fn train_model_kind(
     max_points: usize,
     n_inducing: Option<usize>,
     seed: u64,
-) -> (HbnModel, Vec<Trajectory>) {
+) -> (HysteresisModel, Vec<Trajectory>) {
     let mut cfg = config(max_points, seed, 0);
     cfg.params.n_inducing = n_inducing;
     // This kind only: no model selection between exact and sparse GPs.
     cfg.params.select = Selection::default();
     let runs = training_set(system, noise_gain, seed, &cfg).unwrap();
-    (HbnModel::fit(&sequences(&runs), &cfg.params).unwrap(), runs)
+    (
+        HysteresisModel::fit(&sequences(&runs), &cfg.params).unwrap(),
+        runs,
+    )
 }
 
 /// [`train_model`] with the parameters changed by `change` first.
@@ -70,11 +73,14 @@ pub fn train_model_with(
     max_points: usize,
     seed: u64,
     change: impl FnOnce(&mut HbnParams),
-) -> (HbnModel, Vec<Trajectory>) {
+) -> (HysteresisModel, Vec<Trajectory>) {
     let mut cfg = config(max_points, seed, 0);
     change(&mut cfg.params);
     let runs = training_set(system, noise_gain, seed, &cfg).unwrap();
-    (HbnModel::fit(&sequences(&runs), &cfg.params).unwrap(), runs)
+    (
+        HysteresisModel::fit(&sequences(&runs), &cfg.params).unwrap(),
+        runs,
+    )
 }
 
 /// A fresh test run of `steps` samples.

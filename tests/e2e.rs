@@ -6,7 +6,7 @@ mod common;
 use hbn::core::Mode;
 use hbn::io::Encoding;
 use hbn::model::metrics::nrmse;
-use hbn::model::{HbnModel, HbnParams};
+use hbn::model::{HbnParams, HysteresisModel};
 use hbn::pipeline::{
     LogOptions, Method, SignalChoice, SimLog, TrainSignals, evaluate_log, simulate_log,
     train_from_logs,
@@ -160,7 +160,7 @@ fn saved_model_estimates_identically() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("m.hbn");
     model.save(&path).unwrap();
-    let back = HbnModel::load(&path).unwrap();
+    let back = HysteresisModel::load(&path).unwrap();
     let test = common::test_run(SystemKind::Duhem, 1.0, 300, 4);
     for mode in [Mode::Ekf, Mode::EkfBlr] {
         let a = model.estimate(&test.u, &test.y, mode).unwrap();
@@ -193,7 +193,7 @@ fn model_files_with_and_without_play_operators_load() {
             "{r} vs {f} x {u_span}"
         );
     }
-    let back = HbnModel::from_json(&model.to_json().unwrap(), "mem").unwrap();
+    let back = HysteresisModel::from_json(&model.to_json().unwrap(), "mem").unwrap();
     assert_eq!(back.plays().unwrap(), plays);
 
     // Without memory, written as an older build wrote it.
@@ -205,7 +205,7 @@ fn model_files_with_and_without_play_operators_load() {
         seed: 5,
         ..HbnParams::default()
     };
-    let plain = HbnModel::fit(&hbn::pipeline::sequences(&runs), &params).unwrap();
+    let plain = HysteresisModel::fit(&hbn::pipeline::sequences(&runs), &params).unwrap();
     assert!(plain.plays().unwrap().is_empty());
     let mut v: serde_json::Value = serde_json::from_str(&plain.to_json().unwrap()).unwrap();
     let m = v["model"].as_object_mut().unwrap();
@@ -217,7 +217,7 @@ fn model_files_with_and_without_play_operators_load() {
             .remove("memory")
             .is_some()
     );
-    let old = HbnModel::from_json(&v.to_string(), "old").unwrap();
+    let old = HysteresisModel::from_json(&v.to_string(), "old").unwrap();
     assert!(old.params().memory.is_empty() && old.plays().unwrap().is_empty());
     let test = common::test_run(SystemKind::Preisach, 1.0, 300, 5);
     let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
@@ -251,14 +251,14 @@ fn lags_ride_along_and_reach_the_transition_gp() {
         with.transition().kernel().dim,
         plain.transition().kernel().dim + 1
     );
-    let back = HbnModel::from_json(&with.to_json().unwrap(), "lags").unwrap();
+    let back = HysteresisModel::from_json(&with.to_json().unwrap(), "lags").unwrap();
     assert_eq!(back.plays().unwrap(), plays);
 
     // Without lags, written as an older build wrote it.
     let mut v: serde_json::Value = serde_json::from_str(&plain.to_json().unwrap()).unwrap();
     let params = v["model"]["params"].as_object_mut().unwrap();
     assert!(params.remove("lags").is_some());
-    let old = HbnModel::from_json(&v.to_string(), "old").unwrap();
+    let old = HysteresisModel::from_json(&v.to_string(), "old").unwrap();
     assert!(old.params().lags.is_empty() && old.plays().unwrap().lags().is_empty());
 
     let test = common::test_run(system, 1.0, 400, 1);

@@ -220,7 +220,7 @@ fn exported_models_reproduce_hbn_estimate_in_c_and_rust() {
         ]);
         let reference = read_estimates(&std::fs::read_to_string(&est_csv).expect("est.csv"));
         // The u, y hbn estimate ran on: the log on the model's grid.
-        let loaded = hbn::model::HbnModel::load(Path::new(&model)).expect("load");
+        let loaded = hbn::model::HysteresisModel::load(Path::new(&model)).expect("load");
         let log = read_at_model_rate(
             &loaded,
             Path::new(&p("test.mcap")),
@@ -488,7 +488,7 @@ fn measure_f32_and_small_m() {
             "--out",
             &model_file,
         ]);
-        let model = hbn::model::HbnModel::load(Path::new(&model_file)).expect("load");
+        let model = hbn::model::HysteresisModel::load(Path::new(&model_file)).expect("load");
         let log = read_at_model_rate(
             &model,
             Path::new(&p("test.mcap")),

@@ -7,7 +7,7 @@
 
 use hbn::core::Mode;
 use hbn::model::metrics::{calibration, nrmse};
-use hbn::model::{HbnModel, HbnParams};
+use hbn::model::{HbnParams, HysteresisModel};
 use hbn::pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
 use hbn::pipeline::sequences;
 use hbn::sim::{SystemKind, Trajectory};
@@ -37,7 +37,7 @@ fn tuning_makes_the_uncertainty_honest_on_unseen_data() {
             validation,
             ..HbnParams::default()
         };
-        HbnModel::fit(&sequences(&train), &params).expect("fit")
+        HysteresisModel::fit(&sequences(&train), &params).expect("fit")
     };
     let untuned = fit(0.0);
     let tuned = fit(HbnParams::default().validation);
@@ -65,7 +65,7 @@ fn tuning_makes_the_uncertainty_honest_on_unseen_data() {
         assert!(tuned.nlpd <= row.untuned.calibration.nlpd + 1e-9, "{row:?}");
     }
 
-    let score = |m: &HbnModel| {
+    let score = |m: &HysteresisModel| {
         let est = m
             .estimate(&test.u, &test.y, m.default_mode())
             .expect("estimate");
@@ -111,7 +111,7 @@ fn noise_scales_reach_the_step() {
         validation: 0.0,
         ..HbnParams::default()
     };
-    let model = HbnModel::fit(&sequences(&train), &params).expect("fit");
+    let model = HysteresisModel::fit(&sequences(&train), &params).expect("fit");
     let test = test_trajectory(SystemKind::BoucWen, 1.0, 3, &cfg).expect("test");
     for mode in Mode::ALL {
         let base = model.ekf_config(mode);
@@ -195,7 +195,7 @@ fn selection_returns_the_candidate_with_the_best_held_out_score() {
             ..base.clone()
         };
         assert_eq!(params.candidates().len(), 2);
-        let model = HbnModel::fit(&sequences(&train), &params).expect("fit");
+        let model = HysteresisModel::fit(&sequences(&train), &params).expect("fit");
         let report = model.summary().validation.as_ref().expect("validation");
         let rows = &report.candidates;
         assert_eq!(rows.len(), 2);
@@ -214,7 +214,7 @@ fn selection_returns_the_candidate_with_the_best_held_out_score() {
         // same model alone, with the same held-out table.
         assert_eq!(model.params().n_inducing, rows[best].candidate.n_inducing);
         assert!(model.params().select.is_empty());
-        let alone = HbnModel::fit(&sequences(&train), model.params()).expect("chosen alone");
+        let alone = HysteresisModel::fit(&sequences(&train), model.params()).expect("chosen alone");
         let alone_report = alone.summary().validation.as_ref().expect("validation");
         assert_eq!(report.rows, alone_report.rows);
         assert_eq!(model.tuning(), alone.tuning());
@@ -232,7 +232,7 @@ fn selection_returns_the_candidate_with_the_best_held_out_score() {
     )
     .expect("a list");
     assert_eq!(p.select.inducing, vec![Some(32)]);
-    let model = HbnModel::fit(&sequences(&train), &p).expect("validation 0");
+    let model = HysteresisModel::fit(&sequences(&train), &p).expect("validation 0");
     assert_eq!(model.params().n_inducing, None);
     assert!(model.summary().validation.is_none());
     assert!(

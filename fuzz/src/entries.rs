@@ -228,14 +228,14 @@ pub fn signal_path(data: &[u8]) {
     }
 }
 
-/// Model file loading (`hbn estimate --model`, `HbnModel::load`): parse; if the model loads,
+/// Model file loading (`hbn estimate --model`, `HysteresisModel::load`): parse; if the model loads,
 /// build its view and run every estimator mode for a few steps.
 pub fn model_load(data: &[u8]) {
     let Ok(text) = std::str::from_utf8(data) else {
         return;
     };
     let _ = hbn_gp::GaussianProcess::from_json(text, "fuzz.gp");
-    let Ok(model) = hbn_model::HbnModel::from_json(text, "fuzz.hbn") else {
+    let Ok(model) = hbn_model::HysteresisModel::from_json(text, "fuzz.hbn") else {
         return;
     };
     let u: Vec<f64> = (0..20).map(|k| 0.05 * k as f64).collect();

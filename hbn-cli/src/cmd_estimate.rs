@@ -5,7 +5,7 @@ use std::path::Path;
 
 use anyhow::Context;
 use hbn_core::Mode;
-use hbn_model::{Estimate, HbnModel};
+use hbn_model::{Estimate, HysteresisModel};
 use hbn_pipeline::{LogEstimate, Outputs, SignalChoice, estimate_log_modes};
 use serde_json::{Value, json};
 
@@ -15,8 +15,9 @@ use crate::glossary::{self, Term};
 use crate::report::{self, Renderer};
 
 /// Loads a model, naming the file in errors.
-pub fn load_model(file: &Path) -> anyhow::Result<HbnModel> {
-    HbnModel::load(file).with_context(|| format!("cannot load the model `{}`", file.display()))
+pub fn load_model(file: &Path) -> anyhow::Result<HysteresisModel> {
+    HysteresisModel::load(file)
+        .with_context(|| format!("cannot load the model `{}`", file.display()))
 }
 
 /// Mean normalised innovation squared over the samples that have one.
@@ -60,7 +61,7 @@ fn outputs_of(args: &EstimateArgs, modes: usize, mode: Mode) -> Outputs {
 }
 
 /// The summary as JSON (`--json`).
-pub fn summary_json(args: &EstimateArgs, model: &HbnModel, runs: &[LogEstimate]) -> Value {
+pub fn summary_json(args: &EstimateArgs, model: &HysteresisModel, runs: &[LogEstimate]) -> Value {
     let log = runs.first().map(|r| &r.log);
     let estimates: Vec<Value> = runs
         .iter()
@@ -153,7 +154,7 @@ pub fn run(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<Vec<LogEstima
 pub fn summary_text(
     verbose: bool,
     args: &EstimateArgs,
-    model: &HbnModel,
+    model: &HysteresisModel,
     runs: &[LogEstimate],
 ) -> String {
     let Some(first) = runs.first() else {

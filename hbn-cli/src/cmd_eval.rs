@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use anyhow::Context;
-use hbn_model::HbnModel;
+use hbn_model::HysteresisModel;
 use hbn_pipeline::{Evaluation, Method, SignalChoice, evaluate_log};
 
 use crate::Ui;
@@ -112,7 +112,7 @@ pub fn axis_label(role: &str, info: &hbn_model::SignalInfo) -> String {
 /// The plot of an evaluation: per mode its estimate, 2-sigma band, nRMSE and coverage.
 pub fn plot_data<'a>(
     ev: &'a Evaluation,
-    model: &HbnModel,
+    model: &HysteresisModel,
     model_file: &Path,
     log_file: &Path,
 ) -> EvalPlot<'a> {

@@ -2,7 +2,7 @@
 
 use anyhow::Context;
 use hbn_export::{Format, Precision};
-use hbn_model::HbnModel;
+use hbn_model::HysteresisModel;
 
 use crate::Ui;
 use crate::cli::{ExportArgs, FormatArg, PrecisionArg};
@@ -28,7 +28,7 @@ impl From<PrecisionArg> for Precision {
 
 /// The firmware size table of `model` at both precisions (what `hbn export` and `hbn
 /// inspect` print).
-pub fn size_text(model: &HbnModel, init_pairs: Option<usize>) -> anyhow::Result<String> {
+pub fn size_text(model: &HysteresisModel, init_pairs: Option<usize>) -> anyhow::Result<String> {
     let mut s = String::new();
     for p in [Precision::F32, Precision::F64] {
         let sizes = hbn_export::size_report(model, p, init_pairs)

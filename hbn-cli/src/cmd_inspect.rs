@@ -1,7 +1,7 @@
 //! `hbn inspect`: what a model file contains.
 
 use hbn_gp::GaussianProcess;
-use hbn_model::{GpRole, HbnModel, KernelChoice, LocalData};
+use hbn_model::{GpRole, HysteresisModel, KernelChoice, LocalData};
 use serde_json::{Value, json};
 
 use crate::Ui;
@@ -12,7 +12,7 @@ use crate::glossary::{self, Term};
 /// The inputs of one GP by the model's signal names: `x[k-1], x[k-2], u[k-1], u[k-2]` for the
 /// transition (which predicts `x[k]`), `x[k-1], y[k-1], x[k]` for the sensor (which predicts
 /// `y[k]`; `x[k-1], x[k]` for a sensor of the state only).
-pub fn input_names(model: &HbnModel, role: GpRole) -> Vec<String> {
+pub fn input_names(model: &HysteresisModel, role: GpRole) -> Vec<String> {
     let s = model.signals();
     let (u, x, y) = (&s.input.name, &s.state.name, &s.output.name);
     match role {
@@ -53,7 +53,7 @@ pub fn input_names(model: &HbnModel, role: GpRole) -> Vec<String> {
 }
 
 /// What one GP predicts: `x[k]` or `y[k]`.
-pub fn target_name(model: &HbnModel, role: GpRole) -> String {
+pub fn target_name(model: &HysteresisModel, role: GpRole) -> String {
     let s = model.signals();
     match role {
         GpRole::Transition => format!("{}[k]", s.state.name),
@@ -134,7 +134,7 @@ fn blr_json(l: &LocalData) -> Value {
 }
 
 /// The model description as JSON.
-pub fn model_json(model: &HbnModel) -> Value {
+pub fn model_json(model: &HysteresisModel) -> Value {
     let p = model.params();
     let s = model.summary();
     let (us, xs, ys) = model.stats();
@@ -195,7 +195,7 @@ pub fn named_length_scales(ls: &[f64], inputs: &[String]) -> String {
     }
 }
 
-fn gp_text(model: &HbnModel, role: GpRole, kernel: KernelChoice) -> String {
+fn gp_text(model: &HysteresisModel, role: GpRole, kernel: KernelChoice) -> String {
     let gp = model.gp(role);
     let r = gp.report();
     let failed = r.starts.iter().filter(|s| s.error.is_some()).count();
@@ -245,7 +245,7 @@ fn gp_text(model: &HbnModel, role: GpRole, kernel: KernelChoice) -> String {
 }
 
 /// The model description as text.
-pub fn model_text(model: &HbnModel, file: &std::path::Path) -> String {
+pub fn model_text(model: &HysteresisModel, file: &std::path::Path) -> String {
     let p = model.params();
     let s = model.summary();
     let sig = model.signals();

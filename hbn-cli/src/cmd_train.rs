@@ -1,7 +1,7 @@
 //! `hbn train`: fit the HBN to logs ([`hbn_pipeline::train_from_logs`]).
 
 use anyhow::Context;
-use hbn_model::{GpRole, HbnModel, HbnParams, Selection};
+use hbn_model::{GpRole, HbnParams, HysteresisModel, Selection};
 use hbn_pipeline::{TrainSignals, train_from_logs};
 use serde_json::json;
 
@@ -60,7 +60,7 @@ impl TrainArgs {
 }
 
 /// Trains, saves and summarises; returns the model.
-pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<HbnModel> {
+pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<HysteresisModel> {
     crate::check_output(&args.out, "model file")?;
     let signals = TrainSignals {
         input: args.input.clone(),
@@ -111,7 +111,7 @@ pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<HbnModel> {
 }
 
 /// The one-line result of filter-aware training: the default mode and its held-out scores.
-pub fn default_mode_line(model: &HbnModel) -> String {
+pub fn default_mode_line(model: &HysteresisModel) -> String {
     let Some(v) = &model.summary().validation else {
         return format!(
             "filter not tuned (--validation 0, or too little data to hold some out): default \
@@ -134,7 +134,7 @@ pub fn default_mode_line(model: &HbnModel) -> String {
 /// The training summary: what was trained, how long it took, the default mode and its
 /// held-out scores, and the warnings; with `verbose`, each GP and the held-out table.
 pub fn summary_text(
-    model: &HbnModel,
+    model: &HysteresisModel,
     samples: usize,
     out: &std::path::Path,
     verbose: bool,

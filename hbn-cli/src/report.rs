@@ -212,7 +212,7 @@ impl Drop for Renderer {
 
 /// Each GP's kernel chosen by evidence (`hbn train`, `hbn inspect`): the chosen kernels, and
 /// with `details` every kernel's LML; empty when the kernels were set.
-pub fn evidence_line(model: &hbn_model::HbnModel, details: bool) -> String {
+pub fn evidence_line(model: &hbn_model::HysteresisModel, details: bool) -> String {
     let rows = &model.summary().kernel_evidence;
     if rows.is_empty() {
         return String::new();
@@ -252,7 +252,7 @@ pub fn evidence_line(model: &hbn_model::HbnModel, details: bool) -> String {
 
 /// The validation table of filter-aware training (`hbn train`, `hbn inspect`): per mode the
 /// learned noise scales and the held-out scores before and after; empty without tuning.
-pub fn validation_table(model: &hbn_model::HbnModel) -> String {
+pub fn validation_table(model: &hbn_model::HysteresisModel) -> String {
     let Some(v) = &model.summary().validation else {
         return "  filter not tuned (trained with --validation 0, or too little data): noise \
                 scales 1, default mode ekf\n"

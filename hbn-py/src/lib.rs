@@ -23,7 +23,7 @@ use hbn_gp::{GaussianProcess, GpError, GpParams, RawHyperparameters, SparseParam
 use hbn_io::{IoError, SignalPath};
 use hbn_model::explore::{Criterion, ExploreError, ExploreParams, Explorer, Phase, Strategy};
 use hbn_model::{
-    Estimate, Filter, FilterOutput, HbnModel, HbnParams, KernelChoice, ModelError, Param,
+    Estimate, Filter, FilterOutput, HbnParams, HysteresisModel, KernelChoice, ModelError, Param,
     ParamValue, Sequence, SignalInfo, Signals,
 };
 use hbn_pipeline::{
@@ -839,14 +839,14 @@ impl GaussianProcessCore {
 // HBN model and the streaming filter
 // ---------------------------------------------------------------------------------------------
 
-/// Native HBN model (`hbn_model::HbnModel`). Use `hbn.HysteresisModel` instead.
+/// Native HBN model (`hbn_model::HysteresisModel`). Use `hbn.HysteresisModel` instead.
 #[pyclass(name = "HysteresisModelCore", module = "hbn._hbn", frozen)]
 pub struct HysteresisModelCore {
-    inner: Arc<HbnModel>,
+    inner: Arc<HysteresisModel>,
 }
 
 impl HysteresisModelCore {
-    fn wrap(model: HbnModel) -> Self {
+    fn wrap(model: HysteresisModel) -> Self {
         Self {
             inner: Arc::new(model),
         }
@@ -895,7 +895,7 @@ impl HysteresisModelCore {
             let seqs: Vec<Sequence<'_>> = (0..u.len())
                 .map(|i| Sequence::new(&u[i], &x[i], &y[i]))
                 .collect();
-            Ok(HbnModel::fit(&seqs, &p)?)
+            Ok(HysteresisModel::fit(&seqs, &p)?)
         })?;
         Ok(Self::wrap(inner))
     }
@@ -1077,7 +1077,7 @@ impl HysteresisModelCore {
     #[staticmethod]
     fn from_json(py: Python<'_>, text: &str) -> PyResult<Self> {
         Ok(Self::wrap(
-            HbnModel::from_json(text, "<string>").map_err(|e| raise(py, e))?,
+            HysteresisModel::from_json(text, "<string>").map_err(|e| raise(py, e))?,
         ))
     }
     /// Writes the model atomically (the CLI's `hbn train --out` format).
@@ -1087,7 +1087,7 @@ impl HysteresisModelCore {
     /// Loads a model written by `save` or by `hbn train`.
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
-        let inner = detached(py, move || Ok(HbnModel::load(&path)?))?;
+        let inner = detached(py, move || Ok(HysteresisModel::load(&path)?))?;
         Ok(Self::wrap(inner))
     }
 }

@@ -1,6 +1,6 @@
 //! # hbn-export
 //!
-//! Turns a trained [`HbnModel`] into firmware source: the model's constant tables
+//! Turns a trained [`HysteresisModel`] into firmware source: the model's constant tables
 //! ([`hbn_core::tables`]) as
 //!
 //! - [`Format::Rust`]: one file, `hbn_model.rs`, of `static` arrays and a function returning
@@ -17,12 +17,12 @@
 //!
 //! ```
 //! use hbn_export::{Format, Precision, export};
-//! use hbn_model::{HbnModel, HbnParams, Sequence};
+//! use hbn_model::{HysteresisModel, HbnParams, Sequence};
 //! # let u: Vec<f64> = (0..300).map(|k| (k as f64 * 0.05).sin()).collect();
 //! # let x: Vec<f64> = u.iter().map(|v| 0.8 * v).collect();
 //! # let y: Vec<f64> = x.iter().map(|v| v + 0.1 * v * v).collect();
 //! let params = HbnParams { n_inducing: Some(16), n_starts: 1, ..HbnParams::default() };
-//! let model = HbnModel::fit(&[Sequence::new(&u, &x, &y)], &params)?;
+//! let model = HysteresisModel::fit(&[Sequence::new(&u, &x, &y)], &params)?;
 //! let files = export(&model, model.default_mode(), Format::C, Precision::F32, None, "model.hbn")?;
 //! assert_eq!(files.iter().map(|f| f.name).collect::<Vec<_>>(), ["hbn_model.h", "hbn_model.c"]);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
@@ -41,7 +41,7 @@ use hbn_core::gp::{GpView, Variance};
 use hbn_core::kernel::profile_and_slope;
 use hbn_core::tables::{self, TableSink, Tables};
 use hbn_core::{CoreError, EkfConfig, Estimator, HbnView, InitPrior, Mode};
-use hbn_model::{HbnModel, ModelError};
+use hbn_model::{HysteresisModel, ModelError};
 
 /// What the exported source is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -322,8 +322,8 @@ impl ModelTables {
 }
 
 /// The tables of `model` in `mode`, with the model's tuned settings of that mode
-/// ([`HbnModel::ekf_config`]).
-pub fn model_tables(model: &HbnModel, mode: Mode) -> Result<ModelTables, ExportError> {
+/// ([`HysteresisModel::ekf_config`]).
+pub fn model_tables(model: &HysteresisModel, mode: Mode) -> Result<ModelTables, ExportError> {
     let view = model.view()?;
     let config = model.ekf_config(mode);
     encode(&view, &config, factors_in_two_parts(&view), Precision::F64)
@@ -453,7 +453,7 @@ impl ModeSize {
 /// Bytes of model data and work memory of every mode at `precision`, with at most
 /// `init_pairs` pairs in the prior of `x_0` (as [`export`]).
 pub fn size_report(
-    model: &HbnModel,
+    model: &HysteresisModel,
     precision: Precision,
     init_pairs: Option<usize>,
 ) -> Result<Vec<ModeSize>, ExportError> {
@@ -541,7 +541,7 @@ pub struct GeneratedFile {
 /// mean; fewer pairs change the first estimates only). `origin` (e.g. the model file) is named
 /// in the generated header comment.
 pub fn export(
-    model: &HbnModel,
+    model: &HysteresisModel,
     mode: Mode,
     format: Format,
     precision: Precision,
@@ -891,12 +891,15 @@ mod tests {
         .unwrap()
     }
 
-    fn model(inducing: Option<usize>) -> HbnModel {
+    fn model(inducing: Option<usize>) -> HysteresisModel {
         model_with(inducing, hbn_model::SensorInputs::Thesis)
     }
 
     /// [`model`] with the sensor's inputs (no model selection of them).
-    fn model_with(inducing: Option<usize>, sensor_inputs: hbn_model::SensorInputs) -> HbnModel {
+    fn model_with(
+        inducing: Option<usize>,
+        sensor_inputs: hbn_model::SensorInputs,
+    ) -> HysteresisModel {
         let cfg = SimConfig {
             noise_gain: 1.0,
             ..SimConfig::new(SystemKind::BoucWen)
@@ -912,7 +915,7 @@ mod tests {
         };
         let mut params = params;
         params.select.sensor_inputs.clear();
-        HbnModel::fit(&[Sequence::new(&log.u, &log.x, &log.y)], &params).unwrap()
+        HysteresisModel::fit(&[Sequence::new(&log.u, &log.x, &log.y)], &params).unwrap()
     }
 
     /// The step on the f64 tables equals the model's own estimate bit for bit, every mode,
@@ -1074,7 +1077,8 @@ mod tests {
                 sensor_kernel: kernel,
                 ..HbnParams::default()
             };
-            let m = HbnModel::fit(&[Sequence::new(&log.u, &log.x, &log.y)], &params).unwrap();
+            let m =
+                HysteresisModel::fit(&[Sequence::new(&log.u, &log.x, &log.y)], &params).unwrap();
             let view = m.view().unwrap();
             let factors = [view.transition.len(), view.sensor.len()].map(|n| n * (n + 1) / 2);
             for mode in Mode::ALL {

@@ -4,10 +4,10 @@
 use hbn_core::Mode;
 use hbn_export::model_tables;
 use hbn_ffi::*;
-use hbn_model::{HbnModel, HbnParams, Sequence};
+use hbn_model::{HbnParams, HysteresisModel, Sequence};
 use hbn_sim::{SimConfig, SystemKind, simulate_random};
 
-fn model() -> HbnModel {
+fn model() -> HysteresisModel {
     let cfg = SimConfig {
         noise_gain: 1.0,
         ..SimConfig::new(SystemKind::BoucWen)
@@ -19,7 +19,7 @@ fn model() -> HbnModel {
         max_iters: 40,
         ..HbnParams::default()
     };
-    HbnModel::fit(&[Sequence::new(&log.u, &log.x, &log.y)], &params).unwrap()
+    HysteresisModel::fit(&[Sequence::new(&log.u, &log.x, &log.y)], &params).unwrap()
 }
 
 fn zeroed() -> HbnFilter {

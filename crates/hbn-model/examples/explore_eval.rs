@@ -18,7 +18,7 @@
 //! explore-ramps-alphaA (the default with the seeking weight's end `ExploreParams::alpha_end` =
 //! A, and its start at most A).
 use hbn_model::explore::{Criterion, ExploreParams, Explorer, Strategy};
-use hbn_model::{HbnModel, HbnParams, Sequence, metrics::nrmse};
+use hbn_model::{HbnParams, HysteresisModel, Sequence, metrics::nrmse};
 use hbn_sim::{
     InputKind, SimConfig, Simulator, SystemKind, generate_input, simulate, simulate_random,
 };
@@ -52,7 +52,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 },
                 1500,
             )?;
-            let score = |m: &HbnModel| -> Result<f64, Box<dyn std::error::Error>> {
+            let score = |m: &HysteresisModel| -> Result<f64, Box<dyn std::error::Error>> {
                 let e = m.estimate(&test.u, &test.y, m.default_mode())?;
                 Ok(nrmse(&e.x, &test.x))
             };
@@ -73,7 +73,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             };
                             let tr = simulate_random(&draw, n)?;
                             let seqs = [Sequence::new(&tr.u, &tr.x, &tr.y)];
-                            let s = score(&HbnModel::fit(&seqs, &HbnParams::default())?)?;
+                            let s = score(&HysteresisModel::fit(&seqs, &HbnParams::default())?)?;
                             let t = t0.elapsed().as_secs_f64();
                             println!("{system},{seed},{n},{method},{s},{t:.1}");
                             continue;
@@ -87,7 +87,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             )?;
                             let tr = simulate(&cfg, &u)?;
                             let seqs = [Sequence::new(&tr.u, &tr.x, &tr.y)];
-                            let s = score(&HbnModel::fit(&seqs, &HbnParams::default())?)?;
+                            let s = score(&HysteresisModel::fit(&seqs, &HbnParams::default())?)?;
                             let t = t0.elapsed().as_secs_f64();
                             println!("{system},{seed},{n},{method},{s},{t:.1}");
                             continue;

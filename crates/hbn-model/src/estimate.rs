@@ -3,7 +3,7 @@
 
 use crate::ModelError;
 use crate::filter::{FilterOutput, Tracker};
-use crate::model::HbnModel;
+use crate::model::HysteresisModel;
 use hbn_core::{Ekf, EkfConfig, Flags, Mode, Want};
 
 /// Observability window `h` of thesis Sec. 4.2.
@@ -148,7 +148,7 @@ impl Estimate {
     }
 }
 
-impl HbnModel {
+impl HysteresisModel {
     /// Runs the filter over a sequence with the default settings of `mode`: the loop of
     /// [`Filter::step`](crate::Filter::step) over the samples, without taking ownership of the
     /// model (equal to [`Filter::run`](crate::Filter::run) bit for bit).

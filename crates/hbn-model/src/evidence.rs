@@ -11,7 +11,7 @@
 use hbn_gp::{GaussianProcess, GpParams};
 use serde::{Deserialize, Serialize};
 
-use crate::model::{GpRole, HbnModel, StartSummary};
+use crate::model::{GpRole, HysteresisModel, StartSummary};
 use crate::params::{CheckedHbnParams, HbnParams, Increments, KernelChoice};
 use crate::{ModelError, Sequence};
 
@@ -104,7 +104,7 @@ pub(crate) fn choose(
             prefit: Vec::new(),
         });
     }
-    let plays = HbnModel::plays_for(trajectories, params)?;
+    let plays = HysteresisModel::plays_for(trajectories, params)?;
     let data = crate::build_dataset(trajectories, &plays)?;
     let kernels = params.kernel_evidence.clone();
     let jobs: Vec<(GpRole, KernelChoice)> = [GpRole::Transition, GpRole::Sensor]
@@ -113,10 +113,10 @@ pub(crate) fn choose(
         .collect();
     let fit = |&(role, kernel): &(GpRole, KernelChoice)| {
         let p = params.with_kernel(role, kernel);
-        let (spec, table) = HbnModel::gp_problem(&p, &plays, &data, role);
+        let (spec, table) = HysteresisModel::gp_problem(&p, &plays, &data, role);
         let mut gp_params = p.gp_params(spec, role);
         gp_params.sparse = None;
-        let fitted = HbnModel::fit_gp(role, &gp_params, &table, &mut |_, _| {}).ok();
+        let fitted = HysteresisModel::fit_gp(role, &gp_params, &table, &mut |_, _| {}).ok();
         (gp_params, fitted)
     };
     let threads = std::thread::available_parallelism()
@@ -221,7 +221,7 @@ mod tests {
         let runs = [Sequence::new(&log.u, &log.x, &log.y)];
         let params = small();
         assert_eq!(params.kernel_evidence, DEFAULT_EVIDENCE_KERNELS.to_vec());
-        let m = HbnModel::fit(&runs, &params).unwrap();
+        let m = HysteresisModel::fit(&runs, &params).unwrap();
         let rows = &m.summary().kernel_evidence;
         assert_eq!(rows.len(), 4, "{rows:?}");
         for role in [GpRole::Transition, GpRole::Sensor] {
@@ -243,12 +243,12 @@ mod tests {
         set.transition_kernel = m.params().transition_kernel;
         set.sensor_kernel = m.params().sensor_kernel;
         set.kernel_evidence.clear();
-        let again = HbnModel::fit(&runs, &set).unwrap();
+        let again = HysteresisModel::fit(&runs, &set).unwrap();
         assert!(again.summary().kernel_evidence.is_empty());
         for role in [GpRole::Transition, GpRole::Sensor] {
             assert_eq!(again.gp(role), m.gp(role));
         }
-        let est = |m: &HbnModel| m.estimate(&log.u, &log.y, hbn_core::Mode::Ekf).unwrap().x;
+        let est = |m: &HysteresisModel| m.estimate(&log.u, &log.y, hbn_core::Mode::Ekf).unwrap().x;
         assert_eq!(est(&again), est(&m));
     }
 
@@ -261,7 +261,7 @@ mod tests {
         let params = small().check().unwrap();
         let chosen = choose(&runs, &params).unwrap();
         assert_eq!(chosen.prefit.len(), 2);
-        let plays = HbnModel::plays_for(&runs, &chosen.params).unwrap();
+        let plays = HysteresisModel::plays_for(&runs, &chosen.params).unwrap();
         let data = crate::build_dataset(&runs, &plays).unwrap();
         for (candidate, reused) in [(chosen.params.candidate(), true), {
             let mut sparse = chosen.params.candidate();
@@ -270,7 +270,7 @@ mod tests {
         }] {
             let p = chosen.params.for_candidate(&candidate);
             for role in [GpRole::Transition, GpRole::Sensor] {
-                let (spec, _) = HbnModel::gp_problem(&p, &plays, &data, role);
+                let (spec, _) = HysteresisModel::gp_problem(&p, &plays, &data, role);
                 let found = Prefit::matching(&chosen.prefit, role, &p.gp_params(spec, role), &p);
                 assert_eq!(found.is_some(), reused, "{candidate} {role}");
                 if let Some(f) = found {

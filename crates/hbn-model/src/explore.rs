@@ -44,7 +44,7 @@
 //! the variance then knows where the new data are), and its hyperparameters are re-learned
 //! every [`ExploreParams::optimize_every`] samples, warm-started from the previous ones (one
 //! optimiser start of at most [`RELEARN_MAX_ITERS`] iterations, so that `observe()` blocks
-//! for a bounded time). [`Explorer::model`] trains the whole HBN ([`HbnModel::fit`]) on
+//! for a bounded time). [`Explorer::model`] trains the whole HBN ([`HysteresisModel::fit`]) on
 //! everything observed.
 //!
 //! Guarantees (tested): a proposal lies in `[u_min, u_max]`, and, when the last observed input
@@ -83,7 +83,7 @@ use hbn_gp::{GaussianProcess, Hyperparameters};
 
 use crate::dataset::{Sequence, TRANSITION_DIM, TRANSITION_DIRECTION, Table, build_dataset};
 use crate::params::{CheckedHbnParams, HbnParams};
-use crate::{GpRole, HbnModel, ModelError};
+use crate::{GpRole, HysteresisModel, ModelError};
 
 /// Steps are drawn within this fraction of `max_step`, so that floating-point rounding never
 /// makes a proposal differ from the last input by more than `max_step`.
@@ -620,7 +620,7 @@ impl Explorer {
     /// parameters of [`ExploreParams::model`] are replaced by the model's.
     pub fn resume(
         mut params: ExploreParams,
-        model: &HbnModel,
+        model: &HysteresisModel,
         history: &[Sequence<'_>],
     ) -> Result<Self, ExploreError> {
         params.model = model.params().clone();
@@ -1228,15 +1228,15 @@ impl Explorer {
             .increments(self.params.model.increments.mean_input(GpRole::Transition)))
     }
 
-    /// Trains the HBN ([`HbnModel::fit`] with [`ExploreParams::model`]) on every run observed.
-    pub fn model(&self) -> Result<HbnModel, ExploreError> {
+    /// Trains the HBN ([`HysteresisModel::fit`] with [`ExploreParams::model`]) on every run observed.
+    pub fn model(&self) -> Result<HysteresisModel, ExploreError> {
         let seqs: Vec<Sequence<'_>> = self
             .runs
             .iter()
             .filter(|r| !r.u.is_empty())
             .map(|r| Sequence::new(&r.u, &r.x, &r.y))
             .collect();
-        Ok(HbnModel::fit_checked(
+        Ok(HysteresisModel::fit_checked(
             &seqs,
             &self.params.model,
             &mut |_, _| {},

@@ -1,6 +1,6 @@
 //! The owned streaming estimator: [`Filter`] holds the model, the checked core step, the state
 //! and the scratch, so a robot node keeps one value next to nothing else and calls
-//! [`Filter::step`] per sample. Batch estimation ([`HbnModel::estimate`]) runs the same
+//! [`Filter::step`] per sample. Batch estimation ([`HysteresisModel::estimate`]) runs the same
 //! per-sample code ([`Tracker::step`]) in a loop, so streaming and batch cannot differ.
 
 use std::sync::Arc;
@@ -10,7 +10,7 @@ use nalgebra::Matrix3;
 use self_cell::self_cell;
 
 use crate::estimate::{Estimate, OBSERVABILITY_WINDOW};
-use crate::{HbnModel, ModelError};
+use crate::{HysteresisModel, ModelError};
 
 /// One sample's result: the core step's output plus the observability diagnostic.
 /// Dereferences to [`StepOutput`], so `out.x` and `out.x_std` read directly.
@@ -99,7 +99,7 @@ impl Tracker {
 // unsafe code in this crate.
 self_cell!(
     struct ModelCell {
-        owner: Arc<HbnModel>,
+        owner: Arc<HysteresisModel>,
         #[covariant]
         dependent: Ekf,
     }
@@ -110,16 +110,16 @@ self_cell!(
 /// [`Arc`]), the checked step, the state and the scratch memory. Built once (which checks the
 /// model and settings); [`Filter::step`] then never fails, allocates nothing and is bounded in
 /// time. The first step initialises exactly as batch estimation does (the prior of `x_0` from
-/// the first measurement, [`HbnModel::initial_state`]).
+/// the first measurement, [`HysteresisModel::initial_state`]).
 ///
 /// ```
-/// use hbn_model::{Filter, HbnModel, HbnParams, Sequence};
+/// use hbn_model::{Filter, HysteresisModel, HbnParams, Sequence};
 /// use hbn_core::Mode;
 /// # let u: Vec<f64> = (0..300).map(|k| (k as f64 * 0.05).sin()).collect();
 /// # let x: Vec<f64> = u.iter().map(|v| 0.8 * v).collect();
 /// # let y: Vec<f64> = x.iter().map(|v| v + 0.1 * v * v).collect();
 /// let params = HbnParams { max_points: 80, n_starts: 1, ..HbnParams::default() };
-/// let model = HbnModel::fit(&[Sequence::new(&u, &x, &y)], &params)?;
+/// let model = HysteresisModel::fit(&[Sequence::new(&u, &x, &y)], &params)?;
 /// let mut filter = Filter::new(model, Mode::Ekf)?;
 /// for (&u_k, &y_k) in u.iter().zip(&y) {
 ///     let out = filter.step(u_k, y_k);
@@ -135,8 +135,8 @@ pub struct Filter {
 
 impl Filter {
     /// A filter over `model` in `mode` with the model's default settings
-    /// ([`HbnModel::ekf_config`]). Checks the model and settings once.
-    pub fn new(model: impl Into<Arc<HbnModel>>, mode: Mode) -> Result<Self, ModelError> {
+    /// ([`HysteresisModel::ekf_config`]). Checks the model and settings once.
+    pub fn new(model: impl Into<Arc<HysteresisModel>>, mode: Mode) -> Result<Self, ModelError> {
         let cell = ModelCell::try_new(model.into(), |m| -> Result<Ekf<'_>, ModelError> {
             Ok(Ekf::new(m.view()?, m.ekf_config(mode))?)
         })?;
@@ -156,7 +156,7 @@ impl Filter {
     }
 
     /// Runs the filter from a fresh start over a whole sequence (what
-    /// [`HbnModel::estimate`] returns for the same model and mode). Leaves the filter in the
+    /// [`HysteresisModel::estimate`] returns for the same model and mode). Leaves the filter in the
     /// state after the last sample.
     pub fn run(&mut self, u: &[f64], y: &[f64]) -> Result<Estimate, ModelError> {
         self.reset();
@@ -164,7 +164,7 @@ impl Filter {
     }
 
     /// The model.
-    pub fn model(&self) -> &Arc<HbnModel> {
+    pub fn model(&self) -> &Arc<HysteresisModel> {
         self.cell.borrow_owner()
     }
 
@@ -180,7 +180,7 @@ impl Filter {
 }
 
 /// The batch loop over [`Tracker::step`] shared by [`Filter::run`] and
-/// [`HbnModel::estimate`].
+/// [`HysteresisModel::estimate`].
 pub(crate) fn run(
     tracker: &mut Tracker,
     ekf: &Ekf<'_>,

@@ -7,20 +7,20 @@
 //!
 //! - [`HbnParams`]: the training parameters, their defaults and their one check
 //!   ([`HbnParams::check`] gives [`CheckedHbnParams`]; errors name the [`Param`]);
-//! - [`HbnModel`]: fit, save, load; [`HbnModel::estimate`] over a whole sequence;
+//! - [`HysteresisModel`]: fit, save, load; [`HysteresisModel::estimate`] over a whole sequence;
 //! - [`explore::Explorer`]: which input to apply next while collecting training data
 //!   (thesis Sec. 3.4);
 //! - [`Filter`]: the owned streaming estimator (model, state and scratch in one value), whose
 //!   per-sample step batch estimation loops over.
 //!
 //! ```
-//! use hbn_model::{Filter, HbnModel, HbnParams, Sequence, metrics::nrmse};
+//! use hbn_model::{Filter, HysteresisModel, HbnParams, Sequence, metrics::nrmse};
 //! use hbn_sim::{SimConfig, SystemKind, simulate_random};
 //! use hbn_core::Mode;
 //! let cfg = SimConfig { noise_gain: 1.0, ..SimConfig::new(SystemKind::Duhem) };
 //! let train = simulate_random(&cfg, 400).unwrap();
 //! let params = HbnParams { max_points: 150, n_starts: 1, ..HbnParams::default() };
-//! let model = HbnModel::fit(&[Sequence::new(&train.u, &train.x, &train.y)], &params).unwrap();
+//! let model = HysteresisModel::fit(&[Sequence::new(&train.u, &train.x, &train.y)], &params).unwrap();
 //! let test = simulate_random(&SimConfig { seed: 7, ..cfg }, 300).unwrap();
 //! let est = model.estimate(&test.u, &test.y, Mode::Ekf).unwrap();
 //! assert!(nrmse(&est.x, &test.x) < 0.2);
@@ -56,9 +56,11 @@ pub use filter::{Filter, FilterOutput};
 /// A GP's prior mean ([`HbnParams::linear_mean`]).
 pub use hbn_gp::MeanFunction;
 pub use local::LocalData;
+#[allow(deprecated)]
+pub use model::HbnModel;
 pub use model::{
-    GpRole, HbnModel, INIT_NEIGHBOURS, MODEL_FORMAT, MODEL_FORMAT_OLDEST, MODEL_FORMAT_VERSION,
-    SignalStats, StartSummary, TrainingSummary,
+    GpRole, HysteresisModel, INIT_NEIGHBOURS, MODEL_FORMAT, MODEL_FORMAT_OLDEST,
+    MODEL_FORMAT_VERSION, SignalStats, StartSummary, TrainingSummary,
 };
 pub use params::{
     Candidate, CheckedHbnParams, ConfigError, DEFAULT_EVIDENCE_KERNELS, DEFAULT_INDUCING,

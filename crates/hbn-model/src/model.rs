@@ -139,9 +139,13 @@ pub struct TrainingSummary {
     pub kernel_evidence: Vec<KernelEvidence>,
 }
 
+/// The former name of [`HysteresisModel`].
+#[deprecated(since = "0.2.0", note = "renamed to `HysteresisModel`")]
+pub type HbnModel = HysteresisModel;
+
 /// The trained Hysteresis Bayesian Network.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct HbnModel {
+pub struct HysteresisModel {
     params: HbnParams,
     transition: GaussianProcess,
     sensor: GaussianProcess,
@@ -164,7 +168,7 @@ pub struct HbnModel {
     summary: TrainingSummary,
 }
 
-/// Training samples consulted by [`HbnModel::initial_state`].
+/// Training samples consulted by [`HysteresisModel::initial_state`].
 pub const INIT_NEIGHBOURS: usize = 50;
 
 /// The outlier gate every trained model's filter ships with ([`EkfConfig::nis_gate`]): a
@@ -176,15 +180,15 @@ pub const OUTLIER_GATE: f64 = 25.0;
 struct ModelFile {
     format: String,
     version: u32,
-    model: HbnModel,
+    model: HysteresisModel,
 }
 
-/// Where a candidate's training starts ([`HbnModel::fit_candidates`]).
+/// Where a candidate's training starts ([`HysteresisModel::fit_candidates`]).
 enum Start<'a> {
     /// From nothing: its GPs are fitted first.
     Fresh,
     /// From its GPs, already fitted on every run.
-    Fitted(Box<HbnModel>),
+    Fitted(Box<HysteresisModel>),
     /// From the hyperparameters of the exact GPs (same kernels) that its sparse searches
     /// start from, those the caller has ([`ExactStart`]).
     FromExact(&'a ExactStart<'a>),
@@ -229,9 +233,9 @@ pub(crate) struct ExactStart<'a> {
 /// candidate fits it again to report its own error.
 pub(crate) type SharedSensor = std::sync::OnceLock<Option<(GaussianProcess, Vec<StartSummary>)>>;
 
-impl HbnModel {
+impl HysteresisModel {
     /// Learns both relations from trajectories at `params.rate_hz`: checks the parameters
-    /// ([`HbnParams::check`]), then [`HbnModel::fit_checked`].
+    /// ([`HbnParams::check`]), then [`HysteresisModel::fit_checked`].
     pub fn fit(trajectories: &[Sequence<'_>], params: &HbnParams) -> Result<Self, ModelError> {
         let checked = params.clone().check()?;
         Self::fit_checked(trajectories, &checked, &mut |_, _| {})
@@ -317,10 +321,10 @@ impl HbnModel {
         }
         let mut rows = Vec::with_capacity(candidates.len());
         // Every scored candidate: (its row, held-out NLPD, held-out nRMSE, model).
-        let mut scored_models: Vec<(usize, f64, f64, HbnModel)> = Vec::new();
+        let mut scored_models: Vec<(usize, f64, f64, HysteresisModel)> = Vec::new();
         let mut first_error = None;
         // The first candidate trained, kept in case none can be scored.
-        let mut fallback: Option<(usize, HbnModel)> = None;
+        let mut fallback: Option<(usize, HysteresisModel)> = None;
         let trained = Self::fit_candidates(trajectories, params, &candidates, prefit, observe);
         for (candidate, (fitted, seconds)) in candidates.into_iter().zip(trained) {
             let (scored, note) = match fitted {
@@ -1048,8 +1052,8 @@ impl HbnModel {
             .sum()
     }
 
-    /// Filter settings of `mode`: [`HbnModel::untuned_config`] with the noise scales learned
-    /// on held-out data ([`HbnModel::tuning`]).
+    /// Filter settings of `mode`: [`HysteresisModel::untuned_config`] with the noise scales learned
+    /// on held-out data ([`HysteresisModel::tuning`]).
     pub fn ekf_config(&self, mode: Mode) -> EkfConfig {
         let mut c = self.untuned_config(mode);
         self.tuning.scales(mode).apply(&mut c);
@@ -1161,7 +1165,7 @@ impl HbnModel {
         })
     }
 
-    /// Parses [`HbnModel::to_json`] output, checking tag, version and consistency. `origin`
+    /// Parses [`HysteresisModel::to_json`] output, checking tag, version and consistency. `origin`
     /// names the source in errors.
     pub fn from_json(text: &str, origin: &str) -> Result<Self, ModelError> {
         let fail = |problem| ModelError::ModelFile {
@@ -1202,7 +1206,7 @@ impl HbnModel {
         Ok(hbn_fs::write_atomic(path, self.to_json()?.as_bytes())?)
     }
 
-    /// Loads a model written by [`HbnModel::save`].
+    /// Loads a model written by [`HysteresisModel::save`].
     pub fn load(path: &Path) -> Result<Self, ModelError> {
         let bytes = std::fs::read(path).map_err(|source| ModelError::Io {
             path: path.display().to_string(),
@@ -1394,7 +1398,8 @@ mod sparse_start_tests {
         let params = small_selection(Vec::new());
         let candidates = params.candidates();
         assert_eq!(candidates.len(), 2);
-        let trained = HbnModel::fit_candidates(&seqs, &params, &candidates, &[], &mut |_, _| {});
+        let trained =
+            HysteresisModel::fit_candidates(&seqs, &params, &candidates, &[], &mut |_, _| {});
         let sparse = trained[1].0.as_ref().unwrap();
         assert!(sparse.params().sparse_from_exact);
         for gp in [&sparse.transition, &sparse.sensor] {
@@ -1406,7 +1411,7 @@ mod sparse_start_tests {
         }
         // From its recorded parameters alone (the exact GPs fitted again) it is the same
         // model, bit for bit: what a model file says it was trained with reproduces it.
-        let alone = HbnModel::fit_tuned(
+        let alone = HysteresisModel::fit_tuned(
             &seqs,
             &params.starting_from_exact(&candidates[1]),
             &mut |_, _| {},
@@ -1414,8 +1419,12 @@ mod sparse_start_tests {
         .unwrap();
         assert_eq!(sparse.to_json().unwrap(), alone.to_json().unwrap());
         // Without the setting, the sparse searches make their own starts: another model.
-        let own = HbnModel::fit_tuned(&seqs, &params.for_candidate(&candidates[1]), &mut |_, _| {})
-            .unwrap();
+        let own = HysteresisModel::fit_tuned(
+            &seqs,
+            &params.for_candidate(&candidates[1]),
+            &mut |_, _| {},
+        )
+        .unwrap();
         assert_eq!(own.transition.report().starts.len(), 2);
         assert_ne!(own.to_json().unwrap(), alone.to_json().unwrap());
     }
@@ -1438,9 +1447,10 @@ mod sparse_start_tests {
         );
         assert_eq!(candidates[2].to_string(), "matern52 exact sensor=state");
         let mut events = [0usize; 2];
-        let trained = HbnModel::fit_candidates(&seqs, &params, &candidates, &[], &mut |role, _| {
-            events[usize::from(role == GpRole::Sensor)] += 1;
-        });
+        let trained =
+            HysteresisModel::fit_candidates(&seqs, &params, &candidates, &[], &mut |role, _| {
+                events[usize::from(role == GpRole::Sensor)] += 1;
+            });
         // Transition: the first candidate's two starts and the sparse one's one; none for
         // the state sensor's candidate. Sensor: two, one, and the state sensor's two.
         assert_eq!(events, [3, 5]);
@@ -1458,16 +1468,19 @@ mod sparse_start_tests {
             serde_json::to_string(&state.sensor).unwrap(),
             serde_json::to_string(&first.sensor).unwrap()
         );
-        let alone =
-            HbnModel::fit_tuned(&seqs, &params.for_candidate(&candidates[2]), &mut |_, _| {})
-                .unwrap();
+        let alone = HysteresisModel::fit_tuned(
+            &seqs,
+            &params.for_candidate(&candidates[2]),
+            &mut |_, _| {},
+        )
+        .unwrap();
         assert_eq!(state.to_json().unwrap(), alone.to_json().unwrap());
         // Every mode runs on it, and the model file reads back as the same model.
         for mode in Mode::ALL {
             let run = state.estimate(&data[0].0, &data[0].2, mode).unwrap();
             assert!(run.x.iter().all(|v| v.is_finite()), "{mode:?}");
         }
-        let back = HbnModel::from_json(&state.to_json().unwrap(), "test").unwrap();
+        let back = HysteresisModel::from_json(&state.to_json().unwrap(), "test").unwrap();
         assert_eq!(back.to_json().unwrap(), state.to_json().unwrap());
         assert_eq!(back.view().unwrap().sensor.dim(), 2);
     }
@@ -1490,7 +1503,7 @@ mod sparse_start_tests {
         }
         .check()
         .unwrap();
-        let model = HbnModel::fit_tuned(&seqs, &params, &mut |_, _| {}).unwrap();
+        let model = HysteresisModel::fit_tuned(&seqs, &params, &mut |_, _| {}).unwrap();
         assert_eq!(model.relocalisations(&seqs), 0);
         let (u, x, y) = &data[0];
         let far: Vec<f64> = u.iter().map(|v| 10.0 * v).collect();
@@ -1510,9 +1523,10 @@ mod sparse_start_tests {
             (Some(16), &[0.5][..])
         );
         let mut sensor_events = 0;
-        let trained = HbnModel::fit_candidates(&seqs, &params, &candidates, &[], &mut |role, _| {
-            sensor_events += usize::from(role == GpRole::Sensor);
-        });
+        let trained =
+            HysteresisModel::fit_candidates(&seqs, &params, &candidates, &[], &mut |role, _| {
+                sensor_events += usize::from(role == GpRole::Sensor);
+            });
         // The sensor's searches: the first candidate's two starts, and one start for the
         // sparse sensor GP, which both sparse candidates fit the same and which is fitted once.
         assert_eq!(sensor_events, 3);
@@ -1530,7 +1544,7 @@ mod sparse_start_tests {
         for gp in [&with_lag.transition, &with_lag.sensor] {
             assert_eq!(gp.report().starts.len(), 1);
         }
-        let alone = HbnModel::fit_tuned(
+        let alone = HysteresisModel::fit_tuned(
             &seqs,
             &params.starting_from_exact(&candidates[2]),
             &mut |_, _| {},
@@ -1545,8 +1559,13 @@ mod sparse_start_tests {
         );
         // The other two are as they are without the lag candidate.
         let without = small_selection(Vec::new());
-        let before =
-            HbnModel::fit_candidates(&seqs, &without, &without.candidates(), &[], &mut |_, _| {});
+        let before = HysteresisModel::fit_candidates(
+            &seqs,
+            &without,
+            &without.candidates(),
+            &[],
+            &mut |_, _| {},
+        );
         for i in 0..2 {
             assert_eq!(
                 trained[i].0.as_ref().unwrap().to_json().unwrap(),

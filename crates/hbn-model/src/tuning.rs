@@ -18,7 +18,7 @@
 
 use crate::dataset::Sequence;
 use crate::metrics::{Calibration, calibration, nrmse};
-use crate::{HbnModel, ModelError};
+use crate::{HysteresisModel, ModelError};
 use hbn_core::{EkfConfig, Mode};
 use serde::{Deserialize, Serialize};
 
@@ -351,13 +351,13 @@ pub(crate) fn split<'a>(runs: &[Sequence<'a>], fraction: f64) -> Option<Split<'a
 /// A fold's model (its GPs fitted on the fold's training part) and the held-out blocks it is
 /// scored on.
 pub(crate) struct Trial<'a> {
-    pub model: HbnModel,
+    pub model: HysteresisModel,
     pub blocks: Vec<Block<'a>>,
 }
 
 /// A fold's model and the held-out blocks (or pieces of them) it is scored on.
 struct Scored<'t, 'a> {
-    model: &'t HbnModel,
+    model: &'t HysteresisModel,
     blocks: Vec<Block<'a>>,
 }
 

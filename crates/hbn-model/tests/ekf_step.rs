@@ -4,13 +4,13 @@
 //! identity, the outlier gate, the extrapolation flag and the unscented prediction.
 
 use hbn_core::{Ekf, EkfConfig, EkfState, Flags, GpView, HbnView, Mode, StepOutput, Want};
-use hbn_model::{HbnModel, HbnParams, Sequence};
+use hbn_model::{HbnParams, HysteresisModel, Sequence};
 use hbn_sim::{SimConfig, SystemKind, Trajectory, simulate_random};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use std::sync::OnceLock;
 
 struct Fixture {
-    model: HbnModel,
+    model: HysteresisModel,
     test: Trajectory,
 }
 
@@ -30,7 +30,8 @@ fn train(system: SystemKind, params: &HbnParams) -> Fixture {
         ..SimConfig::new(system)
     };
     let train = simulate_random(&cfg, 600).unwrap();
-    let model = HbnModel::fit(&[Sequence::new(&train.u, &train.x, &train.y)], params).unwrap();
+    let model =
+        HysteresisModel::fit(&[Sequence::new(&train.u, &train.x, &train.y)], params).unwrap();
     let test = simulate_random(&SimConfig { seed: 77, ..cfg }, 400).unwrap();
     Fixture { model, test }
 }

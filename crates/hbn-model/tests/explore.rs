@@ -3,7 +3,7 @@
 //! where random steps do not, planning without a robot, resuming from a first batch, errors.
 
 use hbn_model::explore::{ExploreError, ExploreParams, Explorer, Phase, Strategy};
-use hbn_model::{HbnModel, HbnParams, Sequence, Signal};
+use hbn_model::{HbnParams, HysteresisModel, Sequence, Signal};
 use hbn_sim::{SimConfig, Simulator, SystemKind};
 
 /// Small training parameters so the tests run in seconds.
@@ -223,7 +223,7 @@ fn resuming_from_a_first_batch_continues_its_last_run() {
         ..HbnParams::default()
     };
     let seqs = [Sequence::new(&batch.u, &batch.x, &batch.y)];
-    let model = HbnModel::fit(&seqs, &params).unwrap();
+    let model = HysteresisModel::fit(&seqs, &params).unwrap();
     let e = Explorer::resume(ExploreParams::new(0.0, 1.0, 0.02), &model, &seqs).unwrap();
     assert!(matches!(e.phase(), Phase::Seeking { .. }));
     // The model's own parameters: the configuration it was trained as (with `validation = 0`

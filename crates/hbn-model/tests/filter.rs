@@ -2,11 +2,11 @@
 //! measurement like it, and a trained model file depends only on data and parameters.
 
 use hbn_core::{Flags, Mode};
-use hbn_model::{Filter, HbnModel, HbnParams, Sequence};
+use hbn_model::{Filter, HbnParams, HysteresisModel, Sequence};
 use hbn_sim::{SimConfig, SystemKind, simulate_random};
 use std::sync::Arc;
 
-fn model() -> (HbnModel, hbn_sim::Trajectory) {
+fn model() -> (HysteresisModel, hbn_sim::Trajectory) {
     let cfg = SimConfig {
         noise_gain: 1.0,
         ..SimConfig::new(SystemKind::Duhem)
@@ -18,7 +18,7 @@ fn model() -> (HbnModel, hbn_sim::Trajectory) {
         max_iters: 40,
         ..HbnParams::default()
     };
-    let m = HbnModel::fit(&[Sequence::new(&train.u, &train.x, &train.y)], &params).unwrap();
+    let m = HysteresisModel::fit(&[Sequence::new(&train.u, &train.x, &train.y)], &params).unwrap();
     let mut test = simulate_random(&SimConfig { seed: 9, ..cfg }, 500).unwrap();
     // Drop-outs: the guard paths must agree too.
     test.u[40] = f64::NAN;
@@ -104,7 +104,7 @@ fn model_files_depend_only_on_data_and_parameters() {
     let dir = tempfile::tempdir().unwrap();
     let f = dir.path().join("m.hbn");
     a.save(&f).unwrap();
-    let back = HbnModel::load(&f).unwrap();
+    let back = HysteresisModel::load(&f).unwrap();
     assert_eq!(back.to_json().unwrap(), a.to_json().unwrap());
     // Every start of both GPs is accounted for, with why it stopped.
     assert_eq!(back.summary().starts.len(), 2);

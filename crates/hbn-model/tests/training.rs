@@ -4,7 +4,7 @@
 //! session 21). The sparse GP's: its tolerance sits above the bound's rounding noise
 //! (docs/sparse.md, session 22).
 
-use hbn_model::{HbnModel, HbnParams, Sequence};
+use hbn_model::{HbnParams, HysteresisModel, Sequence};
 use hbn_sim::{
     DEFAULT_MAX_INCREMENT, InputKind, SimConfig, SystemKind, generate_input, simulate,
     simulate_random,
@@ -24,7 +24,8 @@ fn the_exact_search_ends_on_the_ridge_of_smooth_data() {
         validation: 0.0,
         ..HbnParams::default()
     };
-    let model = HbnModel::fit(&[Sequence::new(&train.u, &train.x, &train.y)], &params).unwrap();
+    let model =
+        HysteresisModel::fit(&[Sequence::new(&train.u, &train.x, &train.y)], &params).unwrap();
     let report = model.transition().report();
     assert!(
         report.evaluations < 300,
@@ -64,7 +65,7 @@ fn the_sparse_search_ends_above_the_bounds_rounding_noise() {
         select: hbn_model::Selection::default(),
         ..HbnParams::default()
     };
-    let model = HbnModel::fit(&seqs, &params).unwrap();
+    let model = HysteresisModel::fit(&seqs, &params).unwrap();
     // The transition GP's search: 94 evaluations, 148 with the old tolerance.
     let report = model.transition().report();
     assert!(

@@ -8,7 +8,7 @@
 //! thesis: one training input repeated 10 times) or `varied` (10 runs with their own inputs).
 use hbn_core::Mode;
 use hbn_model::metrics::{calibration, nrmse};
-use hbn_model::{HbnModel, HbnParams, Increments};
+use hbn_model::{HbnParams, HysteresisModel, Increments};
 use hbn_pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
 use hbn_pipeline::sequences;
 use hbn_sim::SystemKind;
@@ -71,7 +71,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 };
                 for (name, params) in variants(lever, &base)? {
                     let t0 = std::time::Instant::now();
-                    let model = HbnModel::fit(&sequences(&train), &params)?;
+                    let model = HysteresisModel::fit(&sequences(&train), &params)?;
                     let seconds = t0.elapsed().as_secs_f64();
                     let mut row = json!({
                         "system": system.name(), "gain": gain, "seed": seed,

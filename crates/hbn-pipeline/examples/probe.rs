@@ -2,7 +2,7 @@
 //! `MAX_SIGNAL_VARIANCE=v`,
 //! `KERNEL=name` and `STRIDE=k` in the environment change the model and the printout.
 use hbn_core::Mode;
-use hbn_model::{HbnModel, HbnParams};
+use hbn_model::{HbnParams, HysteresisModel};
 use hbn_pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
 use hbn_pipeline::sequences;
 
@@ -49,7 +49,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         params.transition_kernel = k.parse()?;
         params.sensor_kernel = k.parse()?;
     }
-    let model = HbnModel::fit(&sequences(&train), &params)?;
+    let model = HysteresisModel::fit(&sequences(&train), &params)?;
     let open = model.simulate_open_loop(&test.u)?;
     println!("warnings {:?}", model.summary().warnings);
     println!(

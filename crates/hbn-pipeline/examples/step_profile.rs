@@ -2,7 +2,7 @@
 //! for a fixed number of samples so `perf record -D` can attach after the fit:
 //! `perf record -D 7000 target/release/examples/step_profile [ekf|ekf-blr]`.
 use hbn_core::{Estimator, Mode};
-use hbn_model::{HbnModel, HbnParams};
+use hbn_model::{HbnParams, HysteresisModel};
 use hbn_pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
 use hbn_pipeline::sequences;
 use hbn_sim::SystemKind;
@@ -25,7 +25,7 @@ fn main() {
         max_iters: 50,
         ..HbnParams::default()
     };
-    let model = HbnModel::fit(&seqs, &params).unwrap();
+    let model = HysteresisModel::fit(&seqs, &params).unwrap();
     let view = model.view().unwrap();
     let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
     let mode = match std::env::args().nth(1).as_deref() {

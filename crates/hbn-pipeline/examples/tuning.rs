@@ -8,7 +8,7 @@
 //! noise) or `varied` (10 runs, each with its own input, as logs of a robot would be).
 use hbn_core::Mode;
 use hbn_model::metrics::{calibration, nrmse};
-use hbn_model::{HbnModel, HbnParams};
+use hbn_model::{HbnParams, HysteresisModel};
 use hbn_pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
 use hbn_pipeline::sequences;
 use hbn_sim::SystemKind;
@@ -55,7 +55,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         ..cfg.params.clone()
                     };
                     let t0 = std::time::Instant::now();
-                    let model = HbnModel::fit(&sequences(&train), &params)?;
+                    let model = HysteresisModel::fit(&sequences(&train), &params)?;
                     let seconds = t0.elapsed().as_secs_f64();
                     let mut row = json!({
                         "system": system.name(), "gain": gain, "seed": seed,

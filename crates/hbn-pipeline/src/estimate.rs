@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use hbn_core::{Flags, Mode};
 use hbn_io::SignalPath;
-use hbn_model::{Estimate, HbnModel};
+use hbn_model::{Estimate, HysteresisModel};
 use serde_json::{Value, json};
 
 use crate::error::{LogOption, PipelineError};
@@ -35,7 +35,11 @@ pub struct SignalChoice {
 
 impl SignalChoice {
     /// The path of one signal for `model`.
-    pub fn resolve(&self, model: &HbnModel, which: LogOption) -> Result<SignalPath, PipelineError> {
+    pub fn resolve(
+        &self,
+        model: &HysteresisModel,
+        which: LogOption,
+    ) -> Result<SignalPath, PipelineError> {
         let s = model.signals();
         let (given, stored, default) = match which {
             LogOption::Input => (&self.input, &s.input.path, DEFAULT_INPUT),
@@ -238,11 +242,11 @@ impl Outputs {
 }
 
 /// Reads `u` and `y` from `file` at the model's rate and runs the filter in `mode` over them
-/// ([`HbnModel::estimate`]); then writes `outputs` (everything is rendered first, so an error
+/// ([`HysteresisModel::estimate`]); then writes `outputs` (everything is rendered first, so an error
 /// leaves no file behind). `log_options.rate_hz` must be unset or the model's rate: a model
 /// only estimates on its own grid.
 pub fn estimate_log(
-    model: &HbnModel,
+    model: &HysteresisModel,
     file: &Path,
     signals: &SignalChoice,
     mode: Mode,
@@ -260,7 +264,7 @@ pub fn estimate_log(
 /// is computed before a file is written, and an error while writing removes the files this
 /// call already wrote.
 pub fn estimate_log_modes(
-    model: &HbnModel,
+    model: &HysteresisModel,
     file: &Path,
     signals: &SignalChoice,
     modes: &[Mode],
@@ -303,7 +307,7 @@ pub fn estimate_log_modes(
 /// Reads the signals `which` (in that order) of `file` for `model`, on the model's grid.
 /// `log_options.rate_hz` must be unset or the model's rate.
 pub fn read_at_model_rate(
-    model: &HbnModel,
+    model: &HysteresisModel,
     file: &Path,
     signals: &SignalChoice,
     which: &[LogOption],

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use hbn_core::Mode;
 use hbn_model::metrics::{Calibration, calibration, nrmse, rmse};
-use hbn_model::{Estimate, HbnModel};
+use hbn_model::{Estimate, HysteresisModel};
 use serde_json::{Map, Value, json};
 
 use crate::error::{LogOption, PipelineError};
@@ -97,7 +97,7 @@ impl Evaluation {
 /// Reads `u`, `x`, `y` from `file` at the model's rate, runs each of `modes` and the open-loop
 /// simulation, and scores them against the logged `x`.
 pub fn evaluate_log(
-    model: &HbnModel,
+    model: &HysteresisModel,
     file: &Path,
     signals: &SignalChoice,
     modes: &[Mode],

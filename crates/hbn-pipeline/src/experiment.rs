@@ -11,7 +11,7 @@ use crate::log::{Event, Observer};
 use crate::sim::sequences;
 use hbn_core::Mode;
 use hbn_model::metrics::{Calibration, calibration, correlation, nrmse, rmse};
-use hbn_model::{HbnModel, HbnParams};
+use hbn_model::{HbnParams, HysteresisModel};
 use hbn_sim::{InputKind, SimConfig, SystemKind, Trajectory, generate_input, simulate};
 use serde::Serialize;
 
@@ -152,7 +152,7 @@ pub fn run_case(
         seed,
         ..cfg.params.clone()
     };
-    let model = HbnModel::fit(&sequences(&train), &params)?;
+    let model = HysteresisModel::fit(&sequences(&train), &params)?;
     let test = test_trajectory(system, noise_gain, seed, cfg)?;
     let ekf = model.estimate(&test.u, &test.y, Mode::Ekf)?;
     let blr = model.estimate(&test.u, &test.y, Mode::EkfBlr)?;

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use hbn_io::{Encoding, ScalarTopic};
 use hbn_model::explore::{ExploreError, ExploreParams, Explorer};
-use hbn_model::{HbnModel, Sequence};
+use hbn_model::{HysteresisModel, Sequence};
 
 use crate::error::{LogOption, PipelineError};
 use crate::estimate::{SignalChoice, read_at_model_rate};
@@ -92,7 +92,7 @@ pub struct PlanRequest {
 /// Reads the logs of `request` (u, x, y) on the model's grid and plans `request.steps`
 /// inputs continuing the last log.
 pub fn plan_from_logs(
-    model: &HbnModel,
+    model: &HysteresisModel,
     request: &PlanRequest,
     observe: &mut Observer<'_>,
 ) -> Result<Schedule, PipelineError> {

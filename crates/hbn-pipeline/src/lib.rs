@@ -7,7 +7,7 @@
 //!    and checks gaps ([`hbn_io::resample`]) under [`LogOptions`] (time source, largest gap,
 //!    rate), checked once ([`LogOptions::check`]);
 //! 2. [`train_from_logs`] trains the HBN on the grid and keeps the rate in the model
-//!    ([`hbn_model::HbnModel::fit_checked`]);
+//!    ([`hbn_model::HysteresisModel::fit_checked`]);
 //! 3. [`estimate_log`] runs the filter over a log at the model's rate and writes the estimate
 //!    as CSV or MCAP ([`Outputs`], atomically through [`hbn_fs`]); [`evaluate_log`] scores it
 //!    against a logged state.

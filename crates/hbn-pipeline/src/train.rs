@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use hbn_io::SignalPath;
-use hbn_model::{HbnModel, HbnParams, Problem, Sequence};
+use hbn_model::{HbnParams, HysteresisModel, Problem, Sequence};
 
 use crate::error::{LogOption, OptionError, PipelineError};
 use crate::log::{Event, LogData, LogOptions, Observer, load_log};
@@ -53,7 +53,7 @@ impl Default for TrainSignals {
 #[derive(Clone, Debug)]
 pub struct Trained {
     /// The model (its rate is the logs' grid rate, its signals the paths read).
-    pub model: HbnModel,
+    pub model: HysteresisModel,
     /// The logs on their grid, one trajectory each.
     pub logs: Vec<LogData>,
 }
@@ -124,7 +124,7 @@ pub fn train_from_logs(
         .iter()
         .map(|d| Sequence::new(d.column(0), d.column(1), d.column(2)))
         .collect();
-    let model = HbnModel::fit_checked(&seqs, &params, &mut |gp, progress| {
+    let model = HysteresisModel::fit_checked(&seqs, &params, &mut |gp, progress| {
         observe(Event::Training { gp, progress })
     })?;
     Ok(Trained { model, logs: data })
