@@ -491,7 +491,7 @@ impl<'a> Neighbourhood<'a> {
 /// nearer than the farthest kept (the later one of equal distances, which has the higher
 /// index) replaces it: the farthest leaves, those after it move up one place, and the new
 /// one goes last, so the order stays that of the index. No sort: most windows hold about as
-/// many samples as the buffer, and a sorted insertion shifted half the buffer for each.
+/// many samples as the buffer, and a sorted insertion would shift half the buffer for each.
 struct Nearest<'o> {
     dist: [f64; BLR_MAX_NEIGHBOURS],
     out: &'o mut [u32],

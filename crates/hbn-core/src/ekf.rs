@@ -65,7 +65,7 @@ impl Flags {
     /// The state left its box and was clamped.
     pub const STATE_CLAMPED: u32 = 1 << 7;
     /// The innovation exceeded the outlier gate ([`EkfConfig::nis_gate`]); the measurement
-    /// was down-weighted to the gate's NIS (the name is from when it was skipped).
+    /// was down-weighted to the gate's NIS, not skipped (despite the flag's name).
     pub const OUTLIER_REJECTED: u32 = 1 << 8;
     /// EKF+BLR: the transition window held no training samples (prior used).
     pub const BLR_EMPTY_TRANSITION: u32 = 1 << 9;
@@ -278,8 +278,8 @@ impl EkfConfig {
             ));
         }
         // The reported standard deviation is `std_scale * sqrt(P_11)` with `P_11 <= p_max`:
-        // it must stay finite (a huge std_scale gave x_std = inf; found by the `step` fuzz
-        // target).
+        // it must stay finite (a huge std_scale gives x_std = inf; the `step` fuzz target
+        // reaches it).
         if !(self.std_scale * sqrt(self.p_max)).is_finite() {
             return Err(CoreError::InvalidSpec(
                 "std_scale * sqrt(p_max) must be finite (the reported standard deviation)",
@@ -317,7 +317,7 @@ pub const SENSOR_DIM: usize = 3;
 
 /// Inputs of a sensor GP of the state only, `[x_{k-1}, x_k]`: the output's level is a
 /// function of the state's, so a filter can recover a drifted state from `y` alone (the
-/// thesis' sensor, which also reads `y_{k-1}`, can learn increments only; docs/results.md,
+/// thesis' sensor, which also reads `y_{k-1}`, can learn increments only; docs/math.md,
 /// "A sensor of the state only").
 pub const SENSOR_STATE_DIM: usize = 2;
 
@@ -435,8 +435,8 @@ impl<'a> InitPrior<'a> {
         let n = k.max(1) as f64;
         let mean = picked().sum::<f64>() / n;
         let var = picked().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n;
-        // Finite pairs near f64::MAX can still overflow the sums (found by the `step` fuzz
-        // target): no prior then, and the caller falls back to its settings.
+        // Finite pairs near f64::MAX can still overflow the sums (the `step` fuzz target
+        // reaches them): no prior then, and the caller falls back to its settings.
         if mean.is_finite() && var.is_finite() {
             Some((mean, var.max(self.var_floor)))
         } else {
@@ -803,7 +803,7 @@ impl<'m> Ekf<'m> {
 
     /// `R` when the sensor GP could not be evaluated (and at the first step): its learned
     /// noise, scaled and floored; the floor if the scaled noise overflows (as in `noises`: a
-    /// huge `r_scale` gave `R = inf`, found by the `step` fuzz target).
+    /// huge `r_scale` gives `R = inf`, which the `step` fuzz target reaches).
     fn fallback_r(&self) -> f64 {
         let cfg = &self.config;
         let r = cfg.r_scale * self.model.sensor.noise_variance().max(cfg.r_model_floor);
@@ -984,8 +984,8 @@ impl<'m> Ekf<'m> {
             };
             // The mean is that of the points clamped to the box (the state's support); the
             // covariance is that of the points as they are. Clamping them for the covariance
-            // too collapsed their spread where the state was pinned against its bound, so the
-            // reported std fell to the floor exactly where the estimate was worst (measured: a
+            // too would collapse their spread where the state is pinned against its bound, so
+            // the reported std would fall to the floor exactly where the estimate is worst (a
             // std of 5e-7 and a mean NEES of 5e8 on a noise-free Preisach run).
             *point = Vector3::new(xk, a, sk);
             *boxed = Vector3::new(x_in, a, clamp_to(sk, cfg.y_bounds.0, cfg.y_bounds.1));
@@ -1225,7 +1225,7 @@ fn update(
     flags: &mut u32,
 ) -> (f64, f64, f64) {
     // `P_ss + R` of two finite variances can still overflow (`P_ss` near `p_max` and a huge
-    // `R`; found by the `step` fuzz target): saturated at the largest finite value, it is a
+    // `R`; the `step` fuzz target reaches it): saturated at the largest finite value, it is a
     // measurement that carries no information, as it should be.
     let s_var = saturating_sum(st.p.m33, r);
     if !y_k.is_finite() {
@@ -1336,7 +1336,7 @@ fn bound_covariance(p: Matrix3<f64>, lo: f64, hi: f64, flags: &mut u32) -> Matri
 /// `p - lo I` has an `L D L^T` factorisation with `D > 0` (so it is positive definite), and
 /// the trace, the sum of the then positive eigenvalues, is at most `hi`. It decides most
 /// steps, whose `x_k` and `x_{k-1}` are too correlated for the Gershgorin test, at a fraction
-/// of a Jacobi sweep (perf: the eigen-solver took 11% of a sparse m = 64 step before it).
+/// of a Jacobi sweep (without it the eigen-solver takes 11% of a sparse m = 64 step).
 /// `false` sends the caller to the eigen-decomposition, which decides exactly.
 fn inside_by_ldl(p: &Matrix3<f64>, lo: f64, hi: f64) -> bool {
     if !(lo >= 0.0 && p.trace() <= hi) {
@@ -1814,7 +1814,7 @@ mod tests {
     fn the_ldl_exit_only_accepts_covariances_inside_the_bounds() {
         // Random symmetric matrices, many of them near the bounds: whenever the cheap test
         // says "inside", the eigenvalues (Jacobi) are inside; and it decides the correlated
-        // case that motivated it, where Gershgorin's discs reach below the floor.
+        // case it exists for, where Gershgorin's discs reach below the floor.
         let mut rng = Rng::new(7);
         let (lo, hi) = (1e-3, 10.0);
         let mut accepted = 0;
@@ -1938,7 +1938,7 @@ mod tests {
     #[test]
     fn init_prior_that_overflows_is_no_prior() {
         // Finite pairs whose mean (sum) or spread overflows: no prior, so the estimator starts
-        // from its settings instead of x = inf (a `step` fuzz target crash).
+        // from its settings instead of x = inf (a case the `step` fuzz target reaches).
         let big = [[0.0, f64::MAX], [0.1, f64::MAX]];
         assert_eq!(InitPrior::new(&big, 2, 1.0).unwrap().prior(0.0), None);
         let spread = [[0.0, f64::MAX], [0.1, -f64::MAX]];

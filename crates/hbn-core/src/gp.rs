@@ -151,7 +151,7 @@ pub struct GpParts<'a> {
     /// `alpha + alpha_lo`. Models leave it empty; model tables ([`crate::tables`]) split each
     /// weight into an `f32`-representable high part and the rest, so that an `f32` export keeps
     /// the weights to about 48 bits (the mean `k^T alpha` cancels: rounding `alpha` alone to
-    /// `f32` moved a sparse model's estimate by 5% of the range of `x`).
+    /// `f32` moves a sparse model's estimate by 5% of the range of `x`).
     pub alpha_lo: &'a [f64],
     /// The variance factors (exact or sparse).
     pub variance: Variance<'a>,
@@ -618,8 +618,8 @@ pub const fn predict_scratch(n: usize, sparse: bool, want: Want) -> usize {
 /// rows are short (`m <= 256`), so what costs is not the arithmetic but the work at each row's
 /// ends: row `i` sums its first `4 floor(i / 4)` columns in one four-lane accumulator (no tail
 /// loop), then adds its last one to four products in column order. With AVX2, four rows go at
-/// once in intrinsics (`simd::lower_packed_times_rows4`), to the same bits. Measured with
-/// `cargo bench --bench gp -- triangular` (docs/benchmarks.md).
+/// once in intrinsics (`simd::lower_packed_times_rows4`), to the same bits.
+/// `cargo bench --bench gp -- triangular` measures it.
 pub fn lower_packed_times(t_packed: &[f64], k: &[f64], out: &mut [f64]) {
     let done = crate::simd::lower_packed_times_rows4(t_packed, k, out);
     lower_packed_times_from(t_packed, k, out, done);
@@ -803,8 +803,8 @@ impl Accum<'_> {
         }
         let mut mean = 0.0;
         let mut gsum = [0.0; D];
-        // Blocks by index and checked slices: a zip of `chunks` iterators kept a division
-        // (by the chunk size) that the link-time no-panic proof could not discharge.
+        // Blocks by index and checked slices: a zip of `chunks` iterators keeps a division
+        // (by the chunk size) that the link-time no-panic proof cannot discharge.
         let n = kvec.len().min(self.alpha.len());
         let mut first = 0;
         while first < n {
@@ -996,9 +996,9 @@ fn forward_substitute_inline(l_packed: &[f64], k: &[f64], v: &mut [f64]) -> Resu
 
 /// The dot products of four rows with one vector `b` (all cut to the shortest length). The
 /// rows go in pairs: each row keeps eight partial sums over chunks of eight, as [`dot`] does,
-/// so each vectorises along the row, and a pair shares every load of `b`. (Measured on the
-/// exact n = 500 EKF step: 56-59 us, against 61-66 us for the four rows at once with four
-/// sums each, which LLVM vectorised across the rows, and 72 us one row at a time.)
+/// so each vectorises along the row, and a pair shares every load of `b`. (On the exact
+/// n = 500 EKF step this is about 10% faster than the four rows at once with four sums each,
+/// which LLVM vectorises across the rows, and about 20% faster than one row at a time.)
 #[inline(always)]
 fn dot4(rows: [&[f64]; 4], b: &[f64]) -> [f64; 4] {
     let n = rows.iter().fold(b.len(), |n, r| n.min(r.len()));

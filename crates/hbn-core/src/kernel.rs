@@ -247,7 +247,7 @@ pub fn profiles_and_slopes(profile: Profile, r2: &[f64], f: &mut [f64], df: &mut
 
 /// [`profiles_and_slopes`] with the caller's square root: training on a host passes
 /// `f64::sqrt`, which the compiler vectorises (`libm`'s is one scalar instruction in inline
-/// assembly, and was a fifth of a sparse training run's kernel blocks).
+/// assembly, and takes a fifth of a sparse training run's kernel blocks).
 #[inline(always)]
 pub fn profiles_and_slopes_with(
     profile: Profile,
@@ -317,9 +317,9 @@ pub const EXP_FLOOR: f64 = -708.0;
 /// value on `[EXP_FLOOR, 0]`; arguments below `EXP_FLOOR` give `exp(EXP_FLOOR)`, positive
 /// ones `1`.
 ///
-/// Straight-line code (no branches, no table), so a loop over support points vectorises. It
-/// replaced `libm::exp`, which took a third of a sparse m = 64 estimator step (perf, 128
-/// calls per step). The method is Cody and Waite's: `x = k ln 2 + r` with `|r| <= ln 2 / 2`,
+/// Straight-line code (no branches, no table), so a loop over support points vectorises
+/// (`libm::exp` in its place takes a third of a sparse m = 64 estimator step, 128 calls per
+/// step). The method is Cody and Waite's: `x = k ln 2 + r` with `|r| <= ln 2 / 2`,
 /// `k` rounded to nearest by adding and subtracting `1.5 * 2^52` (whose bit pattern then
 /// holds `k`), `exp(r) = 1 + r + r^2 q(r)` with a degree-9 polynomial `q` (error below
 /// `2e-17` relative), and `2^k` assembled in the exponent bits.

@@ -16,7 +16,7 @@
 //! than `2 r`. With plays, the transition GP reads
 //! `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}, p^1_{k-1}, .., p^m_{k-1}]`. The plays depend on the
 //! input alone, so the filter's Jacobians and noise are those of the HBN without them.
-//! `docs/memory.md` has the measurements that chose the default radii.
+//! `docs/memory.md` explains how the radii are chosen.
 //!
 //! Beside the plays, a model may have **lags**: first-order low-pass filters of the input,
 //! `l_k = l_{k-1} + a (u_k - l_{k-1})`, `l_0 = u_0`, with `a = 1 - exp(-dt / tau)` for a time

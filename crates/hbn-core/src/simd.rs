@@ -8,13 +8,13 @@
 //! on every x86-64 CPU. Other targets (a firmware's ARM core, say) run the closure as
 //! it is, with whatever the build enables.
 //!
-//! What it buys is measured in `docs/benchmarks.md` ("Vector width chosen at run time").
+//! What it buys is measured in `docs/performance.md`.
 //!
 //! It also holds [`sqrt`], the square root the core uses everywhere: `libm`'s is legacy-SSE
 //! inline assembly, which stalls inside the AVX2 code on some CPUs.
 //!
 //! And it holds one kernel written with AVX2 intrinsics, the sparse GP's `T k`
-//! (`lower_packed_times_rows4`), where the compiler's own vectorisation chose a poor layout.
+//! (`lower_packed_times_rows4`), where the compiler's own vectorisation chooses a poor layout.
 //!
 //! This module holds the crate's only `unsafe` code: the calls of `#[target_feature]` functions,
 //! made only after the CPU was seen to support the feature, the SSE2 square root (SSE2 is
@@ -60,10 +60,9 @@ pub fn vectorised<R>(f: impl FnOnce() -> R) -> R {
 /// On x86-64, `libm::sqrt` is the legacy SSE `sqrtsd` in inline assembly, which the compiler
 /// cannot re-encode. Inside [`vectorised`]'s AVX2 code each such instruction mixes the two
 /// encodings, and on some CPUs that stalls every one of them: on an AMD EPYC (Zen 3) machine
-/// the exact GP's EKF step took 181 us with it against about 40 us without (session 26,
-/// `docs/benchmarks.md`). Here the square root is the compiler's own operation (through
-/// `core::arch`), which it encodes as the code around it needs, and which a loop can
-/// vectorise. Other targets use `libm::sqrt`.
+/// the exact GP's EKF step takes about 4x longer with it. Here the square root is the
+/// compiler's own operation (through `core::arch`), which it encodes as the code around it
+/// needs, and which a loop can vectorise. Other targets use `libm::sqrt`.
 #[inline(always)]
 pub fn sqrt(x: f64) -> f64 {
     #[cfg(target_arch = "x86_64")]
@@ -86,7 +85,7 @@ pub fn sqrt(x: f64) -> f64 {
 /// The rows go four at a time. Each row sums the columns before its block (a multiple of
 /// four) in one four-lane accumulator, then adds the block's triangle column by column: the
 /// order of `crate::gp`'s row-by-row loop, so the bits are the same (multiplications and
-/// additions stay separate, never fused). The compiler's own vectorisation of that loop paired
+/// additions stay separate, never fused). The compiler's own vectorisation of that loop pairs
 /// lanes across rows with shuffles, and one row at a time waits on its accumulator.
 pub(crate) fn lower_packed_times_rows4(t_packed: &[f64], k: &[f64], out: &mut [f64]) -> usize {
     #[cfg(target_arch = "x86_64")]
@@ -210,9 +209,8 @@ mod tests {
         assert_eq!(wide.map(f64::to_bits), narrow.map(f64::to_bits));
     }
 
-    /// `sqrt` is the correctly rounded square root everywhere (the bits of `libm::sqrt`, which
-    /// the filter used before), in the wide code as in the narrow, on ordinary, tiny, huge and
-    /// special arguments.
+    /// `sqrt` is the correctly rounded square root everywhere (the bits of `libm::sqrt`), in the
+    /// wide code as in the narrow, on ordinary, tiny, huge and special arguments.
     #[test]
     fn sqrt_gives_the_bits_of_libm_in_wide_and_narrow_code() {
         let mut args = vec![

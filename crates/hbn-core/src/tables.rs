@@ -19,7 +19,7 @@
 //! ([`split_ranges`]): an `f32` export stores each of them as two `f32` parts, the nearest
 //! `f32` value in its place and the rest after all the reals, and [`widen`] adds the two back
 //! (about 48 bits). Rounded to 24 bits, the inputs of a GP whose kernel rides a near-linear
-//! ridge (a large signal variance and long length scales) moved a model's estimate by up to
+//! ridge (a large signal variance and long length scales) move a model's estimate by up to
 //! 23% of the range of `x`; the O(n d) values cost little next to the O(n^2) factor.
 //!
 //! The local training data of EKF+BLR is only written for that mode: the EKF and the UKF read
@@ -34,12 +34,13 @@ use crate::play::Plays;
 
 /// First value of every layout: `"HBN1"` as little-endian bytes.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"HBN1");
-/// Format version written by [`encode`] and read by [`Tables::model`] (3 adds the play
-/// operators after the prior of `x_0`; 4 adds each GP's linear mean, its slope count after
-/// the whitening length and its slopes after the output scalars; tables of version 2 are read
-/// as having no plays, of versions 2 and 3 as having constant means; 5 adds the lags' count and
-/// coefficients after the plays, and tables before it are read as having no lags; 6 adds the
-/// split ranges after the version, see [`split_ranges`]).
+/// Format version written by [`encode`]. [`Tables::model`] reads every version from
+/// [`OLDEST_VERSION`] to this one; a layout holds only the blocks its version defines, and the
+/// others read as empty: the play operators after the prior of `x_0` (version 3 and above),
+/// each GP's linear mean, its slope count after the whitening length and its slopes after the
+/// output scalars (4 and above, else a constant mean), the lags' count and coefficients after
+/// the plays (5 and above), and the split ranges after the version (6, see
+/// [`split_ranges`]).
 pub const VERSION: u32 = 6;
 /// Oldest format version [`Tables::model`] reads.
 pub const OLDEST_VERSION: u32 = 2;
@@ -85,7 +86,7 @@ pub struct TableModel<'a> {
 pub const MAX_SPLIT_RANGES: usize = 8;
 
 /// The ranges of `reals` (as `start..end` indices) that an `f32` export stores in two parts,
-/// in increasing order, read from a layout (none before format version 6).
+/// in increasing order, read from a layout (none in a layout of format version 5 or lower).
 #[derive(Clone, Copy, Debug)]
 pub struct SplitRanges<'a> {
     pairs: &'a [[u32; 2]],
@@ -555,8 +556,8 @@ impl<'a> Reader<'a> {
         Ok(version)
     }
 
-    /// The split ranges as `(start, len)` pairs (version 6 on), checked to be increasing and
-    /// apart.
+    /// The split ranges as `(start, len)` pairs (version 6 and above), checked to be
+    /// increasing and apart.
     fn split_pairs(&mut self, version: u32) -> Result<&'a [[u32; 2]], CoreError> {
         if version < 6 {
             return Ok(&[]);
@@ -600,7 +601,8 @@ pub fn scratch_len(layout: &[u32]) -> Result<usize, CoreError> {
     r.ints(4)?;
     let mut len = 0;
     // The two GPs' integers are adjacent: profile, metric, dim, warp units, direction (2),
-    // n, sparse, mean input, whitening length, and (version 4) the linear mean's length.
+    // n, sparse, mean input, whitening length, and (version 4 and above) the linear mean's
+    // length.
     for _ in 0..2 {
         r.ints(6)?;
         let n = r.size()?;

@@ -10,7 +10,7 @@ use hbn_core::gp::{GpView, Prediction, Want};
 use hbn_core::{CoreError, Estimator, StepOutput};
 use no_panic::no_panic;
 
-/// The estimator step: `Estimator::step`, the function issue 12 asks to prove panic-free.
+/// The estimator step: `Estimator::step`, the function this crate proves panic-free.
 #[no_panic]
 pub fn step(est: &mut Estimator<'_, '_>, u: f64, y: f64) -> StepOutput {
     est.step(u, y)
