@@ -438,9 +438,8 @@ pub(crate) struct NegLml<'b, O: Objective>(pub &'b O);
 /// Cost the optimiser sees where the objective cannot be evaluated (a covariance that is not
 /// positive definite even with jitter, or a non-finite value): large enough that the line
 /// search backs off, small enough that its cubic interpolation cannot overflow. Without it,
-/// one failed trial step ended the whole start at its initial point (the first L-BFGS step
-/// was as long as the gradient, easily thousands of log-units, until session 30; it is now of
-/// unit length, which can still leave the region where the covariance factors).
+/// one failed trial step would end the whole start at its initial point (a first L-BFGS step
+/// of unit length can still leave the region where the covariance factors).
 const FAILED_COST: f64 = 1e150;
 
 impl<O: Objective> argmin::core::CostFunction for NegLml<'_, O> {

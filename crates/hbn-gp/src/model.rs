@@ -9,10 +9,11 @@ use std::path::Path;
 
 /// Format tag of a standalone GP file.
 pub const GP_FORMAT: &str = "hbn-gp";
-/// Current GP file format version (2 added the sparse GP; 3 leaves out the exact GP's
-/// Cholesky factor, recomputed on load; 4 stores a sparse GP's one folded variance factor
-/// instead of two; 5 adds the slopes of a linear prior mean, which older builds would ignore;
-/// versions 1 to 4 still load).
+/// GP file format version written. Files of every version from [`GP_FORMAT_OLDEST`] to this
+/// one load: a sparse GP needs version 2 or above; versions 1 and 2 hold the exact GP's
+/// Cholesky factor, which versions 3 and above leave out and loading recomputes; versions 2
+/// and 3 hold a sparse GP's variance as two factors, which loading folds into one; only
+/// version 5 holds the slopes of a linear prior mean.
 pub const GP_FORMAT_VERSION: u32 = 5;
 /// Oldest GP file format version this build reads.
 pub const GP_FORMAT_OLDEST: u32 = 1;
@@ -59,7 +60,7 @@ pub struct TrainingReport {
     /// Evaluations whose Cholesky needed jitter.
     pub jitter_evaluations: usize,
     /// Largest jitter used during optimisation, relative to the mean diagonal of the matrix
-    /// factored (model files from before 2026-11-24 hold the absolute jitter).
+    /// factored.
     pub max_jitter: f64,
     /// Jitter in the final factor (added to the noise variance on the diagonal).
     pub final_jitter: f64,
@@ -178,7 +179,7 @@ pub struct GaussianProcess {
     pub(crate) output_mean: f64,
     pub(crate) output_scale: f64,
     /// Slopes of the linear prior mean in raw units ([`crate::MeanFunction::Linear`]); empty
-    /// for a constant mean (and in files from before the option).
+    /// for a constant mean (and in files of format 4 and older).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub(crate) linear: Vec<f64>,
     pub(crate) support_x: Vec<f64>,
@@ -550,7 +551,7 @@ mod tests {
     }
 
     #[test]
-    fn files_of_format_2_with_the_factor_still_load_as_written() {
+    fn files_of_format_2_with_the_factor_load_as_written() {
         let gp = trained();
         let mut value: serde_json::Value = serde_json::from_str(&gp.to_json().unwrap()).unwrap();
         value["version"] = 2.into();

@@ -28,8 +28,8 @@ pub enum SubsetPolicy {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum MeanFunction {
-    /// The targets' mean (with `normalize`; zero without). Model files from before this
-    /// option read as this.
+    /// The targets' mean (with `normalize`; zero without). Parameters and model files
+    /// without the field read as this.
     #[default]
     Constant,
     /// The targets' linear least-squares fit on the inputs.
@@ -170,7 +170,7 @@ pub struct GpParams {
     /// unused); `None` trains the exact GP.
     #[serde(default)]
     pub sparse: Option<SparseParams>,
-    /// The prior mean ([`MeanFunction`]); parameter sets from before this option read as
+    /// The prior mean ([`MeanFunction`]); parameter sets without the field read as
     /// [`MeanFunction::Constant`].
     #[serde(default)]
     pub mean: MeanFunction,

@@ -179,7 +179,7 @@ pub(crate) fn lower_inverse(l: faer::MatRef<'_, f64>) -> Mat<f64> {
 ///
 /// Since `Sigma = A^T B^{-1} A`, `K_mm^{-1} - Sigma = A^T M A` with `M = I - G^T G = I - B^{-1}`,
 /// whose eigenvalues lie in `[0, 1)`: forming `M` subtracts numbers of order 1, never two large
-/// quadratic forms (which is what the two-factor form `|A k|^2 - |G A k|^2` did at every
+/// quadratic forms (which the two-factor form `|A k|^2 - |G A k|^2` does at every
 /// prediction). With `J` the reversal permutation and `J M J = F F^T` (Cholesky), `M = U U^T` with
 /// `U = J F J` upper-triangular, so `R = U^T A` is lower-triangular and the variance is one packed
 /// triangular product, `k** - |R k|^2`. `M` is only semi-definite where the data do not inform an
@@ -1159,7 +1159,7 @@ pub(crate) fn fit_sparse(
         };
         // The per-sample tolerance for the hyperparameters; learning Z (`m d` more
         // parameters, each iteration gaining little) keeps the exact GP's absolute one: with
-        // the per-sample one, a learned-Z fit stopped below the fixed-Z fit it started from.
+        // the per-sample one, a learned-Z fit stops below the fixed-Z fit it starts from.
         let tolerance = |rows: usize| {
             if sp.optimize_inducing {
                 crate::train::COST_TOLERANCE

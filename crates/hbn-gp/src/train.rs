@@ -442,43 +442,43 @@ pub(crate) fn starting_point(
     Ok((theta0, noise0))
 }
 
-/// Runs L-BFGS from `params.n_starts` starts (the first at `theta0`/`noise0`, the rest
-/// random in `theta` and the noise; `tail`, e.g. inducing inputs, is appended unchanged) and
-/// returns the best optimised vector. Every start is recorded in `report` (the caller adds
-/// the objective's counters with [`TrainingReport::add_stats`]).
 /// Smallest per-iteration improvement of the exact GP's log marginal likelihood (nats) before
-/// a start ends. Measured (session 21, docs/tuning.md): with `1e-8` a start on the ridge of
-/// long length scales and a large signal variance that smooth data give went on for hundreds
-/// of evaluations to gain less than 0.001 nats (802 evaluations against 122 on a 1000-sample
-/// Bouc-Wen log, the same likelihood to three decimals); `1e-5` ends it there.
+/// a start ends. Smooth data give a ridge of long length scales and a large signal variance
+/// on which a start with `1e-8` goes on for hundreds of evaluations to gain less than 0.001
+/// nats (on a 1000-sample Bouc-Wen log, 802 evaluations against 122 with `1e-5`, the same
+/// likelihood to three decimals); `1e-5` ends it there.
 pub(crate) const EXACT_COST_TOLERANCE: f64 = 1e-5;
 /// The absolute tolerance of a sparse GP that learns its inducing inputs (`m d` more
 /// parameters, each iteration gaining little).
 pub(crate) const COST_TOLERANCE: f64 = 1e-8;
 /// The sparse bound's counterpart, per sample: its value grows with the sample count, and an
-/// absolute `1e-8` on a 10,000-sample search subset kept every start iterating to
-/// `max_iters` for changes far below what moves a hyperparameter. `1e-7` since session 22:
-/// the bound's own rounding noise is about `1e-8` of its value (measured: evaluations at the
-/// same point, as the line search closes in, differing by `8e-5` nats on a 3000-sample bound
-/// of 5630 nats), so `1e-8` per sample (`3e-5` nats there) sat below the noise and the
-/// line search went on for dozens of evaluations that changed the bound only in that noise
-/// (the demo's three sparse fits: 101, 170 and 60 evaluations, now 58, 50 and 50, the bounds
-/// within 0.002 nats).
+/// absolute `1e-8` on a 10,000-sample search subset keeps every start iterating to
+/// `max_iters` for changes far below what moves a hyperparameter. The bound's own rounding
+/// noise is about `1e-8` of its value (evaluations at the same point, as the line search
+/// closes in, differ by `8e-5` nats on a 3000-sample bound of 5630 nats), so `1e-8` per
+/// sample (`3e-5` nats there) lies below the noise, and the line search goes on for dozens
+/// of evaluations that change the bound only in that noise. With `1e-7` the demo's three
+/// sparse fits take 58, 50 and 50 evaluations (101, 170 and 60 with `1e-8`), their bounds
+/// within 0.002 nats.
 pub(crate) const COST_TOLERANCE_PER_SAMPLE: f64 = 1e-7;
 /// The stall tolerance per sample of the sparse bound's refinement on every sample (after the
 /// search, on a subset when there are more than [`crate::SparseParams::search_samples`]
 /// samples, and the inducing inputs chosen again at its optimum).
 /// The full bound's rounding noise grows with the sample count and with the signal variance:
-/// measured on the 100,000-sample benchmark (session 31), the sensor GP's refinement, its
-/// signal variance at the `1e5` box, gained 187,500.9 -> 187,519.1 nats in its first 8
-/// evaluations and then made 58 more whose values scattered by 0.2 nats while the best rose
-/// by 0.23 (about 7 s of the 30); `1e-7` per sample (0.01 nats) lay below that noise.
+/// on the 100,000-sample benchmark, the sensor GP's refinement, its signal variance at the
+/// `1e5` box, gains 187,500.9 -> 187,519.1 nats in its first 8 evaluations; with `1e-7` per
+/// sample (0.01 nats, below that noise) it then makes 58 more whose values scatter by
+/// 0.2 nats while the best rises by 0.23 (about 7 s of the 30).
 /// Three iterations that together gain less than `1e-6` nats per sample (0.1 nats on
-/// 100,000) end it ([`run_lbfgs_with_stall`]; one iteration's gain alone stopped that
+/// 100,000) end it ([`run_lbfgs_with_stall`]; one iteration's gain alone stops that
 /// benchmark's transition GP 28 nats short, in a valley it crosses slowly): the refinement
 /// exists for the tens of nats a subset's optimum leaves (34 for that transition GP).
 pub(crate) const REFINE_TOLERANCE_PER_SAMPLE: f64 = 1e-6;
 
+/// Runs L-BFGS from `params.n_starts` starts (the first at `theta0`/`noise0`, the rest
+/// random in `theta` and the noise; `tail`, e.g. inducing inputs, is appended unchanged) and
+/// returns the best optimised vector. Every start is recorded in `report` (the caller adds
+/// the objective's counters with [`TrainingReport::add_stats`]).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn multi_start<O: Objective>(
     objective: &O,
@@ -575,12 +575,11 @@ type LineState = IterState<Vec<f64>, Vec<f64>, (), (), (), f64>;
 /// direction `d`, whose length is the gradient's), later ones the quasi-Newton step 1, and a
 /// search ends once its interval of uncertainty is within 10% of the step (`xtol = 0.1`).
 ///
-/// argmin's defaults were a first step of `|g|` (hundreds of log-units on a 100,000-sample
-/// bound, so the first search spent about eight evaluations backing off and growing again)
+/// argmin's defaults are a first step of `|g|` (hundreds of log-units on a 100,000-sample
+/// bound, so the first search spends about eight evaluations backing off and growing again)
 /// and `xtol = 1e-10`. The second matters when the bound's rounding noise exceeds the
-/// decrease a search looks for: measured on a 10,000-sample sensor search with the signal
-/// variance at its bound (noise about 0.02 nats), searches of 30 evaluations at one point
-/// (docs/benchmarks.md, session 30).
+/// decrease a search looks for: on a 10,000-sample sensor search with the signal variance at
+/// its bound (noise about 0.02 nats), it gives searches of 30 evaluations at one point.
 ///
 /// Only `init` and `next_iter` are delegated: argmin's More-Thuente search keeps the
 /// default `terminate` and ends itself from `next_iter`.
@@ -864,7 +863,7 @@ mod tests {
         let (p, _, iterations, _) = run_lbfgs(&bowl, p0, 100, 1e-7 * 1e4).unwrap();
         assert!(p.iter().all(|v| (v - 1.0).abs() < 1e-2), "{p:?}");
         let evaluations = bowl.distinct_points().len() as u64;
-        // Measured: 39 evaluations in 10 iterations; 85 in 11 with a width tolerance of 1e-10.
+        // Here: 39 evaluations in 10 iterations; 85 in 11 with a width tolerance of 1e-10.
         assert!(
             evaluations <= 5 * iterations,
             "{evaluations} evaluations in {iterations} iterations"
@@ -898,8 +897,8 @@ mod tests {
     fn iterations_in_rounding_noise_stop_once_three_gain_too_little() {
         // Value noise of a nat: next to the optimum every step draws a new value from it, so
         // one iteration's change (the cost tolerance) rarely falls below 1e-3, and the line
-        // searches go on until the gradient is small. Measured: 11 iterations and 31
-        // evaluations without the stall rule, 7 and 12 with it.
+        // searches go on until the gradient is small. Here: 11 iterations and 31 evaluations
+        // without the stall rule, 7 and 12 with it.
         let p0 = vec![0.0, 3.0, -2.0, 0.5];
         let run = |stall: f64| {
             let f = NoisyValue {

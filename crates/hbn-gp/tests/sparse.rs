@@ -243,8 +243,8 @@ fn gradients_match_finite_differences() {
 /// On many samples, little noise and an ill-conditioned `K_mm` (greedily selected inducing
 /// points under long length scales, the situation of a 10,000-sample search), the analytic
 /// gradient still agrees with finite differences. Forming `K_mm^{-1} - Sigma` and
-/// `W K_mn + beta y^T` as differences of large terms once gave length-scale derivatives off
-/// by hundreds where the true ones were a few units.
+/// `W K_mn + beta y^T` as differences of large terms gives length-scale derivatives off by
+/// hundreds there, where the true ones are a few units.
 #[test]
 fn gradients_stay_accurate_with_many_samples_and_an_ill_conditioned_k_mm() {
     let (n, d, m) = (20_000, 2, 64);
@@ -453,8 +453,8 @@ fn large_data_search_on_a_subset_then_refine_on_all() {
 }
 
 /// A failed trial step of the line search (a covariance that is not positive definite at an
-/// absurd length scale) must not end the start: every start moves far from its initial point.
-/// (Regression: all three starts stopped after one iteration at their initial bound.)
+/// absurd length scale) must not end the start: every start moves far from its initial point
+/// (rather than stopping after one iteration at its initial bound).
 #[test]
 fn failed_trial_steps_do_not_end_the_optimisation() {
     let (x, _) = data(600, 2, 11);
@@ -525,7 +525,7 @@ fn greedy_selection_skips_duplicates() {
 }
 
 #[test]
-fn persistence_round_trips_and_old_files_load() {
+fn persistence_round_trips_and_files_of_format_1_load() {
     let (x, y) = data(300, 2, 8);
     let mut params = fixed(KernelSpec::se_ard(2), 0.05);
     params.sparse = Some(SparseParams::new(16));
@@ -552,7 +552,7 @@ fn persistence_round_trips_and_old_files_load() {
         back.predict(&at, Want::ALL).unwrap(),
         tilted.predict(&at, Want::ALL).unwrap()
     );
-    // A version-1 (exact-only) file, as written before the sparse GP existed.
+    // A version-1 file (exact GPs only, no `sparse` field).
     let exact = fit(&fixed(KernelSpec::se_ard(2), 0.05), &x[..60], &y[..30]).unwrap();
     let mut v: serde_json::Value = serde_json::from_str(&exact.to_json().unwrap()).unwrap();
     v["version"] = 1.into();
@@ -579,14 +579,13 @@ fn persistence_round_trips_and_old_files_load() {
     ));
 }
 
-/// Sparse GP files of format 3 carried two factors, `L^{-1}` and `L_B^{-1} L^{-1}`; loading
-/// folds them into one. `fixtures/sparse_gp_format3.json` holds two such files as the build
-/// before the fold wrote them (SE with noise 0.05 and m = 16; Matern 5/2 with noise 1e-4 and
-/// m = 32, where the two quadratic forms are large and nearly cancel) and what that build
-/// predicted at 20 points, inside and outside the data. The folded GP predicts the same, to
-/// rounding.
+/// Sparse GP files of format 3 carry two factors, `L^{-1}` and `L_B^{-1} L^{-1}`; loading
+/// folds them into one. `fixtures/sparse_gp_format3.json` holds two such files (SE with noise
+/// 0.05 and m = 16; Matern 5/2 with noise 1e-4 and m = 32, where the two quadratic forms are
+/// large and nearly cancel) and the predictions of their two-factor form at 20 points, inside
+/// and outside the data. The folded GP predicts the same, to rounding.
 #[test]
-fn sparse_files_of_format_3_load_folded_and_predict_as_before() {
+fn sparse_files_of_format_3_load_folded_and_predict_as_their_two_factors() {
     let text = std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../../fixtures/sparse_gp_format3.json"
@@ -608,21 +607,22 @@ fn sparse_files_of_format_3_load_folded_and_predict_as_before() {
         let (means, vars) = (vecf(&case["mean"]), vecf(&case["variance"]));
         let prior = preds.iter().map(|p| p.prior_variance).fold(0.0, f64::max);
         for ((p, m), v) in preds.iter().zip(&means).zip(&vars) {
-            // The mean's formula is unchanged; its kernel's exponential (`exp_nonpositive`,
-            // within 2 ulp of libm's) moves it by rounding only.
+            // The mean's formula is the two-factor form's; the kernel's exponential
+            // (`exp_nonpositive`, within 2 ulp of libm's) moves it by rounding only.
             assert!(
                 (p.mean - m).abs() <= 1e-13 * m.abs().max(1.0),
                 "the mean does not change: {} vs {m}",
                 p.mean
             );
-            // The variance now comes from one factor: equal to rounding, relative to the prior.
+            // The variance comes from one factor: equal to rounding, relative to the prior.
             assert!(
                 (p.variance - v).abs() <= 1e-10 * prior,
                 "variance {} vs {v} (prior {prior})",
                 p.variance
             );
         }
-        // Saved again, it is a format-4 file with the folded factor, and reloads as is.
+        // Saved again, it is a file of the current format with the folded factor, and
+        // reloads as is.
         let again = GaussianProcess::from_json(&gp.to_json().unwrap(), "again").unwrap();
         assert_eq!(again, gp);
     }
