@@ -14,8 +14,9 @@ and reimplements, with numpy only:
   eigenvalue clamp of P, Joseph update) and the default settings of ``HysteresisModel::ekf_config``
   (``crates/hbn-model/src/model.rs``).
 
-Kernels: the ``se`` / ``se-ard`` / ``matern52`` / ``mahalanobis`` / ``warped`` families, each
-with or without ``+dir`` (the defaults ``se-ard+dir`` and ``se-ard`` are the ones tested).
+Kernels: every kernel a model file holds (``matern52``, ``se-ard``, ``se`` and ``thesis``: the
+profile, an isotropic, ARD or Mahalanobis metric, the tanh input warping and the
+direction-advantage factor are each read from the file).
 
 It is a per-sample filter, so a Python loop over samples with vectorised numpy inside each step
 is the honest numpy baseline. The packed Cholesky factor is inverted once at load time, so the
@@ -86,7 +87,7 @@ class NumpyGP:
         self.in_scale = np.asarray(gp["input_scale"], dtype=np.float64)
         self.out_mean = float(gp["output_mean"])
         self.out_scale = float(gp["output_scale"])
-        # A linear prior mean's slopes in raw units (model files of format 4; absent: constant).
+        # A linear prior mean's slopes in raw units (absent: a constant mean).
         self.linear = np.asarray(gp.get("linear", []), dtype=np.float64)
         self.noise_var_raw = float(gp["noise_variance"]) * self.out_scale**2
         n = len(gp["alpha"])
@@ -105,28 +106,18 @@ class NumpyGP:
 
         sparse = gp.get("sparse")
         if sparse is None:
-            # Exact GP: L^{-1}, once; the variance is then |L^{-1} k|^2, one mat-vec. Model files
-            # of version 2 leave the factor out: L L^T = K + s_n^2 I over the support points.
-            if gp.get("chol_packed"):
-                chol = unpack(gp["chol_packed"])
-            else:
-                delta = self.features[:, None, :] - self.features[None, :, :]
-                f, _ = self._profile(np.einsum("ijk,ijk->ij", delta, delta))
-                dirf = 1.0 if self.dirs is None else 0.5 * (1.0 + np.outer(self.dirs, self.dirs))
-                kmat = self.sf2 * f * dirf + float(gp["noise_variance"]) * np.eye(n)
-                chol = np.linalg.cholesky(kmat)
+            # Exact GP: the file leaves the Cholesky factor out (L L^T = K + s_n^2 I over the
+            # support points); L^{-1} once, and the variance is |L^{-1} k|^2, one mat-vec.
+            delta = self.features[:, None, :] - self.features[None, :, :]
+            f, _ = self._profile(np.einsum("ijk,ijk->ij", delta, delta))
+            dirf = 1.0 if self.dirs is None else 0.5 * (1.0 + np.outer(self.dirs, self.dirs))
+            kmat = self.sf2 * f * dirf + float(gp["noise_variance"]) * np.eye(n)
+            chol = np.linalg.cholesky(kmat)
             self.chol_inv = np.linalg.solve(chol, np.eye(n))
-            self.sigma_factor = None
         else:
             # Sparse GP (docs/sparse.md): var = k** - |R k|^2 with R^T R = K_mm^{-1} - Sigma, the
-            # folded factor the file stores; files of model format 2 store L^{-1} and
-            # C = L_B^{-1} L^{-1} instead: var = k** - |L^{-1} k|^2 + |C k|^2.
-            if sparse.get("variance_factor"):
-                self.chol_inv = unpack(sparse["variance_factor"])
-                self.sigma_factor = None
-            else:
-                self.chol_inv = unpack(sparse["kmm_inv_factor"])
-                self.sigma_factor = unpack(sparse["sigma_factor"])
+            # folded factor the file stores.
+            self.chol_inv = unpack(sparse["variance_factor"])
 
     def _profile(self, r2: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """Kernel profile ``f(r2)`` and its slope ``df/dr2``."""
@@ -168,9 +159,6 @@ class NumpyGP:
         grad = self.out_scale * (grad_u @ du_dz) / self.in_scale
         v = self.chol_inv @ k
         reduction = v @ v
-        if self.sigma_factor is not None:
-            b = self.sigma_factor @ k
-            reduction -= b @ b
         var = self.out_scale**2 * max(kss - reduction, 0.0)
         mean = self.out_mean + self.out_scale * mean_std
         if self.linear.size:
@@ -274,13 +262,18 @@ class NumpyEkf:
         self.tr = NumpyGP(model["transition"])
         self.se = NumpyGP(model["sensor"])
         # Play operators of the input (docs/memory.md): their radii, in the input's units
-        # (absent in model files from before them).
+        # (absent: none).
         self.radii = np.asarray(model.get("play_radii", []), dtype=float)
+        # Lags after the plays: first-order low-pass filters of u with coefficients
+        # a = 1 - exp(-1 / (rate tau)) (hbn_core::lag_coefficient).
+        params = model.get("params", {})
+        rate = float(params.get("rate_hz", 100.0))
+        self.lag_a = np.array([-math.expm1(-1.0 / (rate * float(tau))) for tau in params.get("lags") or []])
         # The sensor reads [x_{k-1}, y_{k-1}, x_k] (the thesis) or [x_{k-1}, x_k] (a sensor of
         # the state only, `sensor_inputs = state`).
-        if self.tr.d != 4 + len(self.radii) or self.se.d not in (2, 3):
+        if self.tr.d != 4 + len(self.radii) + len(self.lag_a) or self.se.d not in (2, 3):
             raise ValueError(
-                "not an HBN model (transition needs 4 inputs plus one per play, sensor 3 or 2)"
+                "not an HBN model (transition needs 4 inputs plus one per play and lag, sensor 3 or 2)"
             )
         self.cfg = ekf_config(model)
         self.model = model
@@ -302,7 +295,7 @@ class NumpyEkf:
             "p": p,
             "u_last": u0,
             "u_prev": u0,
-            "plays": np.full(len(self.radii), u0),
+            "plays": np.full(len(self.radii) + len(self.lag_a), u0),
             "rejected_run": 0,
             "lost_run": 0,
         }
@@ -363,8 +356,13 @@ class NumpyEkf:
         q[2, 2] += q_s
         p = _bound_cov(fm @ p @ fm.T + q, c["p_min"], c["p_max"])
         st["u_prev"], st["u_last"] = st["u_last"], u_k
-        # The plays follow u_k at their radius: p = max(u - r, min(u + r, p)).
-        st["plays"] = np.maximum(u_k - self.radii, np.minimum(u_k + self.radii, st["plays"]))
+        # The plays follow u_k at their radius: p = max(u - r, min(u + r, p)); then the lags:
+        # p += a (u - p).
+        nr = len(self.radii)
+        mem = st["plays"].copy()
+        mem[:nr] = np.maximum(u_k - self.radii, np.minimum(u_k + self.radii, mem[:nr]))
+        mem[nr:] = mem[nr:] + self.lag_a * (u_k - mem[nr:])
+        st["plays"] = mem
         # ---- update (Joseph form, H = [0, 0, 1]) ----
         if math.isfinite(y_k):
             s_var = p[2, 2] + r
@@ -435,8 +433,8 @@ def load_model_json(path: str) -> Dict[str, Any]:
     """The ``model`` object of an hbn model file (checks the format tag)."""
     with open(path, "r", encoding="utf-8") as fh:
         doc = json.load(fh)
-    if doc.get("format") != "hbn-model" or doc.get("version") not in (1, 2, 3, 4):
-        raise ValueError(f"{path}: not an hbn model file of format version 1 to 4")
+    if doc.get("format") != "hbn-model" or not isinstance(doc.get("version"), int):
+        raise ValueError(f"{path}: not an hbn model file")
     return doc["model"]
 
 
@@ -452,7 +450,7 @@ def compare(
     kernel: str = "matern52",
     train_steps: int = 1000,
     seed: int = 1,
-    n_restarts: int = 1,
+    n_starts: int = 1,
     model_path: Optional[str] = None,
     n_inducing: Optional[int] = None,
 ) -> Dict[str, float]:
@@ -465,7 +463,7 @@ def compare(
         train = hbn.simulate(system, train_steps, seed=seed, noise_gain=1.0)
         model = hbn.HysteresisModel.fit(
             train["u"], train["x"], train["y"], kernel=kernel, max_points=max_points,
-            n_restarts=n_restarts, seed=seed, n_inducing=n_inducing,
+            n_starts=n_starts, seed=seed, n_inducing=n_inducing,
         )
         tmp = tempfile.TemporaryDirectory()
         model_path = os.path.join(tmp.name, "model.hbn")

@@ -36,7 +36,7 @@ def main():
     Xt, _, ft = data(5_000, d, 8)
 
     t = time.perf_counter()
-    ours = hbn.GaussianProcess(kernel="se-ard", n_inducing=args.m, n_restarts=1).fit(X, y)
+    ours = hbn.GaussianProcess(kernel="se-ard", n_inducing=args.m, n_starts=1).fit(X, y)
     t_ours = time.perf_counter() - t
     rmse_ours = float(np.sqrt(np.mean((ours.predict(Xt) - ft) ** 2)))
 

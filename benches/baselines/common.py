@@ -51,7 +51,7 @@ def read_log(path: str, paths: Mapping[str, str], rate: Optional[float] = None) 
     """
     import hbn  # imported here so the metrics can be used without the wheel
 
-    d = hbn.read_mcap(path, {k: paths[k] for k in ("u", "x", "y")}, rate=rate)
+    d = hbn.read_mcap(path, {k: paths[k] for k in ("u", "x", "y")}, rate_hz=rate)
     r = native_rate(d["t"]) if rate is None else float(rate)
     return Log(u=d["u"], x=d["x"], y=d["y"], rate=r, path=str(path))
 

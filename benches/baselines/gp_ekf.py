@@ -34,7 +34,7 @@ from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
 
 from common import Log, sensor_rows, subsample, transition_rows
 
-#: Rows per GP (the issue's protocol).
+#: Rows per GP: the size of GP a researcher fits with scikit-learn in a few seconds.
 GP_ROWS = 600
 #: Training samples whose ``y`` is nearest the first measurement, for the initial ``x``.
 INIT_NEIGHBOURS = 50
@@ -45,12 +45,12 @@ class SkGP:
     latent variance (without the white noise) and the analytic gradient of the mean.
 
     ``fit`` uses ``ConstantKernel(1) * RBF(ones(d)) + WhiteKernel(0.1)`` with scikit-learn's
-    default bounds, ``normalize_y=True`` and ``n_restarts`` optimiser starts in all (the first
+    default bounds, ``normalize_y=True`` and ``n_starts`` optimiser starts in all (the first
     from those values, the others random; 1 = scikit-learn's default).
     """
 
-    def __init__(self, n_restarts: int = 1, seed: int = 0) -> None:
-        self.n_restarts = n_restarts
+    def __init__(self, n_starts: int = 1, seed: int = 0) -> None:
+        self.n_starts = n_starts
         self.seed = seed
         self.gpr: GaussianProcessRegressor
 
@@ -62,7 +62,7 @@ class SkGP:
         self.gpr = GaussianProcessRegressor(
             kernel=kernel,
             normalize_y=True,
-            n_restarts_optimizer=max(0, self.n_restarts - 1),
+            n_restarts_optimizer=max(0, self.n_starts - 1),
             random_state=self.seed,
         ).fit(X, t)
         k = self.gpr.kernel_
@@ -106,13 +106,13 @@ class GpEkfModel:
     x_span: float
 
 
-def fit(logs: Sequence[Log], seed: int = 0, rows: int = GP_ROWS, n_restarts: int = 1) -> GpEkfModel:
+def fit(logs: Sequence[Log], seed: int = 0, rows: int = GP_ROWS, n_starts: int = 1) -> GpEkfModel:
     """Fits both GPs on ``rows`` random rows of each training set built from ``logs``."""
     rng = np.random.default_rng(seed)
     Xd, td = subsample(*transition_rows(logs), rows, rng)
     Xs, ts = subsample(*sensor_rows(logs), rows, rng)
-    gd = SkGP(n_restarts, seed).fit(Xd, td)
-    gs = SkGP(n_restarts, seed + 1).fit(Xs, ts)
+    gd = SkGP(n_starts, seed).fit(Xd, td)
+    gs = SkGP(n_starts, seed + 1).fit(Xs, ts)
     ys = np.concatenate([lg.y for lg in logs])
     xs = np.concatenate([lg.x for lg in logs])
     ok = np.isfinite(ys) & np.isfinite(xs)
@@ -169,12 +169,12 @@ def estimate(model: GpEkfModel, u: np.ndarray, y: np.ndarray) -> Tuple[np.ndarra
 
 
 def run(
-    train: Sequence[Log], test: Log, seed: int = 0, rows: int = GP_ROWS, n_restarts: int = 1
+    train: Sequence[Log], test: Log, seed: int = 0, rows: int = GP_ROWS, n_starts: int = 1
 ) -> Dict[str, object]:
     """Fits on ``train``, estimates on ``test``; returns ``x``, ``x_std`` and the seconds each
     phase took (``train_seconds``, ``estimate_seconds``) plus the fitted kernels."""
     t0 = time.perf_counter()
-    model = fit(train, seed=seed, rows=rows, n_restarts=n_restarts)
+    model = fit(train, seed=seed, rows=rows, n_starts=n_starts)
     t1 = time.perf_counter()
     x, s = estimate(model, test.u, test.y)
     t2 = time.perf_counter()

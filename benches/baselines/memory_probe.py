@@ -1,19 +1,20 @@
-"""The probe that chose hbn's play operators (docs/memory.md): the scikit-learn GP-EKF baseline
-of ``gp_ekf.py`` with play-operator outputs of ``u`` added to its transition GP's inputs,
-against the same baseline without them, on one simulated cell (``run.simulate_logs``: three
-training logs, one test log with another input, never used in training).
+"""Play operators (docs/memory.md) outside hbn: the scikit-learn GP-EKF baseline of
+``gp_ekf.py`` with play-operator outputs of ``u`` added to its transition GP's inputs, against
+the same baseline without them, on one simulated cell (``run.simulate_logs``: three training
+logs, one test log with another input, never used in training). Prints one JSON line: the test
+nRMSE without plays (``base``) and with each set of radii.
 
-    python benches/baselines/memory_probe.py SYSTEM GAIN SEED   # prints one JSON line
+    python benches/baselines/memory_probe.py SYSTEM GAIN SEED [--workdir DIR]
 
 Every play starts at the first training input; radii are fractions of the training input's
-range. Written for the measurement in docs/memory.md (docs/data/memory_probe_sklearn.jsonl):
-it is a probe, not a baseline, and keeps its own copy of the numpy EKF loop (with the extra
-inputs) for that reason.
+range. It is a probe, not a baseline, and keeps its own copy of the numpy EKF loop (with the
+extra inputs) for that reason.
 """
+import argparse
 import json
 import math
-import os
 import sys
+import tempfile
 from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np
@@ -66,11 +67,12 @@ def estimate(model, gd, u, y, radii, umid):
         x_hat[k], x_std[k] = z[0], math.sqrt(max(P[0, 0], 0.0))
     return x_hat, x_std
 
-def main(system, gain, seed, fracs):
-    wd = Path(os.environ.get("MEMORY_PROBE_DIR", "memory-probe")) / f"{system}_{gain}_{seed}"
-    tr, te = R.simulate_logs(system, gain, seed, wd)
-    logs = [common.read_log(p, common.DEFAULT_PATHS) for p in tr]
-    test = common.read_log(te, common.DEFAULT_PATHS)
+def main(system, gain, seed, fracs, workdir=None):
+    with tempfile.TemporaryDirectory(prefix="hbn-memory-probe-") as tmp:
+        wd = Path(workdir or tmp) / f"{system}_{gain}_{seed}"
+        tr, te = R.simulate_logs(system, gain, seed, wd)
+        logs = [common.read_log(p, common.DEFAULT_PATHS) for p in tr]
+        test = common.read_log(te, common.DEFAULT_PATHS)
     us = np.concatenate([l.u for l in logs]); span = float(np.ptp(us)); umid = float(us[0])
     base = gp_ekf.fit(logs, seed=seed)
     out = {}
@@ -86,5 +88,10 @@ def main(system, gain, seed, fracs):
     print(json.dumps({"system": system, "gain": gain, "seed": seed, **out}), flush=True)
 
 if __name__ == "__main__":
-    sysname, gain, seed = sys.argv[1], float(sys.argv[2]), int(sys.argv[3])
-    main(sysname, gain, seed, [[0.05], [0.15], [0.05, 0.2]])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("system")
+    ap.add_argument("gain", type=float)
+    ap.add_argument("seed", type=int)
+    ap.add_argument("--workdir", default=None, help="keep the simulated logs here (default: a temporary directory)")
+    a = ap.parse_args()
+    main(a.system, a.gain, a.seed, [[0.05], [0.15], [0.05, 0.2]], a.workdir)

@@ -177,7 +177,7 @@ def run_hbn(
         [lg.u for lg in train],
         [lg.x for lg in train],
         [lg.y for lg in train],
-        rate=train[0].rate,
+        rate_hz=train[0].rate,
         seed=seed,
         signals={k: paths[k] for k in ("u", "x", "y")},
         **dict(hbn_params or {}),
@@ -195,7 +195,7 @@ def run_hbn(
             "train_seconds": t_fit,
             "estimate_seconds": time.perf_counter() - t1,
             "flags": est.flag_counts(),
-            "model_rate": model.rate,
+            "model_rate": model.rate_hz,
             "config": _config(model),
             "held_out": held_out,
         }
@@ -207,7 +207,7 @@ def run_hbn(
         "x_std": None,
         "train_seconds": t_fit,
         "estimate_seconds": time.perf_counter() - t1,
-        "model_rate": model.rate,
+        "model_rate": model.rate_hz,
     }
     return out
 
@@ -264,9 +264,13 @@ def _held_out(model: Any) -> Optional[Dict[str, Any]]:
 
 
 def _kernel_name(k: Mapping[str, Any]) -> str:
-    """A kernel of a model file's candidate table (``{"family": "se-ard", "direction": true}``)
-    by its ``hbn train`` name (``se-ard+dir``)."""
-    return f"{k.get('family')}{'+dir' if k.get('direction') else ''}"
+    """A kernel of a model file's candidate table (``{"family": "se-ard", "direction": false}``)
+    by its ``hbn train`` name (``se-ard``; the warped family with the direction factor is
+    ``thesis``)."""
+    family = str(k.get("family"))
+    if k.get("direction"):
+        return "thesis" if family == "warped" else f"{family} with the direction factor"
+    return family
 
 
 def _finite_or_none(v: Any) -> Any:
@@ -372,7 +376,7 @@ def run_floor(test: common.Log, system: str, gain: float) -> Dict[str, Any]:
     import hbn
 
     t0 = time.perf_counter()
-    o = hbn.oracle_estimate(system, test.u, test.x, test.y, noise_gain=gain, rate=test.rate)
+    o = hbn.oracle_estimate(system, test.u, test.x, test.y, noise_gain=gain, rate_hz=test.rate)
     return {"x": o["mean"], "x_std": o["std"], "train_seconds": 0.0, "estimate_seconds": time.perf_counter() - t0}
 
 

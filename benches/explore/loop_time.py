@@ -1,4 +1,4 @@
-"""Cost of the explorer with Python in the robot's loop (docs/benchmarks.md, "The explorer").
+"""Cost of the explorer with Python in the robot's loop (docs/exploration.md).
 
 Drives ``hbn.Simulator("bouc-wen")`` (noise gain 1, seed 1) with ``hbn.Explorer`` (bounds
 [0, 1], ``max_step`` 0.02, seed 1, default settings) for N samples, timing every ``propose()``
@@ -30,7 +30,7 @@ def main() -> None:
     args = ap.parse_args()
     n = args.n
     explorer = hbn.Explorer(
-        0.0, 1.0, 0.02, rate=100.0, seed=1, lag=args.lag, criterion=args.criterion
+        0.0, 1.0, 0.02, rate_hz=100.0, seed=1, lag=args.lag, criterion=args.criterion
     )
     robot = hbn.Simulator("bouc-wen", seed=1, noise_gain=1.0)
     random_samples = hbn.default_explore_params()["random_samples"]

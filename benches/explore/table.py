@@ -1,5 +1,6 @@
-"""Summarises the CSV of `cargo run --release -p hbn-model --example explore_eval` as the
-Markdown tables of docs/exploration.md: mean nRMSE per system, amount of data and method (over
+"""Summarises the CSV of the harness program `explore_eval` (`cargo run --release -p hbn-harness
+--bin explore_eval -- --systems ... --sizes ... --seeds ...`) as the Markdown tables of
+docs/exploration.md: mean nRMSE per system, amount of data and method (over
 seeds), each method's ratio to random ramps, the geometric means against random ramps and
 against the thesis' random walk, and the smallest amount of explored data that reaches the
 accuracy of random ramps on the largest amount. Then the paired comparison: for each method
@@ -8,8 +9,8 @@ same system, seed and size of the nRMSE ratio, with the standard error of its lo
 ratio per size (the cell table's ratios are of means over the seeds).
 
 With `random-ramps-b` in the runs (a second, independent draw of random ramps: an A/A
-comparison, session 36), it ends with what that says about the exploration issue's bar (no
-worse than random ramps in every cell): the spread of one run's log nRMSE ratio between two
+comparison), it ends with what that says about a bar of "no worse than random ramps in every
+cell": the spread of one run's log nRMSE ratio between two
 draws, and the true ratio a method would need in every cell to pass the bar in 12 cells with
 probability 0.9, for cells of 3 and of 6 seeds (normal approximation of the cell mean's log
 ratio). And, for each explorer, its paired ratio to both draws' geometric mean.
@@ -29,8 +30,7 @@ NAMES = {
     "random-walk": "random walk (thesis)",
     "explore-ramps": "explorer (ramps, default)",
     "explore-steps": "explorer (thesis steps)",
-    "explore-ramps-grid": "explorer (most uncertain ramp of a grid: the rule until session 17)",
-    "explore-ramps-variance": "explorer (variance criterion: the default until session 21)",
+    "explore-ramps-variance": "explorer (variance criterion)",
     "explore-ramps-reduction": "explorer (reduction criterion)",
 }
 

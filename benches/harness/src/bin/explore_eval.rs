@@ -30,7 +30,6 @@ use hbn_sim::{
 
 /// nRMSE of the default model after random inputs and after the explorer, one CSV line per run.
 #[derive(Parser)]
-#[command(about)]
 struct Args {
     /// Simulators (comma-separated).
     #[arg(long, value_delimiter = ',', required = true, value_parser = parse::<SystemKind>)]

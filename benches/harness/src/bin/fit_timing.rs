@@ -13,7 +13,6 @@ use std::time::Instant;
 
 /// One GP fit timed, as JSON on stdout.
 #[derive(Parser)]
-#[command(about)]
 struct Args {
     /// Data file: {"x": [row-major inputs], "y": [targets], "d": inputs per row}.
     data: PathBuf,

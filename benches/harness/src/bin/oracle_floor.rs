@@ -12,7 +12,6 @@ use hbn_sim::{DEFAULT_MAX_INCREMENT, InputKind, SimConfig, SystemKind, generate_
 
 /// The oracle's nRMSE on the baselines' simulated test logs, one JSON line per log.
 #[derive(Parser)]
-#[command(about)]
 struct Args {
     /// Simulators (comma-separated).
     #[arg(long, value_delimiter = ',', required = true, value_parser = parse::<SystemKind>)]

@@ -20,7 +20,6 @@ use std::time::Instant;
 
 /// Microseconds per estimator step of model files on a log, one JSON line per model and mode.
 #[derive(Parser)]
-#[command(about)]
 struct Args {
     /// Model file from `hbn train` (repeat for several).
     #[arg(long, required = true)]
