@@ -24,7 +24,7 @@ use hbn_io::{IoError, SignalPath};
 use hbn_model::explore::{Criterion, ExploreError, ExploreParams, Explorer, Phase, Strategy};
 use hbn_model::{
     Estimate, Filter, FilterOutput, HbnParams, HysteresisModel, KernelChoice, ModelError, Param,
-    ParamValue, Sequence, SignalInfo, Signals,
+    ParamValue, Problem, Sequence, SignalInfo, Signals,
 };
 use hbn_pipeline::{
     LogOption, LogOptions, OptionError, Outputs, PipelineError, SignalChoice, TrainSignals,
@@ -36,63 +36,25 @@ use pyo3::exceptions::{
 };
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
-use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple, PyType};
+use pyo3::types::{
+    PyBool, PyBytes, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple, PyType,
+};
 
 // ---------------------------------------------------------------------------------------------
-// Names: the Python keyword of every setting
+// Names: the Python keyword of every setting is its Rust name
 // ---------------------------------------------------------------------------------------------
 
-/// The keyword argument of a training parameter.
-fn param_keyword(p: Param) -> &'static str {
-    match p {
-        Param::Rate => "rate",
-        Param::Kernel => "kernel",
-        Param::TransitionKernel => "transition_kernel",
-        Param::SensorKernel => "sensor_kernel",
-        Param::Inducing => "n_inducing",
-        Param::MaxPoints => "max_points",
-        Param::SubsetPolicy => "subset",
-        Param::Starts => "n_restarts",
-        Param::MaxIters => "max_iter",
-        Param::Seed => "seed",
-        Param::Normalize => "normalize",
-        Param::NoiseFloor => "noise_floor",
-        Param::BlrWindow => "blr_window",
-        Param::Blr => "blr",
-        Param::Validation => "validation",
-        Param::Memory => "memory",
-        Param::Lags => "lags",
-        Param::LinearMean => "linear_mean",
-        Param::SensorInputs => "sensor_inputs",
-        Param::MaxSignalVariance => "max_signal_variance",
-    }
-}
-
-/// The keyword argument of a log option.
-fn option_keyword(o: LogOption) -> &'static str {
-    match o {
-        LogOption::Rate => "rate",
-        LogOption::MaxGap => "max_gap",
-        LogOption::TimeSource => "time_source",
-        LogOption::Logs => "paths",
-        LogOption::Input => "input",
-        LogOption::State => "state",
-        LogOption::Output => "output",
-        LogOption::Mode => "mode",
-    }
-}
-
-/// The keyword argument of a GP parameter (`hbn.GaussianProcess`).
+/// The keyword argument of a GP parameter (`hbn.GaussianProcess`): the field of
+/// [`GpParams`], but `lengthscales` (scikit-learn's spelling of a kernel hyperparameter).
 fn gp_keyword(name: &str) -> &str {
     match name {
-        "n_starts" => "n_restarts",
-        "max_iters" => "max_iter",
         "length_scales" => "lengthscales",
         other => other,
     }
 }
 
-/// Training parameters settable by keyword: every [`Param`] but the BLR prior.
+/// Training parameters settable by keyword: every [`Param`] but the BLR prior, in the order
+/// they are applied (the shorthand `kernel` before the kernel of each GP, which overrides it).
 fn keyword_params() -> impl Iterator<Item = Param> {
     Param::ALL.into_iter().filter(|&p| p != Param::Blr)
 }
@@ -208,11 +170,35 @@ impl Fail {
         }
     }
 
+    /// An invalid argument: `invalid keyword: problem`.
     fn config(keyword: &str, problem: impl std::fmt::Display) -> Self {
         Self::new(
             Kind::Config(keyword.to_owned()),
-            format!("invalid {keyword}=: {problem}"),
+            format!("invalid {keyword}: {problem}"),
         )
+    }
+
+    /// An invalid argument whose value is known: `invalid keyword=value: rule`.
+    fn config_value(keyword: &str, value: &str, rule: impl std::fmt::Display) -> Self {
+        Self::new(
+            Kind::Config(keyword.to_owned()),
+            format!("invalid {keyword}={value}: {rule}"),
+        )
+    }
+
+    /// A parameter's [`Problem`], with the value as given in Python (`given`, its `repr`) when
+    /// it is known: `invalid max_points=1: must be at least 2`. A list given names the element
+    /// at fault too (`invalid memory=[0.1, 1.5]: must be in (0, 1], got 1.5`).
+    fn problem(keyword: &str, problem: &Problem, given: Option<&Bound<'_, PyAny>>) -> Self {
+        let (value, rule) = problem_parts(problem);
+        let list = given.is_some_and(|g| g.is_instance_of::<PyList>() || g.is_instance_of::<PyTuple>());
+        let repr = given.and_then(|g| g.repr().ok()).map(|r| r.to_string());
+        match (repr, value) {
+            (Some(r), Some(_)) if list => Self::config_value(keyword, &r, problem),
+            (Some(r), _) => Self::config_value(keyword, &r, rule),
+            (None, Some(v)) => Self::config_value(keyword, &v, rule),
+            (None, None) => Self::config(keyword, rule),
+        }
     }
 
     fn into_py(self, py: Python<'_>) -> PyErr {
@@ -237,19 +223,42 @@ impl Fail {
     }
 }
 
+/// The value a [`Problem`] names (if any) and the rule it breaks, without the value.
+fn problem_parts(p: &Problem) -> (Option<String>, String) {
+    match p {
+        Problem::NotPositive { value } => {
+            (Some(value.to_string()), "must be a finite number > 0".into())
+        }
+        Problem::OutOfRange { value, min, max } => {
+            (Some(value.to_string()), format!("must be in ({min}, {max}]"))
+        }
+        Problem::Between { value, min, max } => {
+            (Some(value.to_string()), format!("must be in [{min}, {max}]"))
+        }
+        Problem::TooSmall { value, min } => {
+            (Some(value.to_string()), format!("must be at least {min}"))
+        }
+        Problem::Unknown { given, choices } => {
+            (Some(format!("{given:?}")), format!("choose one of {choices}"))
+        }
+        Problem::WrongType { expected } => (None, format!("expected {expected}")),
+        Problem::Invalid { reason } => (None, (*reason).to_owned()),
+    }
+}
+
 impl From<IoError> for Fail {
     fn from(e: IoError) -> Self {
         let kind = match &e {
             IoError::Open { source, .. } => Kind::Io(source.kind()),
             IoError::BadOption { name, .. } => Kind::Config(
                 if *name == "max_gap_s" {
-                    "max_gap"
+                    "max_gap_s"
                 } else {
-                    "rate"
+                    "rate_hz"
                 }
                 .into(),
             ),
-            IoError::GridTooLarge { .. } => Kind::Config("rate".into()),
+            IoError::GridTooLarge { .. } => Kind::Config("rate_hz".into()),
             IoError::BadPath { .. } => Kind::Config("signals".into()),
             _ => Kind::Data,
         };
@@ -275,7 +284,7 @@ impl From<GpError> for Fail {
 impl From<ModelError> for Fail {
     fn from(e: ModelError) -> Self {
         match e {
-            ModelError::Config(c) => Fail::config(param_keyword(c.param), &c.problem),
+            ModelError::Config(c) => Fail::problem(c.param.name(), &c.problem, None),
             ModelError::Gp { which, source } => {
                 let inner = Fail::from(source);
                 Fail::new(inner.kind, format!("{which} GP: {}", inner.message))
@@ -291,7 +300,7 @@ impl From<ModelError> for Fail {
 
 impl From<OptionError> for Fail {
     fn from(e: OptionError) -> Self {
-        Fail::config(option_keyword(e.option), &e.problem)
+        Fail::problem(e.option.name(), &e.problem, None)
     }
 }
 
@@ -300,13 +309,13 @@ impl From<PipelineError> for Fail {
         let hint = |f: Fail, h: &str| Fail::new(f.kind, format!("{}{h}", f.message));
         match e {
             PipelineError::Option(o) => o.into(),
-            PipelineError::Config(c) => Fail::config(param_keyword(c.param), &c.problem),
+            PipelineError::Config(c) => Fail::problem(c.param.name(), &c.problem, None),
             PipelineError::Model(m) => m.into(),
             PipelineError::Read { ref source, .. } => {
                 let h = match source {
                     IoError::TimeBackwards { .. } => " (or read with time_source=\"log\")",
                     IoError::Gap { .. } | IoError::TooFewSamples { .. } => {
-                        " (arguments max_gap=, rate=)"
+                        " (arguments max_gap_s=, rate_hz=)"
                     }
                     _ => "",
                 };
@@ -317,9 +326,9 @@ impl From<PipelineError> for Fail {
                 hint(Fail::new(kind, e.to_string()), h)
             }
             PipelineError::UnknownRate { .. } => {
-                hint(Fail::new(Kind::Data, e.to_string()), " (rate=)")
+                hint(Fail::new(Kind::Data, e.to_string()), " (rate_hz=)")
             }
-            PipelineError::SignalPath { option, .. } => Fail::config(option_keyword(option), &e),
+            PipelineError::SignalPath { option, .. } => Fail::config(option.name(), &e),
             PipelineError::Write { ref source, .. } => {
                 let kind = match source {
                     IoError::Open { source, .. } => Kind::Io(source.kind()),
@@ -347,7 +356,11 @@ impl From<SimError> for Fail {
     fn from(e: SimError) -> Self {
         match &e {
             SimError::UnknownSystem { .. } => Fail::config("system", &e),
-            SimError::InvalidParameter { name, .. } => Fail::config(name, &e),
+            SimError::InvalidParameter {
+                name,
+                value,
+                reason,
+            } => Fail::config_value(name, &value.to_string(), reason),
             _ => Fail::new(Kind::Data, e.to_string()),
         }
     }
@@ -408,7 +421,7 @@ fn parse_path(py: Python<'_>, option: LogOption, text: &str) -> PyResult<SignalP
 /// Log options: the library defaults with the given arguments applied.
 fn log_options(
     py: Python<'_>,
-    rate: Option<f64>,
+    rate_hz: Option<f64>,
     time_source: Option<&str>,
     max_gap: Option<f64>,
 ) -> PyResult<LogOptions> {
@@ -419,82 +432,100 @@ fn log_options(
     if let Some(g) = max_gap {
         o.max_gap_s = g;
     }
-    o.rate_hz = rate;
+    o.rate_hz = rate_hz;
     Ok(o)
 }
 
-/// A Python value as a parameter value (ints stay ints, bools stay bools). A list or tuple is
-/// several values to choose among on held-out data (`kernel=`, `n_inducing=`, where `None` is
-/// the exact GP).
-fn param_value(v: &Bound<'_, PyAny>) -> Option<ParamValue> {
+/// A Python value as a parameter value (integers stay integers, bools stay bools; numpy
+/// scalars are read like Python's), or why it cannot be one. A list or tuple is several values
+/// to choose among on held-out data (`kernel=`, `n_inducing=`, where `None` is the exact GP).
+fn param_value(v: &Bound<'_, PyAny>) -> Result<ParamValue, String> {
     if v.is_instance_of::<PyList>() || v.is_instance_of::<PyTuple>() {
-        let items = v.try_iter().ok()?;
         let mut out = Vec::new();
-        for item in items {
-            let item = item.ok()?;
+        for item in v.try_iter().map_err(|e| e.to_string())? {
+            let item = item.map_err(|e| e.to_string())?;
             out.push(if item.is_none() {
                 ParamValue::Text("exact".to_owned())
             } else {
                 param_value(&item)?
             });
         }
-        Some(ParamValue::List(out))
-    } else if v.is_instance_of::<PyBool>() {
-        v.extract().ok().map(ParamValue::Bool)
-    } else if v.is_instance_of::<PyInt>() {
-        v.extract().ok().map(ParamValue::Int)
-    } else if v.is_instance_of::<PyFloat>() {
-        v.extract().ok().map(ParamValue::Real)
-    } else if v.is_instance_of::<PyString>() {
-        v.extract().ok().map(ParamValue::Text)
-    } else {
-        v.extract::<f64>().ok().map(ParamValue::Real)
+        return Ok(ParamValue::List(out));
     }
+    if v.is_instance_of::<PyBool>() {
+        return Ok(ParamValue::Bool(v.is_truthy().map_err(|e| e.to_string())?));
+    }
+    if v.is_instance_of::<PyString>() {
+        return v.extract().map(ParamValue::Text).map_err(|e| e.to_string());
+    }
+    if v.is_instance_of::<PyFloat>() {
+        return v.extract().map(ParamValue::Real).map_err(|e| e.to_string());
+    }
+    if v.is_instance_of::<PyInt>() || v.hasattr("__index__").unwrap_or(false) {
+        return v
+            .extract()
+            .map(ParamValue::Int)
+            .map_err(|_| "expected a non-negative integer".to_owned());
+    }
+    if let Ok(b) = v.extract::<bool>() {
+        return Ok(ParamValue::Bool(b));
+    }
+    if let Ok(r) = v.extract::<f64>() {
+        return Ok(ParamValue::Real(r));
+    }
+    let kind = v
+        .get_type()
+        .name()
+        .map(|n| n.to_string())
+        .unwrap_or_default();
+    Err(format!("cannot use a value of type {kind} here"))
 }
 
-/// Training parameters: [`HbnParams::default`] with the keyword arguments applied (by
-/// [`HbnParams::set`]); unknown keywords are a `TypeError`, like Python's own.
+/// Training parameters: [`HbnParams::default`] with the keyword arguments applied by
+/// [`HbnParams::set`] in [`Param::ALL`]'s order, then checked ([`HbnParams::check_ref`]), so
+/// that an error shows the value as given. `None` keeps a parameter's default, except
+/// `n_inducing=None`, which asks for exact GPs (and no model selection among inducing
+/// settings), as documented. Unknown keywords are a `TypeError`, like Python's own.
 fn hbn_params(py: Python<'_>, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<HbnParams> {
     let mut p = HbnParams::default();
     let Some(kwargs) = kwargs else {
         return Ok(p);
     };
-    for (k, v) in kwargs.iter() {
+    for k in kwargs.keys() {
         let key: String = k.extract()?;
-        // `None` keeps a parameter's default, except `n_inducing=None`, which asks for exact
-        // GPs (and no model selection), as documented.
-        if v.is_none() && key != param_keyword(Param::Inducing) {
-            continue;
-        }
-        let Some(param) = keyword_params().find(|&p| param_keyword(p) == key) else {
-            let known: Vec<&str> = keyword_params().map(param_keyword).collect();
+        if !keyword_params().any(|p| p.name() == key) {
+            let known: Vec<&str> = keyword_params().map(Param::name).collect();
             return Err(PyTypeError::new_err(format!(
                 "unexpected keyword argument {key:?}; training parameters: {}",
                 known.join(", ")
             )));
+        }
+    }
+    for param in keyword_params() {
+        let Some(v) = kwargs.get_item(param.name())? else {
+            continue;
         };
         let value = if v.is_none() {
-            Some(ParamValue::Text("exact".to_owned()))
+            if param != Param::Inducing {
+                continue;
+            }
+            ParamValue::Text("exact".to_owned())
         } else {
+            let repr = || v.repr().map(|r| r.to_string()).unwrap_or_default();
             param_value(&v)
+                .map_err(|why| raise(py, Fail::config_value(param.name(), &repr(), why)))?
         };
-        let value = value.ok_or_else(|| {
-            raise(
-                py,
-                Fail::config(
-                    &key,
-                    format!(
-                        "cannot use {} here",
-                        v.get_type()
-                            .name()
-                            .map(|n| n.to_string())
-                            .unwrap_or_default()
-                    ),
-                ),
-            )
-        })?;
         p.set(param, value)
-            .map_err(|e| raise(py, Fail::config(param_keyword(e.param), &e.problem)))?;
+            .map_err(|e| raise(py, Fail::problem(e.param.name(), &e.problem, Some(&v))))?;
+    }
+    if let Err(e) = p.check_ref() {
+        let given = kwargs
+            .get_item(e.param.name())?
+            .filter(|g| !g.is_none());
+        return Err(raise(
+            py,
+            Fail::problem(e.param.name(), &e.problem, given.as_ref()),
+        ));
     }
     Ok(p)
 }
@@ -551,14 +582,48 @@ fn to_py<'py, T: serde::Serialize>(py: Python<'py>, v: &T) -> PyResult<Bound<'py
     json_to_py(py, &value)
 }
 
-/// Training parameters as a dict by keyword (the shorthand `kernel` left out), plus `blr` and
-/// `signals`.
-fn params_dict<'py>(py: Python<'py>, p: &HbnParams) -> PyResult<Bound<'py, PyDict>> {
-    let d = PyDict::new(py);
-    for param in keyword_params().filter(|&p| p != Param::Kernel) {
-        if let Some(v) = p.get(param) {
-            d.set_item(param_keyword(param), value_to_py(py, &v)?)?;
+/// A parameter's value in Python: the exact GP (`n_inducing`) and no cap
+/// (`max_signal_variance`) are `None`, like a kernel chosen by evidence (no value).
+fn param_to_py<'py>(
+    py: Python<'py>,
+    param: Param,
+    v: Option<ParamValue>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let is_none = |v: &ParamValue| match (param, v) {
+        (Param::Inducing, ParamValue::Text(t)) => t == "exact",
+        (Param::MaxSignalVariance, ParamValue::Text(t)) => t == "none",
+        _ => false,
+    };
+    let none = || py.None().into_bound(py);
+    match v {
+        None => Ok(none()),
+        Some(v) if is_none(&v) => Ok(none()),
+        Some(ParamValue::List(items)) if param == Param::Inducing => {
+            let l = PyList::empty(py);
+            for item in &items {
+                l.append(if is_none(item) {
+                    none()
+                } else {
+                    value_to_py(py, item)?
+                })?;
+            }
+            Ok(l.into_any())
         }
+        Some(v) => value_to_py(py, &v),
+    }
+}
+
+/// Training parameters as a dict by keyword, plus `blr` and `signals`. `with_kernel` adds the
+/// shorthand `kernel` (for the defaults: `None`, each GP chooses by evidence); a trained model
+/// has the kernel of each GP.
+fn params_dict<'py>(
+    py: Python<'py>,
+    p: &HbnParams,
+    with_kernel: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    for param in keyword_params().filter(|&q| with_kernel || q != Param::Kernel) {
+        d.set_item(param.name(), param_to_py(py, param, p.get(param))?)?;
     }
     d.set_item("blr", to_py(py, &p.blr)?)?;
     d.set_item("signals", to_py(py, &p.signals)?)?;
@@ -855,23 +920,19 @@ impl HysteresisModelCore {
 
 #[pymethods]
 impl HysteresisModelCore {
-    /// Fits both GPs to trajectories (lists of equal-length `u`, `x`, `y` arrays) sampled at
-    /// `rate` Hz; `params` are keyword arguments applied over the library defaults.
+    /// Fits both GPs to trajectories (lists of equal-length `u`, `x`, `y` arrays); `params`
+    /// are the training keywords (`rate_hz` among them) applied over the library defaults.
     #[staticmethod]
-    #[pyo3(signature = (u, x, y, rate, signals, params))]
+    #[pyo3(signature = (u, x, y, signals, params))]
     fn fit(
         py: Python<'_>,
         u: Vec<PyReadonlyArray1<'_, f64>>,
         x: Vec<PyReadonlyArray1<'_, f64>>,
         y: Vec<PyReadonlyArray1<'_, f64>>,
-        rate: Option<f64>,
         signals: Option<&Bound<'_, PyDict>>,
         params: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         let mut p = hbn_params(py, params)?;
-        if let Some(r) = rate {
-            p.rate_hz = r;
-        }
         p.signals = signals_from(signals)?;
         if u.len() != x.len() || u.len() != y.len() {
             return Err(raise(
@@ -904,20 +965,20 @@ impl HysteresisModelCore {
     /// same logs, paths and parameters give the same model file.
     #[staticmethod]
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (paths, input, state, output, rate, time_source, max_gap, params))]
+    #[pyo3(signature = (logs, input, state, output, rate_hz, time_source, max_gap_s, params))]
     fn from_logs(
         py: Python<'_>,
-        paths: Vec<PathBuf>,
+        logs: Vec<PathBuf>,
         input: Option<&str>,
         state: Option<&str>,
         output: Option<&str>,
-        rate: Option<f64>,
+        rate_hz: Option<f64>,
         time_source: Option<&str>,
-        max_gap: Option<f64>,
+        max_gap_s: Option<f64>,
         params: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         let p = hbn_params(py, params)?;
-        let opts = log_options(py, rate, time_source, max_gap)?;
+        let opts = log_options(py, rate_hz, time_source, max_gap_s)?;
         let d = TrainSignals::default();
         let signals = TrainSignals {
             input: match input {
@@ -935,7 +996,7 @@ impl HysteresisModelCore {
         };
         let trained = detached(py, move || {
             Ok(hbn_pipeline::train_from_logs(
-                &paths,
+                &logs,
                 &signals,
                 opts,
                 p,
@@ -963,7 +1024,7 @@ impl HysteresisModelCore {
     /// Reads `u` and `y` from a log at the model's rate, runs the filter, optionally writes
     /// CSV and MCAP (like `hbn estimate`); returns `(t, dict of per-sample arrays)`.
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (path, mode, input, output, csv, mcap, time_source, max_gap))]
+    #[pyo3(signature = (path, mode, input, output, csv, mcap, time_source, max_gap_s))]
     fn estimate_log<'py>(
         &self,
         py: Python<'py>,
@@ -974,10 +1035,10 @@ impl HysteresisModelCore {
         csv: Option<PathBuf>,
         mcap: Option<PathBuf>,
         time_source: Option<&str>,
-        max_gap: Option<f64>,
+        max_gap_s: Option<f64>,
     ) -> PyResult<(Arr<'py>, Bound<'py, PyDict>)> {
         let mode = parse_mode(py, mode, self.inner.default_mode())?;
-        let opts = log_options(py, None, time_source, max_gap)?;
+        let opts = log_options(py, None, time_source, max_gap_s)?;
         let signals = SignalChoice {
             input: input
                 .map(|t| parse_path(py, LogOption::Input, t))
@@ -1034,7 +1095,7 @@ impl HysteresisModelCore {
     }
     /// Sample rate (Hz).
     #[getter]
-    fn rate(&self) -> f64 {
+    fn rate_hz(&self) -> f64 {
         self.inner.rate_hz()
     }
     /// Signals (names, log paths, units) as a dict.
@@ -1043,7 +1104,7 @@ impl HysteresisModelCore {
     }
     /// Training parameters as a dict by keyword argument.
     fn params<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        params_dict(py, self.inner.params())
+        params_dict(py, self.inner.params(), false)
     }
     /// Training summary as a dict.
     fn summary<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
@@ -1079,6 +1140,27 @@ impl HysteresisModelCore {
         Ok(Self::wrap(
             HysteresisModel::from_json(text, "<string>").map_err(|e| raise(py, e))?,
         ))
+    }
+    /// The bytes of the model file `save` writes (GIL released): what a pickled model holds.
+    fn to_bytes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
+        let inner = &self.inner;
+        let text = detached(py, move || Ok(inner.to_json()?))?;
+        Ok(PyBytes::new(py, text.as_bytes()))
+    }
+    /// A model from the bytes of a model file (GIL released); `origin` names them in errors.
+    #[staticmethod]
+    fn from_bytes(py: Python<'_>, data: Vec<u8>, origin: &str) -> PyResult<Self> {
+        let origin = origin.to_owned();
+        let inner = detached(py, move || {
+            let text = String::from_utf8(data).map_err(|_| {
+                Fail::new(
+                    Kind::ModelFile,
+                    format!("{origin}: not an hbn model file (not UTF-8 text)"),
+                )
+            })?;
+            Ok(HysteresisModel::from_json(&text, &origin)?)
+        })?;
+        Ok(Self::wrap(inner))
     }
     /// Writes the model atomically (the CLI's `hbn train --out` format).
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
@@ -1196,18 +1278,18 @@ pub struct ExplorerCore {
 
 #[pymethods]
 impl ExplorerCore {
-    /// Checks the parameters; `params` are the training keywords of `HysteresisModel.fit`.
+    /// Checks the parameters; `params` are the training keywords of `HysteresisModel.fit`
+    /// (`rate_hz` among them); `seed` seeds the explorer and the training.
     #[new]
-    #[pyo3(signature = (u_min, u_max, max_step, rate, seed, u_start, random_samples,
-        alpha_start, alpha_end, alpha_ramp, refit_every, optimize_every, candidates, horizon,
-        strategy, pool, lag, params, criterion=None))]
+    #[pyo3(signature = (u_min, u_max, max_step, seed, u_start, random_samples, alpha_start,
+        alpha_end, alpha_ramp, refit_every, optimize_every, candidates, horizon, strategy, pool,
+        lag, criterion, params))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         u_min: f64,
         u_max: f64,
         max_step: f64,
-        rate: Option<f64>,
         seed: Option<u64>,
         u_start: Option<f64>,
         random_samples: Option<usize>,
@@ -1221,14 +1303,11 @@ impl ExplorerCore {
         strategy: Option<&str>,
         pool: Option<usize>,
         lag: Option<usize>,
-        params: Option<&Bound<'_, PyDict>>,
         criterion: Option<&str>,
+        params: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         let mut p = ExploreParams::new(u_min, u_max, max_step);
         p.model = hbn_params(py, params)?;
-        if let Some(r) = rate {
-            p.model.rate_hz = r;
-        }
         if let Some(s) = seed {
             p.seed = s;
             p.model.seed = s;
@@ -1364,14 +1443,14 @@ fn sim_config(
     system: &str,
     seed: Option<u64>,
     noise_gain: Option<f64>,
-    rate: Option<f64>,
+    rate_hz: Option<f64>,
 ) -> PyResult<SimConfig> {
     let kind = SystemKind::from_str(system).map_err(|e| raise(py, e))?;
     let d = SimConfig::new(kind);
     Ok(SimConfig {
         system: kind,
         noise_gain: noise_gain.unwrap_or(d.noise_gain),
-        rate_hz: rate.unwrap_or(d.rate_hz),
+        rate_hz: rate_hz.unwrap_or(d.rate_hz),
         seed: seed.unwrap_or(d.seed),
     })
 }
@@ -1386,15 +1465,15 @@ pub struct SimulatorCore {
 impl SimulatorCore {
     /// The system in its relaxed state; `None` settings take the simulator's defaults.
     #[new]
-    #[pyo3(signature = (system, seed, noise_gain, rate))]
+    #[pyo3(signature = (system, seed, noise_gain, rate_hz))]
     fn new(
         py: Python<'_>,
         system: &str,
         seed: Option<u64>,
         noise_gain: Option<f64>,
-        rate: Option<f64>,
+        rate_hz: Option<f64>,
     ) -> PyResult<Self> {
-        let cfg = sim_config(py, system, seed, noise_gain, rate)?;
+        let cfg = sim_config(py, system, seed, noise_gain, rate_hz)?;
         let inner = Simulator::new(&cfg).map_err(|e| raise(py, e))?;
         Ok(Self { inner })
     }
@@ -1412,16 +1491,16 @@ impl SimulatorCore {
 /// Simulates a hysteretic system under a random bounded-increment input: `(u, x, y)`.
 /// `None` settings take the simulator's defaults.
 #[pyfunction]
-#[pyo3(signature = (system, steps, seed, noise_gain, rate))]
+#[pyo3(signature = (system, steps, seed, noise_gain, rate_hz))]
 fn simulate<'py>(
     py: Python<'py>,
     system: &str,
     steps: usize,
     seed: Option<u64>,
     noise_gain: Option<f64>,
-    rate: Option<f64>,
+    rate_hz: Option<f64>,
 ) -> PyResult<(Arr<'py>, Arr<'py>, Arr<'py>)> {
-    let cfg = sim_config(py, system, seed, noise_gain, rate)?;
+    let cfg = sim_config(py, system, seed, noise_gain, rate_hz)?;
     let t = detached(py, move || Ok(hbn_sim::simulate_random(&cfg, steps)?))?;
     Ok((
         PyArray1::from_vec(py, t.u),
@@ -1434,7 +1513,7 @@ fn simulate<'py>(
 /// ([`hbn_sim::oracle_estimate`]): the posterior `(mean, std)` of each `x[k]` given `u` and `y`
 /// up to `k`, the true past states and the simulator itself.
 #[pyfunction]
-#[pyo3(signature = (system, u, x, y, noise_gain, rate))]
+#[pyo3(signature = (system, u, x, y, noise_gain, rate_hz))]
 fn oracle_estimate<'py>(
     py: Python<'py>,
     system: &str,
@@ -1442,9 +1521,9 @@ fn oracle_estimate<'py>(
     x: PyReadonlyArray1<'_, f64>,
     y: PyReadonlyArray1<'_, f64>,
     noise_gain: Option<f64>,
-    rate: Option<f64>,
+    rate_hz: Option<f64>,
 ) -> PyResult<(Arr<'py>, Arr<'py>)> {
-    let cfg = sim_config(py, system, None, noise_gain, rate)?;
+    let cfg = sim_config(py, system, None, noise_gain, rate_hz)?;
     let traj = hbn_sim::Trajectory {
         u: slice(&u, "u")?.to_vec(),
         x: slice(&x, "x")?.to_vec(),
@@ -1501,15 +1580,15 @@ fn systems() -> Vec<&'static str> {
 /// Reads signals from an MCAP log and resamples them on one grid (`hbn_pipeline::load_log`,
 /// the pipeline of the CLI): `(t, columns, rate)`.
 #[pyfunction]
-#[pyo3(signature = (path, signals, rate, time_source, max_gap))]
+#[pyo3(signature = (path, signals, rate_hz, time_source, max_gap_s))]
 #[allow(clippy::type_complexity)]
 fn read_mcap<'py>(
     py: Python<'py>,
     path: PathBuf,
     signals: Vec<String>,
-    rate: Option<f64>,
+    rate_hz: Option<f64>,
     time_source: Option<&str>,
-    max_gap: Option<f64>,
+    max_gap_s: Option<f64>,
 ) -> PyResult<(Arr<'py>, Vec<Arr<'py>>, f64)> {
     let paths = signals
         .iter()
@@ -1521,7 +1600,7 @@ fn read_mcap<'py>(
             Fail::config("signals", "give at least one signal"),
         ));
     }
-    let opts = log_options(py, rate, time_source, max_gap)?;
+    let opts = log_options(py, rate_hz, time_source, max_gap_s)?;
     let log = detached(py, move || {
         let opts = opts.check()?;
         Ok(hbn_pipeline::load_log(
@@ -1555,39 +1634,77 @@ fn list_topics(py: Python<'_>, path: PathBuf) -> PyResult<Vec<TopicRow>> {
         .collect())
 }
 
-/// The training parameters' defaults, by keyword argument (`hbn_model::HbnParams::default`).
+/// The training parameters' defaults, by keyword argument (`hbn_model::HbnParams::default`,
+/// read back by `HbnParams::get`, the inverse of the `HbnParams::set` that applies keywords),
+/// plus `blr` and `signals`.
 #[pyfunction]
 fn default_params(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
-    params_dict(py, &HbnParams::default())
+    params_dict(py, &HbnParams::default(), true)
 }
 
-/// The log reading defaults (`hbn_pipeline::LogOptions::default`): `time_source`, `max_gap`,
-/// `rate` (None: the log's native rate), and the default signal paths.
+/// The keywords of the training parameters, in the order they are applied.
+#[pyfunction]
+fn training_keywords() -> Vec<&'static str> {
+    keyword_params().map(Param::name).collect()
+}
+
+/// `HbnParams::default()` serialised by serde (the model file's `params`): a second,
+/// independent reading of the defaults, which the tests compare with `default_params()`.
+#[pyfunction]
+fn default_params_json(py: Python<'_>) -> PyResult<String> {
+    serde_json::to_string(&HbnParams::default())
+        .map_err(|e| raise(py, Fail::new(Kind::Internal, e.to_string())))
+}
+
+/// The log reading defaults (`hbn_pipeline::LogOptions::default`) by keyword: `time_source`,
+/// `max_gap_s`, `rate_hz` (None: the log's native rate), the default signal paths `input`,
+/// `state`, `output`, and the default estimation `mode`.
 #[pyfunction]
 fn default_log_options(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     let o = LogOptions::default();
     let d = PyDict::new(py);
-    d.set_item("time_source", o.time_source.name())?;
-    d.set_item("max_gap", o.max_gap_s)?;
-    d.set_item("rate", o.rate_hz)?;
-    d.set_item("input", hbn_pipeline::DEFAULT_INPUT)?;
-    d.set_item("state", hbn_pipeline::DEFAULT_STATE)?;
-    d.set_item("output", hbn_pipeline::DEFAULT_OUTPUT)?;
-    d.set_item("mode", Mode::default().name())?;
+    d.set_item(LogOption::TimeSource.name(), o.time_source.name())?;
+    d.set_item(LogOption::MaxGap.name(), o.max_gap_s)?;
+    d.set_item(LogOption::Rate.name(), o.rate_hz)?;
+    d.set_item(LogOption::Input.name(), hbn_pipeline::DEFAULT_INPUT)?;
+    d.set_item(LogOption::State.name(), hbn_pipeline::DEFAULT_STATE)?;
+    d.set_item(LogOption::Output.name(), hbn_pipeline::DEFAULT_OUTPUT)?;
+    d.set_item(LogOption::Mode.name(), Mode::default().name())?;
     Ok(d)
 }
+
+/// The kernel of `hbn.GaussianProcess` when none is named.
+const GP_DEFAULT_KERNEL: &str = "se-ard";
 
 /// The GP fitting defaults (`hbn_gp::GpParams::new`), by keyword argument.
 #[pyfunction]
 fn default_gp_params(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     let p = GpParams::new(hbn_core::KernelSpec::se_ard(1));
     let d = PyDict::new(py);
+    d.set_item("kernel", GP_DEFAULT_KERNEL)?;
     d.set_item("optimize", p.optimize)?;
     d.set_item("normalize", p.normalize)?;
-    d.set_item("n_restarts", p.n_starts)?;
-    d.set_item("max_iter", p.max_iters)?;
+    d.set_item("n_starts", p.n_starts)?;
+    d.set_item("max_iters", p.max_iters)?;
     d.set_item("max_points", p.max_points)?;
     d.set_item("seed", p.seed)?;
+    d.set_item("mean", p.mean.name())?;
+    d.set_item(
+        "optimize_inducing",
+        SparseParams::new(1).optimize_inducing,
+    )?;
+    Ok(d)
+}
+
+/// The simulators' defaults (`hbn_sim::SimConfig::new`), by keyword argument: `seed`,
+/// `noise_gain`, `rate_hz`.
+#[pyfunction]
+fn default_sim_params(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let c = SimConfig::new(SystemKind::ALL[0]);
+    let d = PyDict::new(py);
+    d.set_item("seed", c.seed)?;
+    d.set_item("noise_gain", c.noise_gain)?;
+    d.set_item("rate_hz", c.rate_hz)?;
     Ok(d)
 }
 
@@ -1629,6 +1746,9 @@ fn _hbn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(default_params, m)?)?;
     m.add_function(wrap_pyfunction!(default_log_options, m)?)?;
     m.add_function(wrap_pyfunction!(default_gp_params, m)?)?;
+    m.add_function(wrap_pyfunction!(default_sim_params, m)?)?;
+    m.add_function(wrap_pyfunction!(training_keywords, m)?)?;
+    m.add_function(wrap_pyfunction!(default_params_json, m)?)?;
     m.add_function(wrap_pyfunction!(kernel_names, m)?)?;
     m.add_function(wrap_pyfunction!(mode_names, m)?)?;
     m.add_function(wrap_pyfunction!(flag_names, m)?)?;

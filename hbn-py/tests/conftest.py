@@ -28,7 +28,7 @@ def trained():
     """A small model of the Duhem system and a fresh test trajectory."""
     train = hbn.simulate("duhem", 600, seed=1, noise_gain=1.0)
     model = hbn.HysteresisModel.fit(
-        train["u"], train["x"], train["y"], max_points=250, n_restarts=1, seed=0
+        train["u"], train["x"], train["y"], max_points=250, n_starts=1, seed=0
     )
     test = hbn.simulate("duhem", 500, seed=2, noise_gain=1.0)
     return model, train, test

@@ -93,12 +93,12 @@ def test_cli_trained_model_loads_and_matches_cli_estimate(cli, logs):
     cli(CLI_TRAIN, log=train, out=model_path, max_points=200)
     model = hbn.HysteresisModel.load(model_path)
     paths = _signal_paths(test, model)
-    truth = hbn.read_mcap(test, {"u": paths["u"], "x": paths["x"], "y": paths["y"]}, rate=model.rate)
+    truth = hbn.read_mcap(test, {"u": paths["u"], "x": paths["x"], "y": paths["y"]}, rate_hz=model.rate_hz)
     e = model.estimate(truth["u"], truth["y"])
     ol = model.simulate_open_loop(truth["u"])
     rmse = lambda a: float(np.sqrt(np.mean((a - truth["x"]) ** 2)))  # noqa: E731
     assert rmse(e.x) < rmse(ol)
-    data = hbn.read_mcap(test, {"u": paths["u"], "y": paths["y"]}, rate=model.rate)
+    data = hbn.read_mcap(test, {"u": paths["u"], "y": paths["y"]}, rate_hz=model.rate_hz)
     est = model.estimate(data["u"], data["y"])
     cli(CLI_ESTIMATE, model=model_path, log=test, out=out_csv)
     x_cli = _csv_x(out_csv)
@@ -109,15 +109,15 @@ def test_cli_trained_model_loads_and_matches_cli_estimate(cli, logs):
 def test_python_trained_model_is_read_by_cli(cli, logs):
     d, train, test = logs
     paths = _signal_paths(train)
-    data = hbn.read_mcap(train, paths, rate=100.0)
+    data = hbn.read_mcap(train, paths, rate_hz=100.0)
     model = hbn.HysteresisModel.fit(
-        data["u"], data["x"], data["y"], rate=100.0, max_points=200, n_restarts=1, signals=paths
+        data["u"], data["x"], data["y"], rate_hz=100.0, max_points=200, n_starts=1, signals=paths
     )
     model_path, out_csv = d / "py.hbn", d / "py_est.csv"
     model.save(model_path)
     text = cli(CLI_INSPECT, model=model_path)
     assert text.strip(), "hbn inspect printed nothing"
     cli(CLI_ESTIMATE, model=model_path, log=test, out=out_csv)
-    te = hbn.read_mcap(test, {"u": paths["u"], "y": paths["y"]}, rate=model.rate)
+    te = hbn.read_mcap(test, {"u": paths["u"], "y": paths["y"]}, rate_hz=model.rate_hz)
     est = model.estimate(te["u"], te["y"])
     np.testing.assert_allclose(est.x, _csv_x(out_csv), rtol=0, atol=1e-12)

@@ -11,7 +11,7 @@ import pytest
 
 import hbn
 
-QUICK = dict(random_samples=40, max_points=60, n_restarts=1, max_iter=40, validation=0.0)
+QUICK = dict(random_samples=40, max_points=60, n_starts=1, max_iters=40, validation=0.0)
 
 
 def drive(explorer, system="duhem", steps=200, seed=1):
@@ -118,7 +118,7 @@ def test_a_plan_keeps_the_bounds_and_leaves_the_explorer_unchanged():
         (dict(strategy="zigzag"), "strategy"),
         (dict(criterion="entropy"), "criterion"),
         (dict(max_points=1), "max_points"),
-        (dict(rate=-1.0), "rate"),
+        (dict(rate_hz=-1.0), "rate_hz"),
     ],
 )
 def test_every_bad_keyword_is_named(kwargs, keyword):

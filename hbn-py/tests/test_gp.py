@@ -55,8 +55,8 @@ def test_normalize_and_optimize_paths_are_finite():
     X, y, Xs, ls, sf2, noise = _data(60, 3, 7)
     for kwargs in (
         dict(lengthscales=ls, signal_variance=sf2, noise_variance=noise, optimize=False, normalize=True),
-        dict(optimize=True, normalize=True, n_restarts=2),
-        dict(optimize=True, normalize=False, n_restarts=1),
+        dict(optimize=True, normalize=True, n_starts=2),
+        dict(optimize=True, normalize=False, n_starts=1),
     ):
         gp = hbn.GaussianProcess(**kwargs).fit(X, y)
         m, s = gp.predict(Xs, return_std=True)
@@ -68,7 +68,7 @@ def test_normalize_and_optimize_paths_are_finite():
 
 def test_optimized_normalized_prediction_close_to_sklearn_optimum():
     X, y, Xs, _, _, _ = _data(50, 2, 11)
-    gp = hbn.GaussianProcess(n_restarts=3).fit(X, y)
+    gp = hbn.GaussianProcess(n_starts=3).fit(X, y)
     hp = gp.hyperparameters
     sk = GaussianProcessRegressor(
         kernel=ConstantKernel(hp["signal_variance"], "fixed") * RBF(hp["lengthscales"], "fixed"),
@@ -83,8 +83,7 @@ def test_optimized_normalized_prediction_close_to_sklearn_optimum():
 @pytest.mark.parametrize(
     "kernel,optimize",
     [("se", False), ("se-ard", False), ("se-ard", True), ("matern52", False),
-     ("mahalanobis", False), ("warped", False), ("thesis", False), ("se-ard+dir", False),
-     ("se-ard+dir", True)],
+     ("thesis", False), ("thesis", True)],
 )
 def test_gradient_matches_finite_differences(kernel, optimize):
     rng = np.random.default_rng(5)
@@ -92,7 +91,7 @@ def test_gradient_matches_finite_differences(kernel, optimize):
     y = np.sin(2 * X[:, 0]) + X[:, 1] * X[:, 2]
     gp = hbn.GaussianProcess(
         kernel=kernel, optimize=optimize, noise_variance=None if optimize else 1e-2,
-        n_restarts=1, max_iter=50,
+        n_starts=1, max_iters=50,
     ).fit(X, y)
     Xs = rng.uniform(-0.8, 0.8, size=(6, 3))
     mean, std, grad = gp.predict(Xs, return_std=True, return_grad=True)
@@ -104,7 +103,7 @@ def test_gradient_matches_finite_differences(kernel, optimize):
     for j in range(3):
         e = np.zeros(3)
         e[j] = h
-        if kernel.endswith("+dir"):
+        if kernel == "thesis":
             # The direction sign (x0 - x1) is piecewise constant: stay on one side.
             keep = np.abs(Xs[:, 0] - Xs[:, 1]) > 10 * h
         else:
@@ -132,7 +131,7 @@ def test_one_dimensional_inputs_and_array_likes(tmp_path):
 
 def test_subset_is_reported():
     X = np.linspace(0, 10, 300)
-    gp = hbn.GaussianProcess(max_points=50, n_restarts=1).fit(X, np.sin(X))
+    gp = hbn.GaussianProcess(max_points=50, n_starts=1).fit(X, np.sin(X))
     assert gp.n_support == 50
     # Keeping a subset is reported, and is normal: not a warning.
     assert gp.report_["n_samples"] == 300 and gp.report_["subset_policy"] == "farthest-point"
@@ -193,10 +192,10 @@ def test_fixed_and_learned_inducing_points():
     X = rng.uniform(-1, 1, size=(600, 2))
     y = X[:, 0] ** 2 - X[:, 1] + 0.05 * rng.standard_normal(600)
     Z = X[:6] + 0.01
-    fixed = hbn.GaussianProcess(n_inducing=6, inducing_points=Z, n_restarts=1).fit(X, y)
+    fixed = hbn.GaussianProcess(n_inducing=6, inducing_points=Z, n_starts=1).fit(X, y)
     np.testing.assert_allclose(fixed.inducing_points_, Z, rtol=1e-13, atol=1e-15)
     learned = hbn.GaussianProcess(
-        n_inducing=6, inducing_points=Z, optimize_inducing=True, n_restarts=1
+        n_inducing=6, inducing_points=Z, optimize_inducing=True, n_starts=1
     ).fit(X, y)
     assert not np.array_equal(learned.inducing_points_, Z)
     assert learned.log_marginal_likelihood() > fixed.log_marginal_likelihood()
@@ -221,8 +220,8 @@ def test_linear_mean_follows_the_plane_outside_the_data(n_inducing):
     plane = lambda Z: 2.0 * Z[:, 0] - 3.0 * Z[:, 1] + 0.5
     y = plane(X) + 0.1 * np.sin(4 * X[:, 0]) + 0.01 * rng.normal(size=300)
     far = np.array([[6.0, -4.0]])
-    linear = hbn.GaussianProcess(mean="linear", n_inducing=n_inducing, n_restarts=1).fit(X, y)
-    constant = hbn.GaussianProcess(n_inducing=n_inducing, n_restarts=1).fit(X, y)
+    linear = hbn.GaussianProcess(mean="linear", n_inducing=n_inducing, n_starts=1).fit(X, y)
+    constant = hbn.GaussianProcess(n_inducing=n_inducing, n_starts=1).fit(X, y)
     mean, grad = linear.predict(far, return_grad=True)
     assert abs(mean[0] - plane(far)[0]) < 1.5
     assert abs(grad[0, 1] + 3.0) < 0.1

@@ -44,9 +44,9 @@ def test_from_logs_gives_the_cli_model_file_byte_for_byte(cli, tmp_path, rate):
     for p in logs:
         args += ["--log", p]
     cli(*args, "--out", cli_model)
-    model = hbn.HysteresisModel.from_logs(logs, max_points=120, n_restarts=1, max_iter=40, seed=3)
+    model = hbn.HysteresisModel.from_logs(logs, max_points=120, n_starts=1, max_iters=40, seed=3)
     # The model keeps the logs' rate (not a default of 100 Hz).
-    assert model.rate == rate
+    assert model.rate_hz == rate
     py_model = tmp_path / "py.hbn"
     model.save(py_model)
     assert py_model.read_bytes() == cli_model.read_bytes()
@@ -68,11 +68,11 @@ def test_estimates_written_from_python_equal_the_cli(cli, tmp_path):
     est = model.estimate_log(test, mode="ekf-blr", csv=tmp_path / "py.csv", mcap=tmp_path / "py.mcap")
     assert (tmp_path / "py.csv").read_bytes() == (tmp_path / "cli.csv").read_bytes()
     # Read back through resampling (grid times rounded to ns): equal up to interpolation rounding.
-    back = hbn.read_mcap(tmp_path / "py.mcap", {"x": "/hbn/estimate.x"}, rate=50.0)
+    back = hbn.read_mcap(tmp_path / "py.mcap", {"x": "/hbn/estimate.x"}, rate_hz=50.0)
     np.testing.assert_allclose(back["x"], est.x, rtol=0, atol=1e-12)
     assert est.t is not None and est.t[1] == pytest.approx(0.02)
     # The same numbers as the array API on the same grid.
-    d = hbn.read_mcap(test, {"u": "/input.data", "y": "/sensor.data"}, rate=model.rate)
+    d = hbn.read_mcap(test, {"u": "/input.data", "y": "/sensor.data"}, rate_hz=model.rate_hz)
     np.testing.assert_array_equal(model.estimate(d["u"], d["y"], mode="ekf-blr").x, est.x)
 
 
@@ -108,20 +108,23 @@ def test_defaults_come_from_the_library():
     m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=60)
     got = m.params
     for k, v in p.items():
-        if k not in ("max_points", "signals", "n_inducing", "lags", "sensor_inputs"):
+        if k in ("kernel", "transition_kernel", "sensor_kernel"):
+            # None by default: each GP chooses by evidence; the model holds the kernel chosen.
+            assert v is None and (k == "kernel" or got[k] in ("matern52", "se-ard")), k
+        elif k not in ("max_points", "signals", "n_inducing", "lags", "sensor_inputs"):
             assert got[k] == v, k
     assert got["max_points"] == 60
     # The default lists the inducing settings chosen among on held-out data (exact GPs first);
     # the model holds the one chosen.
-    assert p["n_inducing"] == ["exact", hbn.DEFAULT_INDUCING]
+    assert p["n_inducing"] == [None, hbn.DEFAULT_INDUCING]
     assert got["n_inducing"] in p["n_inducing"]
     # Likewise the lag sets (the primary one first).
     assert p["lags"] == [[], [1.0]] and got["lags"] in p["lags"]
     # And the sensor's inputs (the thesis' sensor first, a sensor of the state only tried).
     assert p["sensor_inputs"] == ["thesis", "state"] and got["sensor_inputs"] in p["sensor_inputs"]
     o = hbn.default_log_options()
-    assert o["rate"] is None and o["max_gap"] > 0 and o["time_source"] == "log"
-    assert hbn.default_gp_params()["n_restarts"] >= 1
+    assert o["rate_hz"] is None and o["max_gap_s"] > 0 and o["time_source"] == "log"
+    assert hbn.default_gp_params()["n_starts"] >= 1
 
 
 def test_exception_classes():
@@ -135,18 +138,18 @@ def test_exception_classes():
 
 
 BAD_PARAMS = [
-    ("rate", -1.0),
-    ("rate", 0),
+    ("rate_hz", -1.0),
+    ("rate_hz", 0),
     ("max_points", 1),
-    ("n_restarts", 0),
-    ("max_iter", 0),
+    ("n_starts", 0),
+    ("max_iters", 0),
     ("noise_floor", 0.0),
     ("blr_window", 0.7),
     ("blr_window", 0.0),
     ("kernel", "rbf"),
     ("transition_kernel", "rbf"),
     ("sensor_kernel", "rbf"),
-    ("subset", "all"),
+    ("subset_policy", "all"),
     ("seed", -1),
     ("normalize", "yes"),
     ("memory", [0.0]),
@@ -168,7 +171,7 @@ BAD_PARAMS = [
 
 def test_memory_sets_the_play_operators():
     d = hbn.simulate("preisach", 300, seed=1, noise_gain=1.0)
-    fast = dict(max_points=80, n_restarts=1, max_iter=30, validation=0.0)
+    fast = dict(max_points=80, n_starts=1, max_iters=30, validation=0.0)
     default = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], **fast)
     assert default.params["memory"] == hbn.default_params()["memory"] == [0.05, 0.2]
     plain = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], memory=[], **fast)
@@ -183,7 +186,7 @@ def test_memory_sets_the_play_operators():
 
 def test_lags_set_low_pass_inputs_of_the_transition():
     d = hbn.simulate("soft-actuator", 300, seed=1, noise_gain=1.0)
-    fast = dict(max_points=80, n_restarts=1, max_iter=30, validation=0.0)
+    fast = dict(max_points=80, n_starts=1, max_iters=30, validation=0.0)
     # The default trains none and tries one 1 s lag on held-out data (none here: validation=0).
     assert hbn.default_params()["lags"] == [[], [1.0]]
     plain = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], **fast)
@@ -199,7 +202,7 @@ def test_lags_set_low_pass_inputs_of_the_transition():
 
 def test_linear_mean_sets_the_gps_prior_means():
     d = hbn.simulate("preisach", 300, seed=1, noise_gain=1.0)
-    fast = dict(max_points=80, n_restarts=1, max_iter=30, validation=0.0, memory=[])
+    fast = dict(max_points=80, n_starts=1, max_iters=30, validation=0.0, memory=[])
     assert hbn.default_params()["linear_mean"] == "none"
     te = hbn.simulate("preisach", 200, seed=2, noise_gain=1.0)
     estimates = []
@@ -214,7 +217,7 @@ def test_linear_mean_sets_the_gps_prior_means():
 
 def test_sensor_inputs_set_what_the_sensor_gp_reads():
     d = hbn.simulate("maxwell-slip", 300, seed=1, noise_gain=1.0)
-    fast = dict(max_points=80, n_restarts=1, max_iter=30, validation=0.0)
+    fast = dict(max_points=80, n_starts=1, max_iters=30, validation=0.0)
     thesis = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], **fast)
     assert thesis.params["sensor_inputs"] == "thesis"
     state = hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], sensor_inputs="state", **fast)
@@ -242,17 +245,17 @@ def test_every_parameter_check_names_its_keyword(keyword, value):
 @pytest.mark.parametrize(
     "keyword,kwargs",
     [
-        ("max_gap", {"max_gap": 0.0}),
+        ("max_gap_s", {"max_gap_s": 0.0}),
         ("time_source", {"time_source": "gps"}),
-        ("rate", {"rate": -2.0}),
+        ("rate_hz", {"rate_hz": -2.0}),
         ("input", {"input": "/a[x"}),
-        ("paths", {"paths": []}),
+        ("logs", {"logs": []}),
         ("max_points", {"max_points": 1}),
     ],
 )
 def test_log_option_checks_name_their_keyword_before_reading(keyword, kwargs, tmp_path):
     kwargs = dict(kwargs)
-    paths = kwargs.pop("paths", [tmp_path / "absent.mcap"])
+    paths = kwargs.pop("logs", [tmp_path / "absent.mcap"])
     with pytest.raises(hbn.ConfigError, match=keyword) as e:
         hbn.HysteresisModel.from_logs(paths, **kwargs)
     assert e.value.keyword == keyword

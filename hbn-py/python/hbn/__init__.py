@@ -2,23 +2,27 @@
 
 The same Rust engine as the ``hbn`` command-line tool, with a scikit-learn feel:
 
-* :class:`GaussianProcess` -- an exact GP regressor (``fit`` / ``predict``) with the kernels of
-  the Hysteresis Bayesian Network, input gradients of the mean, and JSON persistence;
-* :class:`HysteresisModel` -- the HBN (actuator ``u -> x``, soft sensor ``x -> y``) learned from
-  logged ``(u, x, y)`` trajectories, whose EKF estimates ``x`` from ``u`` and ``y`` alone; its
-  files are the CLI's ``hbn train --out model.hbn`` files;
+* :class:`HysteresisModel` -- the Hysteresis Bayesian Network (actuator ``u -> x``, soft sensor
+  ``x -> y``) learned from logged ``(u, x, y)`` trajectories, whose filter estimates ``x`` from
+  ``u`` and ``y`` alone; its files are the CLI's ``hbn train --out model.hbn`` files;
 * :class:`Filter` -- the streaming estimator (``model.filter()``): one ``step(u, y)`` per sample,
   equal to :meth:`HysteresisModel.estimate` sample for sample;
+* :class:`GaussianProcess` -- an exact or sparse GP regressor (``fit`` / ``predict``) with the
+  kernels of the HBN, input gradients of the mean, and JSON persistence;
 * :class:`Explorer` -- which input to apply next while collecting training data (thesis
   Sec. 3.4), with a robot or a :class:`Simulator` in the loop;
 * :func:`simulate` -- the hysteretic test systems of ``hbn simulate``; :class:`Simulator` steps
-  one of them a sample at a time;
+  one of them a sample at a time; :func:`oracle_estimate` -- the floor under causal estimation
+  on their logs;
 * :func:`read_mcap` -- numeric signals from MCAP robot logs (ROS 2 or Foxglove), resampled on one
   grid by the CLI's own pipeline; :meth:`HysteresisModel.from_logs` trains from logs exactly like
   ``hbn train``.
 
-Defaults are the library's (:func:`default_params`, :func:`default_log_options`,
-:func:`default_gp_params`): an argument left at ``None`` takes them.
+Every default in a signature is the library's own, read from the Rust engine when the module
+loads (:func:`default_params`, :func:`default_log_options`, :func:`default_gp_params`,
+:func:`default_explore_params`, :func:`default_sim_params`). A keyword is the name of the Rust
+field it sets (``n_starts``, ``max_points``, ``rate_hz``); ``docs/options.md`` lists every option
+with its CLI flag. Today a model is scalar: one input, one state, one sensor.
 
 Example
 -------
@@ -32,27 +36,43 @@ Example
 
 Errors are subclasses of :class:`HbnError`: :class:`ConfigError` (an invalid argument; its
 ``keyword`` names it), :class:`DataError` (bad data or an unusable log), :class:`ModelFileError`
-(not an hbn model or GP of a supported version), :class:`HbnIOError` (a file could not be read or
-written; :class:`HbnFileNotFoundError` when it does not exist) and :class:`TrainingError`
+(not an hbn model or GP of the supported version), :class:`HbnIOError` (a file could not be read
+or written; :class:`HbnFileNotFoundError` when it does not exist) and :class:`TrainingError`
 (numerical failure). They also derive from ``ValueError``, ``OSError`` /
 ``FileNotFoundError`` and ``RuntimeError`` respectively, so generic handlers keep working.
 """
 
 from __future__ import annotations
 
+import functools
+import inspect
 import os
-from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
+import textwrap
+import warnings
+from typing import (
+    Any,
+    Callable,
+    Dict,
+    Iterator,
+    List,
+    Mapping,
+    Optional,
+    Sequence,
+    Tuple,
+    TypeVar,
+    Union,
+)
 
 import numpy as np
 
 from . import _hbn
 
 __all__ = [
-    "GaussianProcess",
     "HysteresisModel",
     "Estimate",
     "Filter",
     "FilterOutput",
+    "GaussianProcess",
     "Explorer",
     "Simulator",
     "simulate",
@@ -63,6 +83,7 @@ __all__ = [
     "default_log_options",
     "default_gp_params",
     "default_explore_params",
+    "default_sim_params",
     "HbnError",
     "HbnIOError",
     "HbnFileNotFoundError",
@@ -90,7 +111,7 @@ FilterOutput = _hbn.FilterOutput
 
 #: Names accepted by ``simulate(system=...)``.
 SYSTEMS: Tuple[str, ...] = tuple(_hbn.systems())
-#: Kernel names accepted by ``kernel=`` (each of the first five optionally with ``+dir``).
+#: Kernel names accepted by ``kernel=``.
 KERNELS: str = _hbn.kernel_names()
 #: Inducing points per GP of the default model's sparse candidate (``HysteresisModel.fit``
 #: chooses between exact GPs and sparse GPs with this many points on held-out data).
@@ -100,12 +121,15 @@ MODES: Tuple[str, ...] = tuple(_hbn.mode_names())
 
 
 def default_params() -> Dict[str, Any]:
-    """The training parameters' defaults by keyword argument (``HbnParams::default`` in Rust; the
+    """The training parameters' defaults by keyword (``HbnParams::default`` in Rust; the
     defaults of ``hbn train``), plus the BLR prior (``blr``) and ``signals``.
+
+    ``kernel``, ``transition_kernel`` and ``sensor_kernel`` are ``None``: each GP chooses between
+    ``"matern52"`` and ``"se-ard"`` by its evidence. ``None`` in ``n_inducing`` is the exact GP.
 
     >>> import hbn
     >>> p = hbn.default_params()
-    >>> {"max_points", "n_restarts", "max_iter", "kernel"} <= set(p) | {"kernel"}
+    >>> p["max_points"] >= 2 and p["kernel"] is None
     True
     """
     return _hbn.default_params()
@@ -113,22 +137,101 @@ def default_params() -> Dict[str, Any]:
 
 def default_log_options() -> Dict[str, Any]:
     """How logs are read by default (``LogOptions::default`` in Rust; ``hbn train`` / ``hbn
-    estimate``): ``time_source``, ``max_gap`` (s), ``rate`` (``None``: the log's native rate), the
-    default signal paths ``input``, ``state``, ``output`` and the default ``mode``."""
+    estimate``): ``time_source``, ``max_gap_s`` (seconds), ``rate_hz`` (``None``: the log's native
+    rate), the default signal paths ``input``, ``state``, ``output`` and the default ``mode``.
+
+    >>> import hbn
+    >>> hbn.default_log_options()["time_source"]
+    'log'
+    """
     return _hbn.default_log_options()
 
 
 def default_explore_params() -> Dict[str, Any]:
     """The :class:`Explorer`'s defaults (the library's ``ExploreParams``), by keyword; the
-    bounds ``u_min``, ``u_max`` and ``max_step`` have none."""
+    bounds ``u_min``, ``u_max`` and ``max_step`` have none.
+
+    >>> import hbn
+    >>> hbn.default_explore_params()["strategy"]
+    'ramps'
+    """
     return _hbn.default_explore_params()
 
 
 def default_gp_params() -> Dict[str, Any]:
-    """The defaults of :class:`GaussianProcess` (``GpParams::new`` in Rust)."""
+    """The defaults of :class:`GaussianProcess` (``GpParams::new`` in Rust), by keyword.
+
+    >>> import hbn
+    >>> hbn.default_gp_params()["kernel"]
+    'se-ard'
+    """
     return _hbn.default_gp_params()
 
+
+def default_sim_params() -> Dict[str, Any]:
+    """The defaults of :func:`simulate`, :class:`Simulator` and :func:`oracle_estimate`
+    (``SimConfig::new`` in Rust): ``seed``, ``noise_gain`` (0: noise-free) and ``rate_hz``.
+
+    >>> import hbn
+    >>> hbn.default_sim_params()["rate_hz"]
+    100.0
+    """
+    return _hbn.default_sim_params()
+
+
+def _frozen(v: Any) -> Any:
+    """A default value as it appears in a signature: lists become tuples (immutable)."""
+    if isinstance(v, list):
+        return tuple(_frozen(i) for i in v)
+    return v
+
+
+# The library's defaults, read once: every signature below takes its defaults from these.
+_TRAINING: Tuple[str, ...] = tuple(_hbn.training_keywords())
+_P: Dict[str, Any] = {k: _frozen(v) for k, v in _hbn.default_params().items()}
+_L: Dict[str, Any] = _hbn.default_log_options()
+_G: Dict[str, Any] = _hbn.default_gp_params()
+_E: Dict[str, Any] = _hbn.default_explore_params()
+_S: Dict[str, Any] = _hbn.default_sim_params()
+
 PathLike = Union[str, "os.PathLike[str]"]
+
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+
+def _renamed(**old_to_new: str) -> Callable[[_F], _F]:
+    """Accepts the keywords of the previous release under their old names for one more
+    release, with a ``DeprecationWarning`` naming the new one. The signature (``help()``,
+    ``inspect.signature``) shows only the new names."""
+
+    def wrap(f: _F) -> _F:
+        @functools.wraps(f)
+        def call(*args: Any, **kwargs: Any) -> Any:
+            for old, new in old_to_new.items():
+                if old in kwargs:
+                    if new in kwargs:
+                        raise TypeError(f"{f.__qualname__}() got both {old}= and {new}=")
+                    warnings.warn(
+                        f"{f.__qualname__}({old}=) is deprecated; use {new}=",
+                        DeprecationWarning,
+                        stacklevel=2,
+                    )
+                    kwargs[new] = kwargs.pop(old)
+            return f(*args, **kwargs)
+
+        call.__signature__ = inspect.signature(f)  # type: ignore[attr-defined]
+        return call  # type: ignore[return-value]
+
+    return wrap
+
+
+#: The renamed training keywords (``HysteresisModel.fit``, ``from_logs``, ``Explorer``).
+_RENAMED = dict(n_restarts="n_starts", max_iter="max_iters", subset="subset_policy")
+
+
+def _training_args(args: Mapping[str, Any]) -> Dict[str, Any]:
+    """The training keywords among a call's arguments (``locals()``), by name."""
+    return {k: args[k] for k in _TRAINING if k in args}
 
 
 def _vector(a: Any, name: str) -> np.ndarray:
@@ -165,25 +268,43 @@ def _fspath(path: PathLike) -> str:
     return os.fspath(path)
 
 
-def _config_error(keyword: str, problem: str) -> "ConfigError":
-    e = ConfigError(f"invalid {keyword}=: {problem}")
+_NO_VALUE = object()
+
+
+def _config_error(keyword: str, problem: str, value: Any = _NO_VALUE) -> ConfigError:
+    """``invalid keyword=value: problem`` (``invalid keyword: problem`` without a value)."""
+    shown = keyword if value is _NO_VALUE else f"{keyword}={value!r}"
+    e = ConfigError(f"invalid {shown}: {problem}")
     e.keyword = keyword
     return e
 
 
 def _float(v: Any, keyword: str) -> float:
+    if isinstance(v, (bool, np.bool_)):
+        raise _config_error(keyword, "must be a number", v)
     try:
         return float(v)
     except (TypeError, ValueError):
-        raise _config_error(keyword, f"must be a number, got {v!r}") from None
+        raise _config_error(keyword, "must be a number", v) from None
 
 
-def _opt_float(v: Any) -> Optional[float]:
-    return None if v is None else float(v)
+def _opt_float(v: Any, keyword: str) -> Optional[float]:
+    return None if v is None else _float(v, keyword)
 
 
 def _opt_str(v: Any) -> Optional[str]:
     return None if v is None else str(v)
+
+
+def _count(value: Any, keyword: str) -> Optional[int]:
+    """A non-negative integer argument (``None`` passes through)."""
+    if value is None:
+        return None
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise _config_error(keyword, "must be an integer", value)
+    if value < 0:
+        raise _config_error(keyword, "must be >= 0", value)
+    return int(value)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -194,52 +315,55 @@ def _opt_str(v: Any) -> Optional[str]:
 class GaussianProcess:
     """Gaussian-process regression, exact or sparse (the engine of the HBN's two GPs).
 
+    It follows scikit-learn: settings in the constructor, then :meth:`fit` on data, because its
+    users come from scikit-learn's ``GaussianProcessRegressor``. (:class:`HysteresisModel` is
+    built by class methods instead: a trained HBN is immutable.)
+
     Parameters
     ----------
-    kernel : str, default "se-ard"
+    kernel : str
         ``"se"`` (isotropic squared exponential), ``"se-ard"`` (one length scale per input),
-        ``"matern52"`` (ARD Matern 5/2), ``"mahalanobis"`` (SE with the empirical input
-        covariance, one scale), ``"warped"`` (tanh-warped inputs under the Mahalanobis SE), each
-        optionally with ``"+dir"``, and ``"thesis"`` (= ``"warped+dir"``). ``"+dir"`` multiplies the
-        kernel by the direction-advantage factor ``(1 + g g') / 2`` with ``g = sign(X[:, 0] -
-        X[:, 1])`` (so it needs at least two features).
+        ``"matern52"`` (ARD Matern 5/2) or ``"thesis"`` (the thesis' Eq. 19: tanh-warped inputs
+        under a Mahalanobis squared exponential, times the direction-advantage factor
+        ``(1 + g g') / 2`` with ``g = sign(X[:, 0] - X[:, 1])``, so it needs two features).
     lengthscales, signal_variance, noise_variance : optional
         Hyperparameters in the raw units of the data (``lengthscales``: one per feature for the
         ARD kernels, one value otherwise). With ``optimize=False`` they are used exactly as given
-        (missing ones take the defaults: unit variance and length scales in standardised units);
-        with ``optimize=True`` they are the first optimiser start.
-    optimize : bool, optional
+        (missing ones take unit variance and length scales in standardised units); with
+        ``optimize=True`` they are the first optimiser start.
+    optimize : bool
         Maximise the log marginal likelihood (multi-start L-BFGS on log-parameters).
-    normalize : bool, optional
+    normalize : bool
         Standardise inputs (per feature) and targets before the kernel.
-    n_restarts : int, optional
-        Optimiser starts *in all* (the first from the given/default hyperparameters, the rest
+    n_starts : int
+        Optimiser starts in all (the first from the given or default hyperparameters, the rest
         random); the CLI's ``--starts``. Must be >= 1.
-    max_iter : int, optional
+    max_iters : int
         L-BFGS iterations per start.
-    max_points : int, optional
-        Most support points kept; larger data sets are reduced by farthest-point sampling (the
-        fit reports it in :attr:`warnings_`).
-    seed : int, optional
+    max_points : int
+        Most support points of the exact GP; larger data sets are reduced by farthest-point
+        sampling (the fit reports it in :attr:`warnings_`).
+    seed : int
         Seed of the random starts.
-    n_inducing : int or None, default None
+    n_inducing : int or None
         ``None`` fits the exact GP (on at most ``max_points`` samples). An integer ``m`` fits
-        the sparse GP of Titsias (2009) on *every* sample with ``m`` inducing points:
-        ``O(n m^2)`` to train, ``O(m^2)`` per prediction; ``log_marginal_likelihood()`` is then
-        its variational lower bound. The inducing inputs start from greedy conditional-variance
-        selection (see ``docs/sparse.md``); fewer are used if the data have fewer distinct inputs.
+        the sparse GP of Titsias (2009) on every sample with ``m`` inducing points: ``O(n m^2)``
+        to train, ``O(m^2)`` per prediction; :meth:`log_marginal_likelihood` is then its
+        variational lower bound. The inducing inputs start from greedy conditional-variance
+        selection (``docs/sparse.md``); fewer are used if the data have fewer distinct inputs.
     inducing_points : array-like (m x d), optional
         Fixed starting inducing inputs (raw units) for the sparse GP, instead of the selection.
-    optimize_inducing : bool, default False
+    optimize_inducing : bool
         Learn the inducing inputs together with the hyperparameters (sparse GP only).
-    mean : {"constant", "linear"}, optional
+    mean : {"constant", "linear"}
         The prior mean. ``"linear"`` subtracts the targets' least-squares plane on the inputs
         before the kernel sees them and adds it back in prediction (its slopes join the mean
         gradient), so a nearly linear relation does not push the kernel to huge length scales
-        and signal variances, and predictions far from the data follow the plane. The default
-        ``"constant"`` is the targets' mean.
+        and signal variances, and predictions far from the data follow the plane. ``"constant"``
+        is the targets' mean.
 
-    Settings left at ``None`` take the library defaults, :func:`default_gp_params`.
+    The defaults are the library's (:func:`default_gp_params`). A fitted GP pickles (its JSON
+    inside).
 
     Examples
     --------
@@ -261,59 +385,62 @@ class GaussianProcess:
     True
     """
 
+    @_renamed(n_restarts="n_starts", max_iter="max_iters")
     def __init__(
         self,
-        kernel: str = "se-ard",
+        kernel: str = _G["kernel"],
         lengthscales: Optional[Union[float, Sequence[float], np.ndarray]] = None,
         signal_variance: Optional[float] = None,
         noise_variance: Optional[float] = None,
-        optimize: Optional[bool] = None,
-        normalize: Optional[bool] = None,
-        n_restarts: Optional[int] = None,
-        max_iter: Optional[int] = None,
-        max_points: Optional[int] = None,
-        seed: Optional[int] = None,
+        optimize: bool = _G["optimize"],
+        normalize: bool = _G["normalize"],
+        n_starts: int = _G["n_starts"],
+        max_iters: int = _G["max_iters"],
+        max_points: int = _G["max_points"],
+        seed: int = _G["seed"],
         n_inducing: Optional[int] = None,
         inducing_points: Optional[Any] = None,
-        optimize_inducing: bool = False,
-        mean: Optional[str] = None,
+        optimize_inducing: bool = _G["optimize_inducing"],
+        mean: str = _G["mean"],
     ) -> None:
         self.kernel = kernel
-        self.mean = mean
-        self.n_inducing = n_inducing
-        self.inducing_points = inducing_points
-        self.optimize_inducing = optimize_inducing
         self.lengthscales = lengthscales
         self.signal_variance = signal_variance
         self.noise_variance = noise_variance
         self.optimize = optimize
         self.normalize = normalize
-        self.n_restarts = n_restarts
-        self.max_iter = max_iter
+        self.n_starts = n_starts
+        self.max_iters = max_iters
         self.max_points = max_points
         self.seed = seed
+        self.n_inducing = n_inducing
+        self.inducing_points = inducing_points
+        self.optimize_inducing = optimize_inducing
+        self.mean = mean
         self._core: Optional[_hbn.GaussianProcessCore] = None
 
     def __repr__(self) -> str:
         state = f"fitted, n_support={self._core.n_support}" if self._core else "not fitted"
         return f"GaussianProcess(kernel={self.kernel!r}, {state})"
 
+    def __getstate__(self) -> Dict[str, Any]:
+        state = self.__dict__.copy()
+        core = state.pop("_core")
+        state["_json"] = None if core is None else core.to_json()
+        return state
+
+    def __setstate__(self, state: Dict[str, Any]) -> None:
+        state = dict(state)
+        text = state.pop("_json")
+        self.__dict__.update(state)
+        self._core = None if text is None else _hbn.GaussianProcessCore.from_json(text)
+
     def _fitted(self) -> _hbn.GaussianProcessCore:
         if self._core is None:
             raise ValueError("this GaussianProcess is not fitted yet; call fit(X, y) first")
         return self._core
 
-    @staticmethod
-    def _count(value: Any, name: str) -> Optional[int]:
-        if value is None:
-            return None
-        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-            raise _config_error(name, f"must be an integer, got {value!r}")
-        if value < 0:
-            raise _config_error(name, f"must be >= 0, got {value}")
-        return int(value)
-
-    def fit(self, X: Any, y: Any) -> "GaussianProcess":
+    def fit(self, X: Any, y: Any) -> GaussianProcess:
         """Fits the GP to inputs ``X`` (``n x d``, or 1-D for one feature) and targets ``y`` (``n``).
 
         Returns ``self``. Raises ``ValueError`` for NaN/Inf values, mismatched lengths, constant
@@ -333,16 +460,14 @@ class GaussianProcess:
         ls = self.lengthscales
         if ls is not None:
             ls = [float(v) for v in np.atleast_1d(np.asarray(ls, dtype=np.float64))]
-        m = None if self.n_inducing is None else self._count(self.n_inducing, "n_inducing")
+        m = _count(self.n_inducing, "n_inducing")
         Z = None
         if self.inducing_points is not None:
             if m is None:
                 raise ValueError("inducing_points needs n_inducing (the sparse GP)")
             Z = _matrix(self.inducing_points, "inducing_points", Xm.shape[1])
             if Z.shape[0] != m:
-                raise ValueError(
-                    f"inducing_points has {Z.shape[0]} rows but n_inducing is {m}"
-                )
+                raise ValueError(f"inducing_points has {Z.shape[0]} rows but n_inducing is {m}")
             Z = Z.ravel()
         self._core = _hbn.GaussianProcessCore.fit(
             Xm.ravel(),
@@ -350,18 +475,18 @@ class GaussianProcess:
             yv,
             str(self.kernel),
             ls,
-            None if self.signal_variance is None else float(self.signal_variance),
-            None if self.noise_variance is None else float(self.noise_variance),
+            _opt_float(self.signal_variance, "signal_variance"),
+            _opt_float(self.noise_variance, "noise_variance"),
             None if self.optimize is None else bool(self.optimize),
             None if self.normalize is None else bool(self.normalize),
-            self._count(self.n_restarts, "n_restarts"),
-            self._count(self.max_iter, "max_iter"),
-            self._count(self.max_points, "max_points"),
-            self._count(self.seed, "seed"),
+            _count(self.n_starts, "n_starts"),
+            _count(self.max_iters, "max_iters"),
+            _count(self.max_points, "max_points"),
+            _count(self.seed, "seed"),
             m,
             Z,
             bool(self.optimize_inducing),
-            None if self.mean is None else str(self.mean),
+            _opt_str(self.mean),
         )
         return self
 
@@ -478,16 +603,13 @@ class GaussianProcess:
         self._fitted().save(_fspath(path))
 
     @classmethod
-    def load(cls, path: PathLike) -> "GaussianProcess":
+    def load(cls, path: PathLike) -> GaussianProcess:
         """Loads a GP written by :meth:`save` (:class:`HbnFileNotFoundError` if missing,
-        :class:`ModelFileError` if the file is not an hbn GP of a supported version)."""
-        core = _hbn.GaussianProcessCore.load(_fspath(path))
-        gp = cls(kernel=core.kernel)
-        gp._core = core
-        return gp
+        :class:`ModelFileError` if the file is not an hbn GP of the supported version)."""
+        return cls._from_core(_hbn.GaussianProcessCore.load(_fspath(path)))
 
     @classmethod
-    def _from_core(cls, core: _hbn.GaussianProcessCore) -> "GaussianProcess":
+    def _from_core(cls, core: _hbn.GaussianProcessCore) -> GaussianProcess:
         gp = cls(kernel=core.kernel)
         gp._core = core
         return gp
@@ -513,7 +635,7 @@ class Estimate:
 
     >>> import hbn
     >>> tr = hbn.simulate("duhem", 300, seed=1)
-    >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_restarts=1)
+    >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_starts=1)
     >>> est = m.estimate(tr["u"], tr["y"])
     >>> x_hat, x_std = est
     >>> est.flags.dtype.name
@@ -593,7 +715,7 @@ class Estimate:
 
         >>> import hbn
         >>> tr = hbn.simulate("duhem", 300, seed=1)
-        >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_restarts=1)
+        >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_starts=1)
         >>> te = hbn.simulate("duhem", 200, seed=2)
         >>> s = m.estimate(te["u"], te["y"]).score(te["x"])
         >>> sorted(s)[:3], s["samples"]
@@ -608,64 +730,95 @@ def _trajectories(a: Any, name: str) -> List[np.ndarray]:
     return [_vector(a, name)]
 
 
-class HysteresisModel:
-    """The Hysteresis Bayesian Network: a transition GP ``x_k = H_D(x_{k-1}, x_{k-2}, u_{k-1},
-    u_{k-2})`` and a sensor GP ``y_k = H_S(x_{k-1}, y_{k-1}, x_k)``, with an EKF (optionally with
-    local Bayesian linear regression) that estimates ``x`` from ``u`` and ``y`` alone.
 
-    Build one with :meth:`fit` (arrays), :meth:`from_logs` (MCAP logs, like ``hbn train``) or
-    :meth:`load` (files of ``hbn train --out``).
 
-    Training parameters are keyword arguments (``**params``) applied over the library defaults
-    (:func:`default_params`): ``kernel`` (both GPs; see :data:`KERNELS`), ``transition_kernel``,
-    ``sensor_kernel`` (by default each GP chooses between ``"matern52"`` and ``"se-ard"`` by its
-    evidence, the exact GP's log marginal likelihood, so :func:`default_params` lists no kernel;
-    naming one turns that off; the table is ``summary["kernel_evidence"]``), ``n_inducing`` (``None``: exact GPs on at most ``max_points`` samples;
-    an integer: sparse GPs with that many inducing points, trained on every sample; a list:
-    chosen among on held-out data, see below; default ``[None, DEFAULT_INDUCING]``, so the
-    held-out data choose between exact and sparse GPs, and with ``validation=0`` the exact GPs
-    are trained), ``max_points``, ``subset`` (``"farthest-point"`` or ``"random"``),
-    ``n_restarts`` (optimiser starts per GP), ``max_iter`` (L-BFGS iterations per start),
-    ``seed``, ``normalize``, ``noise_floor``, ``blr_window`` (half-width of the EKF+BLR window as a
-    fraction of each coordinate's range), ``validation`` (fraction of every run held out at a
-    time to learn the filter's noise scales and default mode, by blocked cross-validation: 0.25
-    holds out each quarter of every run in turn; 0 turns this filter-aware training off; see
-    :attr:`tuning`), ``memory`` (the input's long memory: radii of play operators whose outputs
-    the transition GP reads besides ``u_{k-1}`` and ``u_{k-2}``, as fractions of the training
-    input's range, at most 4; ``[]`` for the thesis' four inputs; default ``[0.05, 0.2]``, see
-    ``docs/memory.md``), ``lags`` (time constants in seconds of first-order low-pass filters of
-    the input whose outputs the transition GP reads after the plays, for creep and
-    viscoelastic relaxation; plays and lags at most 4 in all; a list of such lists is chosen
-    among on held-out data, see below; default ``[[], [1.0]]``: none, with one 1 s lag tried
-    with the sparse GPs; ``[]`` trains without lags and tries none; see ``docs/memory.md``),
-    ``linear_mean`` (which GPs have a linear prior mean: ``"none"``,
-    ``"transition"`` or ``"both"``; see :class:`GaussianProcess` and ``docs/sparse.md``),
-    ``sensor_inputs`` (what the sensor GP reads: ``"thesis"``, ``[x_{k-1}, y_{k-1}, x_k]``, or
-    ``"state"``, ``[x_{k-1}, x_k]``, so that every measurement pins the state's level; a list
-    is chosen among on held-out data; default ``["thesis", "state"]``: the thesis' sensor, with
-    the exact GPs and a sensor of the state only tried; see ``docs/tuning.md``),
-    ``max_signal_variance`` (largest GP signal variance, as a multiple
-    of the variance each kernel models, or ``"none"`` for only the ``1e5`` box). They are
-    the flags of ``hbn train``. A bad value
+_TRAINING_PARAMETERS_DOC = """
+    Training parameters (keyword-only; the defaults are :func:`default_params`, the defaults
+    of ``hbn train``; ``docs/options.md`` says when to change each):
+
+    kernel : str, list of str or None
+        Kernel of both GPs (one of :data:`KERNELS`). ``None``: each GP chooses between
+        ``"matern52"`` and ``"se-ard"`` by its evidence, the exact GP's log marginal likelihood
+        (the table is ``summary["kernel_evidence"]``); naming a kernel turns that off. A list
+        is chosen among on held-out data (model selection, below).
+    transition_kernel, sensor_kernel : str or None
+        The kernel of one GP (overrides ``kernel``).
+    n_inducing : int, None or list
+        ``None``: exact GPs on at most ``max_points`` samples each; an integer: sparse GPs with
+        that many inducing points, trained on every sample; a list (``None`` being the exact
+        GP) is chosen among on held-out data. The default lets the held-out data choose
+        between exact GPs and sparse GPs of :data:`DEFAULT_INDUCING` points.
+    max_points : int
+        Most support points of each exact GP.
+    subset_policy : {"farthest-point", "random"}
+        How the support points are chosen when there are more samples.
+    n_starts : int
+        Optimiser starts per GP.
+    max_iters : int
+        L-BFGS iterations per start.
+    seed : int
+        Seed of the random starts and subsets.
+    normalize : bool
+        Standardise GP inputs and outputs.
+    noise_floor : float
+        Lower bound of each GP's noise variance (standardised units).
+    blr_window : float
+        Half-width of the EKF+BLR window, as a fraction of each coordinate's range.
+    validation : float
+        Fraction of every run held out at a time (blocked cross-validation: 0.25 holds out
+        each quarter of every run in turn) to learn the filter's noise scales and default mode
+        (:attr:`HysteresisModel.tuning`) and to choose among candidates; 0 turns this off.
+    memory : list of float
+        The input's long memory: radii of play operators whose outputs the transition GP reads
+        besides ``u_{k-1}`` and ``u_{k-2}``, as fractions of the training input's range (at most
+        4); ``[]`` for the thesis' four inputs (``docs/memory.md``).
+    lags : list of float, or list of lists
+        Time constants (seconds) of first-order low-pass filters of the input that the
+        transition GP reads after the plays, for creep and relaxation (plays and lags at most 4
+        in all). A list of lists: the first set is the primary one, the others are tried on
+        held-out data with the sparse candidates; ``[]`` trains without lags and tries none.
+    linear_mean : {"none", "transition", "both"}
+        Which GPs have a linear prior mean (see :class:`GaussianProcess`).
+    sensor_inputs : str or list of str
+        What the sensor GP reads: ``"thesis"``, ``[x_{k-1}, y_{k-1}, x_k]``, or ``"state"``,
+        ``[x_{k-1}, x_k]``, so that every measurement pins the state's level; a list is chosen
+        among on held-out data, the first being the primary one (``docs/tuning.md``).
+    max_signal_variance : float or None
+        Largest GP signal variance, as a multiple of the variance each kernel models; ``None``
+        for only the ``1e5`` box.
+
+    ``None`` keeps a parameter's default, except ``n_inducing=None`` (exact GPs). A bad value
     raises :class:`ConfigError` whose ``keyword`` names it.
 
-    Model selection: ``kernel`` and ``n_inducing`` also take a list (``kernel=["matern52",
-    "se-ard"]``, ``n_inducing=[None, 64]``, ``None`` being the exact GP), ``lags`` a list of
-    lag sets (``lags=[[], [1.0]]``, the first the primary one) and ``sensor_inputs`` a list of
-    sensors. Every combination of kernel and inducing setting is trained, each sparse one also
-    with every further lag set, the first one also with every further sensor, and its
-    filter tuned on the same held-out data; the one whose default mode has the lowest held-out
-    NLPD among those at least as accurate held out (nRMSE) as the first becomes the model,
-    leaving out candidates whose filter loses the state on their own training runs (a row's
-    ``"lost"``) while another does not; each candidate costs one training. The table is
-    ``summary["validation"]["candidates"]``, and :attr:`params` holds the chosen configuration.
+    Model selection: every combination of a kernel and an inducing setting is a candidate,
+    each sparse one also with every further lag set, and the first one also with every further
+    sensor. Each is trained and its filter tuned on the same held-out data; the one whose
+    default mode has the lowest held-out NLPD among those at least as accurate held out (nRMSE)
+    as the first becomes the model, leaving out candidates whose filter loses the state on
+    their own training runs while another does not. Each candidate costs one training. The
+    table is ``summary["validation"]["candidates"]``, and :attr:`HysteresisModel.params` holds
+    the configuration chosen.
+"""
+
+
+class HysteresisModel:
+    """The Hysteresis Bayesian Network: a transition GP ``x_k = H_D(x_{k-1}, x_{k-2}, u_{k-1},
+    u_{k-2}, ...)`` and a sensor GP ``y_k = H_S(x_{k-1}, y_{k-1}, x_k)``, with a filter (EKF,
+    EKF with local Bayesian linear regression, or UKF) that estimates ``x`` from ``u`` and ``y``
+    alone.
+
+    Build one with :meth:`fit` (arrays), :meth:`from_logs` (MCAP logs, like ``hbn train``),
+    :meth:`load` (files of ``hbn train --out``) or :meth:`from_bytes`. These are class methods,
+    not scikit-learn's constructor-then-``fit``: a trained model is immutable, and the
+    constructors are siblings. A model pickles with its model file inside, so
+    ``concurrent.futures``, ``multiprocessing`` and Dask carry it to other processes.
 
     >>> import hbn
     >>> tr = hbn.simulate("maxwell-slip", 500, seed=1, noise_gain=1.0)
     >>> model = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=150)
     >>> te = hbn.simulate("maxwell-slip", 300, seed=2, noise_gain=1.0)
     >>> x_hat, x_std = model.estimate(te["u"], te["y"])
-    >>> model.rate
+    >>> model.rate_hz
     100.0
     """
 
@@ -680,87 +833,126 @@ class HysteresisModel:
     def __repr__(self) -> str:
         p = self.params
         return (
-            f"HysteresisModel(rate={self.rate}, kernel={p['transition_kernel']}, "
-            f"max_points={p['max_points']})"
+            f"HysteresisModel(rate_hz={self.rate_hz}, transition_kernel="
+            f"{p['transition_kernel']!r}, sensor_kernel={p['sensor_kernel']!r}, "
+            f"n_inducing={p['n_inducing']!r})"
         )
 
+    def __reduce__(self) -> Tuple[Any, Tuple[bytes]]:
+        return (_model_from_bytes, (self.to_bytes(),))
+
     @classmethod
+    @_renamed(rate="rate_hz", **_RENAMED)
     def fit(
         cls,
         u: Any,
         x: Any,
         y: Any,
-        rate: Optional[float] = None,
+        rate_hz: float = _P["rate_hz"],
         signals: Optional[Mapping[str, Any]] = None,
-        **params: Any,
-    ) -> "HysteresisModel":
-        """Learns both GPs from logged trajectories sampled at ``rate`` Hz (``None``: the default
-        rate of :func:`default_params`).
+        *,
+        kernel: Union[str, Sequence[str], None] = _P["kernel"],
+        transition_kernel: Optional[str] = _P["transition_kernel"],
+        sensor_kernel: Optional[str] = _P["sensor_kernel"],
+        n_inducing: Union[int, None, Sequence[Optional[int]]] = _P["n_inducing"],
+        max_points: int = _P["max_points"],
+        subset_policy: str = _P["subset_policy"],
+        n_starts: int = _P["n_starts"],
+        max_iters: int = _P["max_iters"],
+        seed: int = _P["seed"],
+        normalize: bool = _P["normalize"],
+        noise_floor: float = _P["noise_floor"],
+        blr_window: float = _P["blr_window"],
+        validation: float = _P["validation"],
+        memory: Sequence[float] = _P["memory"],
+        lags: Union[Sequence[float], Sequence[Sequence[float]]] = _P["lags"],
+        linear_mean: str = _P["linear_mean"],
+        sensor_inputs: Union[str, Sequence[str]] = _P["sensor_inputs"],
+        max_signal_variance: Optional[float] = _P["max_signal_variance"],
+    ) -> HysteresisModel:
+        """Learns both GPs from logged trajectories sampled at ``rate_hz`` Hz.
 
         ``u``, ``x``, ``y``: one trajectory (1-D arrays of equal length, at least 3 samples) or
-        lists of trajectories (rows never straddle two trajectories). ``**params``: training
-        parameters (see the class documentation; ``n_inducing=None`` trains exact GPs on at most
-        ``max_points`` samples each; an integer trains sparse GPs with that many inducing points
-        on every sample; the default ``[None, hbn.DEFAULT_INDUCING]`` trains both and keeps the
-        one that estimates the held-out data better). ``signals`` (optional) records where the
-        signals come from, ``{"u": "/valve.pressure", "x": ..., "y": ...}`` (or with ``{"name",
-        "path", "unit"}`` dicts as values): ``hbn estimate --model`` then reads ``u`` and ``y``
-        from those message paths. To train from MCAP logs use :meth:`from_logs`, which keeps the
-        logs' rate.
-
+        lists of trajectories (rows never straddle two trajectories). ``signals`` (optional)
+        records where the signals come from, ``{"u": "/valve.pressure", "x": ..., "y": ...}``
+        (or ``{"name", "path", "unit"}`` dicts as values): ``hbn estimate --model`` then reads
+        ``u`` and ``y`` from those message paths. To train from MCAP logs use
+        :meth:`from_logs`, which keeps the logs' rate.
+        {training}
         >>> import hbn
         >>> runs = [hbn.simulate("duhem", 200, seed=s, noise_gain=1.0) for s in (1, 2)]
         >>> m = hbn.HysteresisModel.fit([r["u"] for r in runs], [r["x"] for r in runs],
-        ...                             [r["y"] for r in runs], max_points=100, n_restarts=1)
+        ...                             [r["y"] for r in runs], max_points=100, n_starts=1)
         >>> m.summary["trajectories"]
         2
         """
         us, xs, ys = _trajectories(u, "u"), _trajectories(x, "x"), _trajectories(y, "y")
         if signals is not None and not isinstance(signals, Mapping):
             raise _config_error(
-                "signals", 'must be a dict like {"u": "/topic.field", "x": ..., "y": ...}'
+                "signals", 'must be a dict like {"u": "/topic.field", "x": ..., "y": ...}', signals
             )
+        params = _training_args(locals())
         core = _hbn.HysteresisModelCore.fit(
-            us, xs, ys, _opt_float(rate), None if signals is None else dict(signals), params
+            us, xs, ys, None if signals is None else dict(signals), params
         )
         return cls(core)
 
     @classmethod
+    @_renamed(paths="logs", rate="rate_hz", max_gap="max_gap_s", **_RENAMED)
     def from_logs(
         cls,
-        paths: Union[PathLike, Sequence[PathLike]],
-        input: Optional[str] = None,
-        state: Optional[str] = None,
-        output: Optional[str] = None,
-        rate: Optional[float] = None,
-        time_source: Optional[str] = None,
-        max_gap: Optional[float] = None,
-        **params: Any,
-    ) -> "HysteresisModel":
+        logs: Union[PathLike, Sequence[PathLike]],
+        input: str = _L["input"],
+        state: str = _L["state"],
+        output: str = _L["output"],
+        rate_hz: Optional[float] = _L["rate_hz"],
+        time_source: str = _L["time_source"],
+        max_gap_s: float = _L["max_gap_s"],
+        *,
+        kernel: Union[str, Sequence[str], None] = _P["kernel"],
+        transition_kernel: Optional[str] = _P["transition_kernel"],
+        sensor_kernel: Optional[str] = _P["sensor_kernel"],
+        n_inducing: Union[int, None, Sequence[Optional[int]]] = _P["n_inducing"],
+        max_points: int = _P["max_points"],
+        subset_policy: str = _P["subset_policy"],
+        n_starts: int = _P["n_starts"],
+        max_iters: int = _P["max_iters"],
+        seed: int = _P["seed"],
+        normalize: bool = _P["normalize"],
+        noise_floor: float = _P["noise_floor"],
+        blr_window: float = _P["blr_window"],
+        validation: float = _P["validation"],
+        memory: Sequence[float] = _P["memory"],
+        lags: Union[Sequence[float], Sequence[Sequence[float]]] = _P["lags"],
+        linear_mean: str = _P["linear_mean"],
+        sensor_inputs: Union[str, Sequence[str]] = _P["sensor_inputs"],
+        max_signal_variance: Optional[float] = _P["max_signal_variance"],
+    ) -> HysteresisModel:
         """Trains from MCAP logs exactly like ``hbn train`` (the same Rust function): each log is
-        one trajectory; the same logs and parameters give a bit-identical model file.
+        one trajectory; the same logs and parameters give a byte-identical model file.
 
-        ``input``, ``state``, ``output``: Foxglove message paths of ``u``, ``x``, ``y`` (defaults
-        in :func:`default_log_options`, the topics ``hbn simulate`` writes). ``rate``: grid rate in
-        Hz (``None``: the native rate of ``input`` in the first log, rounded to 0.1 Hz); the model
-        keeps it. ``time_source`` (``"log"`` or ``"header"``) and ``max_gap`` (largest gap between
-        two samples of a signal, seconds) are the CLI's ``--time-source`` and ``--max-gap``.
-        ``**params``: training parameters (see the class documentation).
-
-        >>> import hbn  # doctest: +SKIP
-        >>> m = hbn.HysteresisModel.from_logs(["run1.mcap", "run2.mcap"], input="/valve.pressure",
-        ...                                   state="/mocap.angle", output="/strain.data")  # doctest: +SKIP
+        ``logs``: one path or several (the CLI's ``--log``). ``input``, ``state``, ``output``:
+        message paths of ``u``, ``x``, ``y`` (``/topic.field``; the defaults are the topics
+        ``hbn simulate`` writes). ``rate_hz``: grid rate in Hz (``None``: the native rate of
+        ``input`` in the first log, rounded to 0.1 Hz); the model keeps it. ``time_source``
+        (``"log"`` or ``"header"``) and ``max_gap_s`` (the largest gap between two samples of a
+        signal, seconds) say how the logs are read (``docs/your-robot.md``).
+        {training}
+        >>> import hbn
+        >>> m = hbn.HysteresisModel.from_logs("fixtures/json_zstd.mcap", input="/input.data",
+        ...     state="/state.data", output="/sensor.data", max_points=80)  # doctest: +SKIP
         """
-        if isinstance(paths, (str, os.PathLike)):
-            paths = [paths]
+        paths = [logs] if isinstance(logs, (str, os.PathLike)) else list(logs)
+        args = locals()
+        params = {k: v for k, v in _training_args(args).items() if k != "rate_hz"}
         core = _hbn.HysteresisModelCore.from_logs(
             [_fspath(p) for p in paths],
-            _opt_str(input),
-            _opt_str(state),
-            _opt_str(output),
-            _opt_float(rate),
-            _opt_str(time_source),
-            _opt_float(max_gap),
+            str(input),
+            str(state),
+            str(output),
+            _opt_float(rate_hz, "rate_hz"),
+            str(time_source),
+            _float(max_gap_s, "max_gap_s"),
             params,
         )
         return cls(core)
@@ -777,7 +969,7 @@ class HysteresisModel:
 
         >>> import hbn
         >>> tr = hbn.simulate("duhem", 300, seed=1)
-        >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_restarts=1)
+        >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_starts=1)
         >>> est = m.estimate(tr["u"], tr["y"], mode="ekf-blr")
         >>> est.x.shape == est.x_std.shape == (300,)
         True
@@ -786,6 +978,7 @@ class HysteresisModel:
         fields = self._core.estimate(uv, yv, _opt_str(mode))
         return Estimate(fields, self._mode_name(mode))
 
+    @_renamed(max_gap="max_gap_s")
     def estimate_log(
         self,
         path: PathLike,
@@ -794,13 +987,14 @@ class HysteresisModel:
         output: Optional[str] = None,
         csv: Optional[PathLike] = None,
         mcap: Optional[PathLike] = None,
-        time_source: Optional[str] = None,
-        max_gap: Optional[float] = None,
+        time_source: str = _L["time_source"],
+        max_gap_s: float = _L["max_gap_s"],
     ) -> Estimate:
         """Estimates the state over an MCAP log exactly like ``hbn estimate``: reads ``u`` and
-        ``y`` (the model's paths unless ``input`` / ``output`` are given) at the model's rate,
-        runs the filter, and writes the estimate to ``csv`` and/or ``mcap`` when given (the CLI's
-        formats, atomically). Returns an :class:`Estimate` with ``t`` set.
+        ``y`` (the model's message paths unless ``input`` / ``output`` are given) at the model's
+        rate, runs the filter (``mode``: as in :meth:`estimate`), and writes the estimate to
+        ``csv`` and/or ``mcap`` when given (the CLI's formats, atomically). ``time_source`` and
+        ``max_gap_s`` as in :meth:`from_logs`. Returns an :class:`Estimate` with ``t`` set.
         """
         t, fields = self._core.estimate_log(
             _fspath(path),
@@ -809,19 +1003,19 @@ class HysteresisModel:
             _opt_str(output),
             None if csv is None else _fspath(csv),
             None if mcap is None else _fspath(mcap),
-            _opt_str(time_source),
-            _opt_float(max_gap),
+            str(time_source),
+            _float(max_gap_s, "max_gap_s"),
         )
         return Estimate(fields, self._mode_name(mode), t)
 
-    def filter(self, mode: Optional[str] = None) -> "Filter":
+    def filter(self, mode: Optional[str] = None) -> Filter:
         """A streaming estimator over this model (it shares the model): call ``step(u, y)`` once
         per sample. It initialises like :meth:`estimate` and its outputs equal :meth:`estimate`'s
-        bit for bit.
+        bit for bit. ``mode``: as in :meth:`estimate`.
 
         >>> import hbn
         >>> tr = hbn.simulate("duhem", 300, seed=1)
-        >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_restarts=1)
+        >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_starts=1)
         >>> f = m.filter(mode="ekf")
         >>> out = f.step(tr["u"][0], tr["y"][0])
         >>> bool(out.x == m.estimate(tr["u"][:1], tr["y"][:1]).x[0])
@@ -829,47 +1023,72 @@ class HysteresisModel:
         """
         return Filter(self._core.filter(_opt_str(mode)))
 
-    @staticmethod
-    def _mode_name(mode: Optional[str]) -> str:
-        return default_log_options()["mode"] if mode is None else str(mode).lower()
+    def _mode_name(self, mode: Optional[str]) -> str:
+        return self.default_mode if mode is None else str(mode).lower()
 
     def simulate_open_loop(self, u: Any) -> np.ndarray:
-        """Open-loop GP simulation of ``x`` from ``u`` alone (the baseline the EKF must beat).
+        """Open-loop GP simulation of ``x`` from ``u`` alone (the baseline the filter must beat).
 
         >>> import hbn
         >>> tr = hbn.simulate("duhem", 300, seed=1)
-        >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_restarts=1)
+        >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_starts=1)
         >>> m.simulate_open_loop(tr["u"]).shape
         (300,)
         """
         return self._core.simulate_open_loop(_vector(u, "u"))
 
     def save(self, path: PathLike) -> None:
-        """Writes the model (the CLI's model file format: ``hbn inspect`` / ``hbn estimate --model``
+        """Writes the model file (the CLI's format: ``hbn inspect`` / ``hbn estimate --model``
         read it), atomically.
 
         >>> import hbn, os, tempfile
         >>> tr = hbn.simulate("duhem", 200, seed=1)
-        >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=80, n_restarts=1)
+        >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=80, n_starts=1)
         >>> p = os.path.join(tempfile.mkdtemp(), "model.hbn"); m.save(p)
-        >>> hbn.HysteresisModel.load(p).rate
+        >>> hbn.HysteresisModel.load(p).rate_hz
         100.0
         """
         self._core.save(_fspath(path))
 
     @classmethod
-    def load(cls, path: PathLike) -> "HysteresisModel":
+    def load(cls, path: PathLike) -> HysteresisModel:
         """Loads a model written by :meth:`save` or by ``hbn train --out``.
 
         :class:`HbnFileNotFoundError` if the file is missing; :class:`ModelFileError` if it is not
-        an hbn model or of an unsupported format version.
+        an hbn model file of the supported format version (a model file of an older version of
+        hbn says so: train the model again).
         """
         return cls(_hbn.HysteresisModelCore.load(_fspath(path)))
 
+    def to_bytes(self) -> bytes:
+        """The bytes of the model file :meth:`save` writes (what a pickled model holds).
+
+        >>> import hbn
+        >>> tr = hbn.simulate("duhem", 200, seed=1)
+        >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=80, n_starts=1)
+        >>> hbn.HysteresisModel.from_bytes(m.to_bytes()).to_bytes() == m.to_bytes()
+        True
+        """
+        return self._core.to_bytes()
+
+    @classmethod
+    def from_bytes(cls, data: bytes) -> HysteresisModel:
+        """A model from the bytes of a model file (:meth:`to_bytes`, or a file's contents);
+        :class:`ModelFileError` as in :meth:`load`."""
+        return cls(_hbn.HysteresisModelCore.from_bytes(bytes(data), "<bytes>"))
+
+    @property
+    def rate_hz(self) -> float:
+        """Sample rate in Hz (estimation data must use the same)."""
+        return self._core.rate_hz
+
     @property
     def rate(self) -> float:
-        """Sample rate in Hz (estimation data must use the same)."""
-        return self._core.rate
+        """Deprecated name of :attr:`rate_hz`."""
+        warnings.warn(
+            "HysteresisModel.rate is deprecated; use rate_hz", DeprecationWarning, stacklevel=2
+        )
+        return self._core.rate_hz
 
     @property
     def signals(self) -> Dict[str, Dict[str, Optional[str]]]:
@@ -878,15 +1097,16 @@ class HysteresisModel:
 
     @property
     def params(self) -> Dict[str, Any]:
-        """Training parameters by keyword argument (as :func:`default_params`), with ``blr`` and
-        ``signals``."""
+        """The training parameters of this model by keyword (as :func:`default_params`, with
+        the kernel of each GP), plus ``blr`` and ``signals``. Training again with them trains
+        the same model."""
         return self._core.params()
 
     @property
     def default_mode(self) -> str:
         """The mode :meth:`estimate` and :meth:`filter` use without ``mode=``: the one with the
-        best held-out score at training (filter-aware training, ``validation=``), ``"ekf"`` for
-        a model trained with ``validation=0``."""
+        best held-out score at training (``validation``), ``"ekf"`` for a model trained with
+        ``validation=0``."""
         return self._core.default_mode()
 
     @property
@@ -906,12 +1126,14 @@ class HysteresisModel:
 
     @property
     def transition(self) -> GaussianProcess:
-        """The transition GP (inputs ``[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}]``, target ``x_k``)."""
+        """The transition GP (inputs ``[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}]``, then the plays
+        and lags; target ``x_k``)."""
         return GaussianProcess._from_core(self._core.transition())
 
     @property
     def sensor(self) -> GaussianProcess:
-        """The sensor GP (inputs ``[x_{k-1}, y_{k-1}, x_k]``, target ``y_k``)."""
+        """The sensor GP (inputs ``[x_{k-1}, y_{k-1}, x_k]``, or ``[x_{k-1}, x_k]`` with
+        ``sensor_inputs="state"``; target ``y_k``)."""
         return GaussianProcess._from_core(self._core.sensor())
 
     def ekf_config(self, mode: Optional[str] = None) -> Dict[str, Any]:
@@ -922,6 +1144,17 @@ class HysteresisModel:
         """Prior ``(mean, variance)`` of ``x_0`` the filter takes from a first measurement ``y0``
         (``None`` if ``y0`` is not finite: the training prior of :meth:`ekf_config` applies)."""
         return self._core.initial_state(float(y0))
+
+
+for _f in (HysteresisModel.fit, HysteresisModel.from_logs):
+    _f.__func__.__doc__ = _f.__func__.__doc__.replace(  # type: ignore[union-attr]
+        "        {training}\n", textwrap.indent(_TRAINING_PARAMETERS_DOC, "    ")
+    )
+
+
+def _model_from_bytes(data: bytes) -> HysteresisModel:
+    """Unpickles a :class:`HysteresisModel` (its model file's bytes)."""
+    return HysteresisModel(_hbn.HysteresisModelCore.from_bytes(data, "<pickle>"))
 
 
 class Filter:
@@ -935,7 +1168,7 @@ class Filter:
 
     >>> import hbn
     >>> tr = hbn.simulate("duhem", 200, seed=1)
-    >>> f = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=80, n_restarts=1).filter()
+    >>> f = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=80, n_starts=1).filter()
     >>> outs = [f.step(u, y) for u, y in zip(tr["u"], tr["y"])]
     >>> "initialised" in outs[0].flag_names()
     True
@@ -969,40 +1202,65 @@ class Filter:
         return self._core.steps
 
 
+
+
 class Explorer:
     """Chooses the next input while training data are collected (thesis Sec. 3.4): random
     inputs first, then inputs that seek where the transition GP is uncertain.
 
-    ``u_min``, ``u_max``: bounds of the input; ``max_step``: the largest change of the input
-    per sample. Every proposal lies in the bounds and, when the last observed input does,
-    differs from it by at most ``max_step``. ``rate``: the sample rate of the model (Hz);
-    ``seed``: seeds the random steps and the training. The schedule (defaults in
-    :func:`default_explore_params`, from the library): ``u_start`` (the first input; ``None``:
-    ``u_min``), ``random_samples`` (length of the random phase), ``alpha_start``,
-    ``alpha_end``, ``alpha_ramp`` (the weight of uncertainty seeking grows linearly from
-    ``alpha_start`` to ``alpha_end`` over ``alpha_ramp`` samples), ``refit_every`` (refit the
-    transition GP every N samples), ``optimize_every`` (re-learn its hyperparameters,
-    warm-started, every N samples), ``horizon`` (look-ahead of the uncertainty search, in
-    samples), ``strategy`` (``"ramps"``: ramps to random target levels at random slopes, as
-    :func:`simulate` drives its systems, the next ramp being, with probability ``alpha``, the
-    best of ``pool`` such random ramps by ``criterion``; ``"steps"``: the thesis' per-sample rule
-    ``u += alpha * eps + (1 - alpha) * w``, ``eps`` the best of ``candidates`` steps) and
-    ``pool`` (random ramps drawn per seeking choice; more seeks harder) and ``lag`` (0: every
-    refit runs inside :meth:`observe`, which blocks for it; ``lag > 0``: refits run on a thread
-    beside the loop and are used ``lag`` samples after they start, so that a loop faster than
-    the refits, such as a robot at 100 Hz with ``lag=200``, is not held up; the proposals stay
-    deterministic, and the older model costs some accuracy, docs/exploration.md) and
-    ``criterion`` (how a seeking choice of ``"ramps"`` scores the pool: ``"reduction"``, the
-    default, the ramp whose samples would lower the transition GP's variance most, summed over
-    where all the pool's ramps go; ``"variance"``, the ramp along which it is most
-    uncertain). ``**params``:
-    training parameters of :meth:`HysteresisModel.fit` (``max_points``, ``n_inducing``,
-    ``kernel``, ...), used by the explorer's transition GP and by :meth:`model`. A bad value
-    raises :class:`ConfigError` whose ``keyword`` names it. docs/exploration.md says what it
-    gains over random inputs, measured.
+    Parameters
+    ----------
+    u_min, u_max : float
+        Bounds of the input.
+    max_step : float
+        The largest change of the input per sample. Every proposal lies in the bounds and,
+        when the last observed input does, differs from it by at most ``max_step``.
+    rate_hz : float
+        The sample rate of the model (Hz).
+    seed : int
+        Seeds the random steps and the training.
+    u_start : float or None
+        The first input (``None``: ``u_min``).
+    random_samples : int
+        Length of the random phase.
+    alpha_start, alpha_end : float
+        The weight of uncertainty seeking grows linearly from ``alpha_start`` to
+        ``alpha_end`` ...
+    alpha_ramp : int
+        ... over this many samples.
+    refit_every : int
+        Refit the transition GP every this many samples.
+    optimize_every : int
+        Re-learn its hyperparameters (warm-started) every this many samples.
+    candidates : int
+        Random steps drawn per seeking choice of ``strategy="steps"``.
+    horizon : int
+        Look-ahead of the uncertainty search, in samples.
+    strategy : {"ramps", "steps"}
+        ``"ramps"``: ramps to random target levels at random slopes, as :func:`simulate`
+        drives its systems, the next ramp being, with probability ``alpha``, the best of
+        ``pool`` such random ramps by ``criterion``; ``"steps"``: the thesis' per-sample rule
+        ``u += alpha * eps + (1 - alpha) * w``, ``eps`` the best of ``candidates`` steps.
+    pool : int
+        Random ramps drawn per seeking choice (more seeks harder).
+    lag : int
+        0: every refit runs inside :meth:`observe`, which blocks for it. ``lag > 0``: refits run
+        on a thread beside the loop and are used ``lag`` samples after they start, so that a
+        loop faster than the refits (a robot at 100 Hz with ``lag=200``) is not held up; the
+        proposals stay deterministic, and the older model costs some accuracy
+        (``docs/exploration.md``).
+    criterion : {"reduction", "variance"}
+        How a seeking choice of ``"ramps"`` scores the pool: ``"reduction"``, the ramp whose
+        samples would lower the transition GP's variance most, summed over where all the
+        pool's ramps go; ``"variance"``, the ramp along which it is most uncertain.
+
+    The training parameters (keyword-only) are those of :meth:`HysteresisModel.fit`, used by
+    the explorer's transition GP and by :meth:`model`. The defaults are the library's
+    (:func:`default_explore_params`, :func:`default_params`). A bad value raises
+    :class:`ConfigError` whose ``keyword`` names it.
 
     >>> import hbn
-    >>> explorer = hbn.Explorer(0.0, 1.0, 0.02, random_samples=40, max_points=60, n_restarts=1)
+    >>> explorer = hbn.Explorer(0.0, 1.0, 0.02, random_samples=40, max_points=60, n_starts=1)
     >>> robot = hbn.Simulator("duhem", noise_gain=1.0)
     >>> for _ in range(120):
     ...     u = explorer.propose()
@@ -1013,49 +1271,66 @@ class Explorer:
     >>> model = explorer.model()
     """
 
+    @_renamed(rate="rate_hz", **_RENAMED)
     def __init__(
         self,
         u_min: float,
         u_max: float,
         max_step: float,
-        rate: Optional[float] = None,
-        seed: Optional[int] = None,
-        u_start: Optional[float] = None,
-        random_samples: Optional[int] = None,
-        alpha_start: Optional[float] = None,
-        alpha_end: Optional[float] = None,
-        alpha_ramp: Optional[int] = None,
-        refit_every: Optional[int] = None,
-        optimize_every: Optional[int] = None,
-        candidates: Optional[int] = None,
-        horizon: Optional[int] = None,
-        strategy: Optional[str] = None,
-        pool: Optional[int] = None,
-        lag: Optional[int] = None,
-        criterion: Optional[str] = None,
-        **params: Any,
+        rate_hz: float = _P["rate_hz"],
+        seed: int = _E["seed"],
+        u_start: Optional[float] = _E["u_start"],
+        random_samples: int = _E["random_samples"],
+        alpha_start: float = _E["alpha_start"],
+        alpha_end: float = _E["alpha_end"],
+        alpha_ramp: int = _E["alpha_ramp"],
+        refit_every: int = _E["refit_every"],
+        optimize_every: int = _E["optimize_every"],
+        candidates: int = _E["candidates"],
+        horizon: int = _E["horizon"],
+        strategy: str = _E["strategy"],
+        pool: int = _E["pool"],
+        lag: int = _E["lag"],
+        criterion: str = _E["criterion"],
+        *,
+        kernel: Union[str, Sequence[str], None] = _P["kernel"],
+        transition_kernel: Optional[str] = _P["transition_kernel"],
+        sensor_kernel: Optional[str] = _P["sensor_kernel"],
+        n_inducing: Union[int, None, Sequence[Optional[int]]] = _P["n_inducing"],
+        max_points: int = _P["max_points"],
+        subset_policy: str = _P["subset_policy"],
+        n_starts: int = _P["n_starts"],
+        max_iters: int = _P["max_iters"],
+        normalize: bool = _P["normalize"],
+        noise_floor: float = _P["noise_floor"],
+        blr_window: float = _P["blr_window"],
+        validation: float = _P["validation"],
+        memory: Sequence[float] = _P["memory"],
+        lags: Union[Sequence[float], Sequence[Sequence[float]]] = _P["lags"],
+        linear_mean: str = _P["linear_mean"],
+        sensor_inputs: Union[str, Sequence[str]] = _P["sensor_inputs"],
+        max_signal_variance: Optional[float] = _P["max_signal_variance"],
     ) -> None:
-        count = GaussianProcess._count
+        params = _training_args(locals())
         self._core = _hbn.ExplorerCore(
             _float(u_min, "u_min"),
             _float(u_max, "u_max"),
             _float(max_step, "max_step"),
-            _opt_float(rate),
-            count(seed, "seed"),
-            _opt_float(u_start),
-            count(random_samples, "random_samples"),
-            _opt_float(alpha_start),
-            _opt_float(alpha_end),
-            count(alpha_ramp, "alpha_ramp"),
-            count(refit_every, "refit_every"),
-            count(optimize_every, "optimize_every"),
-            count(candidates, "candidates"),
-            count(horizon, "horizon"),
+            _count(seed, "seed"),
+            _opt_float(u_start, "u_start"),
+            _count(random_samples, "random_samples"),
+            _opt_float(alpha_start, "alpha_start"),
+            _opt_float(alpha_end, "alpha_end"),
+            _count(alpha_ramp, "alpha_ramp"),
+            _count(refit_every, "refit_every"),
+            _count(optimize_every, "optimize_every"),
+            _count(candidates, "candidates"),
+            _count(horizon, "horizon"),
             _opt_str(strategy),
-            count(pool, "pool"),
-            count(lag, "lag"),
-            params,
+            _count(pool, "pool"),
+            _count(lag, "lag"),
             _opt_str(criterion),
+            params,
         )
 
     def __repr__(self) -> str:
@@ -1075,7 +1350,7 @@ class Explorer:
         when it is due."""
         self._core.observe(_float(u, "u"), _float(x, "x"), _float(y, "y"))
 
-    def model(self) -> "HysteresisModel":
+    def model(self) -> HysteresisModel:
         """Trains the HBN on every sample observed (like :meth:`HysteresisModel.fit`)."""
         return HysteresisModel(self._core.model())
 
@@ -1083,7 +1358,7 @@ class Explorer:
         """A schedule of ``steps`` inputs for a robot without the explorer in its loop, and
         the states the transition GP predicts along it (what ``hbn explore`` writes); each
         predicted state is treated as observed. The explorer itself is not changed."""
-        return self._core.plan(GaussianProcess._count(steps, "steps"))
+        return self._core.plan(_count(steps, "steps"))
 
     def start_run(self) -> None:
         """The robot was reset: the next samples start a new run (the next input is
@@ -1125,7 +1400,7 @@ class Simulator:
     """One of the systems of :func:`simulate`, stepped one sample at a time: a stand-in robot
     for :class:`Explorer` or a controller in the loop.
 
-    ``system``: one of :data:`SYSTEMS`; ``seed``, ``noise_gain``, ``rate`` as in
+    ``system``: one of :data:`SYSTEMS`; ``seed``, ``noise_gain``, ``rate_hz`` as in
     :func:`simulate`. Stepping through an input gives exactly the ``x`` and ``y`` that
     :func:`simulate` gives for it with the same settings.
 
@@ -1136,15 +1411,19 @@ class Simulator:
     1
     """
 
+    @_renamed(rate="rate_hz")
     def __init__(
         self,
         system: str,
-        seed: Optional[int] = None,
-        noise_gain: Optional[float] = None,
-        rate: Optional[float] = None,
+        seed: int = _S["seed"],
+        noise_gain: float = _S["noise_gain"],
+        rate_hz: float = _S["rate_hz"],
     ) -> None:
         self._core = _hbn.SimulatorCore(
-            str(system), GaussianProcess._count(seed, "seed"), _opt_float(noise_gain), _opt_float(rate)
+            str(system),
+            _count(seed, "seed"),
+            _opt_float(noise_gain, "noise_gain"),
+            _opt_float(rate_hz, "rate_hz"),
         )
 
     def __repr__(self) -> str:
@@ -1166,54 +1445,58 @@ class Simulator:
 # ------------------------------------------------------------------------------------------------
 
 
+@_renamed(rate="rate_hz")
 def simulate(
     system: str,
     steps: int,
-    seed: Optional[int] = None,
-    noise_gain: Optional[float] = None,
-    rate: Optional[float] = None,
+    seed: int = _S["seed"],
+    noise_gain: float = _S["noise_gain"],
+    rate_hz: float = _S["rate_hz"],
 ) -> Dict[str, np.ndarray]:
     """Simulates a hysteretic actuator/sensor system under a random bounded-increment input.
 
     ``system``: one of :data:`SYSTEMS` (``"maxwell-slip"``, ``"generalized-pi"``, ``"bouc-wen"``,
     ``"preisach"``, ``"duhem"``, ``"soft-actuator"``). ``noise_gain``: the thesis' noise gain
-    (0 = clean). ``None`` settings take the simulator's defaults (seed 0, noise-free, 100 Hz).
-    Returns ``{"u", "x", "y"}`` arrays of ``steps`` samples (the data of ``hbn simulate`` with the
-    same settings).
+    (0 = noise-free). Returns ``{"u", "x", "y"}`` arrays of ``steps`` samples (the data of
+    ``hbn simulate`` with the same settings).
 
     >>> import hbn
     >>> d = hbn.simulate("bouc-wen", 100, seed=3, noise_gain=1.0)
     >>> sorted(d), d["x"].shape
     (['u', 'x', 'y'], (100,))
     """
-    n = GaussianProcess._count(steps, "steps")
     u, x, y = _hbn.simulate(
-        str(system), n, GaussianProcess._count(seed, "seed"), _opt_float(noise_gain), _opt_float(rate)
+        str(system),
+        _count(steps, "steps"),
+        _count(seed, "seed"),
+        _opt_float(noise_gain, "noise_gain"),
+        _opt_float(rate_hz, "rate_hz"),
     )
     return {"u": u, "x": x, "y": y}
 
 
+@_renamed(rate="rate_hz")
 def oracle_estimate(
     system: str,
     u: Any,
     x: Any,
     y: Any,
-    noise_gain: Optional[float] = None,
-    rate: Optional[float] = None,
+    noise_gain: float = _S["noise_gain"],
+    rate_hz: float = _S["rate_hz"],
 ) -> Dict[str, np.ndarray]:
     """The floor under causal state estimation on a simulated log: how low any estimator's
     error can go.
 
     ``u``, ``x``, ``y``: a trajectory of the simulator ``system`` (from :func:`simulate`,
-    :class:`Simulator` or ``hbn simulate``) with the same ``noise_gain`` and ``rate`` (``None``
-    takes the simulator's defaults: noise-free, 100 Hz; the noise seed is not needed). Returns
-    ``{"mean", "std"}``: the exact posterior of each ``x[k]`` given ``u`` and ``y`` up to ``k``,
-    the true past states ``x[:k]`` and the simulator itself. An estimator that sees only ``u``
-    and ``y`` up to ``k`` (hbn's filters, any causal baseline) conditions on less, so none has
-    a lower expected squared error than ``mean`` on the same log: the ratio of an estimator's
-    RMSE to this one's is what it could still gain. Noise-free logs give ``mean == x``.
-    :class:`DataError` if the arrays differ in length or an input lies outside the simulator's
-    range; :class:`ConfigError` for an unknown system or a bad setting.
+    :class:`Simulator` or ``hbn simulate``) with the same ``noise_gain`` and ``rate_hz`` (the
+    noise seed is not needed). Returns ``{"mean", "std"}``: the exact posterior of each ``x[k]``
+    given ``u`` and ``y`` up to ``k``, the true past states ``x[:k]`` and the simulator itself.
+    An estimator that sees only ``u`` and ``y`` up to ``k`` (hbn's filters, any causal
+    baseline) conditions on less, so none has a lower expected squared error than ``mean`` on
+    the same log: the ratio of an estimator's RMSE to this one's is what it could still gain.
+    Noise-free logs give ``mean == x``. :class:`DataError` if the arrays differ in length or an
+    input lies outside the simulator's range; :class:`ConfigError` for an unknown system or a
+    bad setting.
 
     >>> import hbn, numpy as np
     >>> d = hbn.simulate("bouc-wen", 400, seed=3, noise_gain=3.0)
@@ -1223,7 +1506,12 @@ def oracle_estimate(
     True
     """
     mean, std = _hbn.oracle_estimate(
-        str(system), _vector(u, "u"), _vector(x, "x"), _vector(y, "y"), _opt_float(noise_gain), _opt_float(rate)
+        str(system),
+        _vector(u, "u"),
+        _vector(x, "x"),
+        _vector(y, "y"),
+        _opt_float(noise_gain, "noise_gain"),
+        _opt_float(rate_hz, "rate_hz"),
     )
     return {"mean": mean, "std": std}
 
@@ -1231,9 +1519,9 @@ def oracle_estimate(
 def list_topics(path: PathLike) -> List[Dict[str, Any]]:
     """Topics of an MCAP log: ``[{"topic", "message_count", "encoding", "schema"}]``.
 
-    >>> import hbn  # doctest: +SKIP
-    >>> [t["topic"] for t in hbn.list_topics("run.mcap")]  # doctest: +SKIP
-    ['/u', '/x', '/y']
+    >>> import hbn
+    >>> [t["topic"] for t in hbn.list_topics("fixtures/json_zstd.mcap")]  # doctest: +SKIP
+    ['/input', '/sensor', '/state']
     """
     return [
         {"topic": t, "message_count": n, "encoding": enc, "schema": schema}
@@ -1241,37 +1529,49 @@ def list_topics(path: PathLike) -> List[Dict[str, Any]]:
     ]
 
 
+@_renamed(rate="rate_hz", max_gap="max_gap_s")
 def read_mcap(
     path: PathLike,
     signals: Mapping[str, str],
-    rate: Optional[float] = None,
-    time_source: Optional[str] = None,
-    max_gap: Optional[float] = None,
+    rate_hz: Optional[float] = _L["rate_hz"],
+    time_source: str = _L["time_source"],
+    max_gap_s: float = _L["max_gap_s"],
 ) -> Dict[str, np.ndarray]:
     """Reads numeric signals from an MCAP log and resamples them on one uniform grid, with the
     pipeline of the ``hbn`` CLI.
 
-    ``signals`` maps your names to Foxglove-style message paths, e.g.
-    ``{"u": "/valve.pressure", "y": "/joint_states.position[1]"}``. ``rate``: grid rate in Hz
-    (``None`` = the native rate of the first signal, rounded to 0.1 Hz); ``time_source``,
-    ``max_gap``: as in :meth:`HysteresisModel.from_logs`. Returns the same keys plus ``"t"``
+    ``signals`` maps your names to message paths, e.g.
+    ``{"u": "/valve.pressure", "y": "/joint_states.position[1]"}``. ``rate_hz``: grid rate in Hz
+    (``None``: the native rate of the first signal, rounded to 0.1 Hz); ``time_source``,
+    ``max_gap_s``: as in :meth:`HysteresisModel.from_logs`. Returns the same keys plus ``"t"``
     (seconds since the first grid point).
 
-    >>> import hbn  # doctest: +SKIP
-    >>> d = hbn.read_mcap("run.mcap", {"u": "/hbn/u.data", "y": "/hbn/y.data"}, rate=100.0)  # doctest: +SKIP
+    >>> import hbn
+    >>> d = hbn.read_mcap("fixtures/json_zstd.mcap", {"u": "/input.data"})  # doctest: +SKIP
     """
     if not isinstance(signals, Mapping) or len(signals) == 0:
-        raise _config_error("signals", "must be a non-empty dict {name: message path}")
+        raise _config_error("signals", "must be a non-empty dict {name: message path}", signals)
     if "t" in signals:
-        raise _config_error("signals", '"t" is reserved for the time column; name the signal otherwise')
+        raise _config_error(
+            "signals", '"t" is reserved for the time column; name the signal otherwise'
+        )
     names = list(signals.keys())
     t, cols, _ = _hbn.read_mcap(
         _fspath(path),
         [str(signals[n]) for n in names],
-        _opt_float(rate),
+        _opt_float(rate_hz, "rate_hz"),
         _opt_str(time_source),
-        _opt_float(max_gap),
+        _opt_float(max_gap_s, "max_gap_s"),
     )
     out: Dict[str, np.ndarray] = {"t": t}
     out.update(zip(names, cols))
     return out
+
+
+def __getattr__(name: str) -> Any:
+    if name == "HbnModel":
+        warnings.warn(
+            "hbn.HbnModel is deprecated; use hbn.HysteresisModel", DeprecationWarning, stacklevel=2
+        )
+        return HysteresisModel
+    raise AttributeError(f"module 'hbn' has no attribute {name!r}")
