@@ -9,9 +9,11 @@
 //!   exact or sparse (inducing points);
 //! - [`ekf`]: the EKF / EKF+BLR step on the augmented HBN state;
 //! - [`blr`]: local Bayesian linear regression with a bounded neighbourhood query;
-//! - [`play`]: play operators and lags, the input's memory for the transition GP;
-//! - [`rng`]: a small portable random number generator;
-//! - [`tables`]: a trained model as constant tables (flash) and the view read back from them.
+//! - [`play`]: play operators and lags, the input's memory for the transition GP.
+//!
+//! The modules `tables` (a trained model as constant tables, which exported firmware reads),
+//! `rng`, `simd` and `eigen` are public for the other crates of the workspace and for the code
+//! `hbn export` writes; they are not part of the supported API.
 #![cfg_attr(not(feature = "std"), no_std)]
 // `unsafe` only in `simd`, to call code compiled for a CPU feature the CPU was seen to have.
 #![deny(unsafe_code)]
@@ -40,10 +42,14 @@ mod error;
 pub mod gp;
 pub mod kernel;
 pub mod play;
+#[doc(hidden)]
 pub mod rng;
+#[doc(hidden)]
 pub mod simd;
+#[doc(hidden)]
 pub mod tables;
 
+#[doc(hidden)]
 pub mod eigen;
 pub use blr::{LocalRegression, Neighbourhood, NeighbourhoodParts, Posterior};
 pub use ekf::{

@@ -95,18 +95,6 @@ pub struct Table {
 }
 
 impl Table {
-    /// The table with input `j` subtracted from each target (`t - x[j]`), or a copy when `j`
-    /// is `None`: the targets of a GP that learns increments.
-    pub fn increments(&self, j: Option<usize>) -> Table {
-        let mut t = self.clone();
-        if let Some(j) = j {
-            for (target, row) in t.targets.iter_mut().zip(self.inputs.chunks_exact(self.dim)) {
-                *target -= row.get(j).copied().unwrap_or(0.0);
-            }
-        }
-        t
-    }
-
     /// The table of the first `n` input columns (all of them when `n >= dim`).
     pub fn first_columns(&self, n: usize) -> Table {
         if n >= self.dim {

@@ -100,9 +100,9 @@ pub enum ModelFileProblem {
     },
     /// A format version this build does not read.
     #[error(
-        "model format version {version} is not supported by this hbn (reads versions {} to {}); \
-         retrain with this version or use a newer hbn",
-        crate::MODEL_FORMAT_OLDEST,
+        "model format version {version} is not the version this hbn reads ({}): retrain the \
+         model with this hbn (`hbn train` or `HysteresisModel.fit`), or load it with the hbn \
+         that wrote it",
         crate::MODEL_FORMAT_VERSION
     )]
     UnsupportedVersion {

@@ -12,7 +12,7 @@ use hbn_gp::{GaussianProcess, GpParams};
 use serde::{Deserialize, Serialize};
 
 use crate::model::{GpRole, HysteresisModel, StartSummary};
-use crate::params::{CheckedHbnParams, HbnParams, Increments, KernelChoice};
+use crate::params::{CheckedHbnParams, HbnParams, KernelChoice};
 use crate::{ModelError, Sequence};
 
 /// One GP's evidence under one kernel: a row of the table [`crate::TrainingSummary`] keeps.
@@ -45,7 +45,6 @@ pub(crate) struct Prefit {
 struct DataKey {
     memory: Vec<f64>,
     lags: Vec<f64>,
-    increments: Increments,
     rate_hz: f64,
 }
 
@@ -54,7 +53,6 @@ impl DataKey {
         Self {
             memory: p.memory.clone(),
             lags: p.lags.clone(),
-            increments: p.increments,
             rate_hz: p.rate_hz,
         }
     }

@@ -83,7 +83,7 @@ use hbn_gp::{GaussianProcess, Hyperparameters};
 
 use crate::dataset::{Sequence, TRANSITION_DIM, TRANSITION_DIRECTION, Table, build_dataset};
 use crate::params::{CheckedHbnParams, HbnParams};
-use crate::{GpRole, HysteresisModel, ModelError};
+use crate::{HysteresisModel, ModelError};
 
 /// Steps are drawn within this fraction of `max_step`, so that floating-point rounding never
 /// makes a proposal differ from the last input by more than `max_step`.
@@ -819,8 +819,7 @@ impl Explorer {
             return None;
         }
         let play = run.play?;
-        let mean_input = self.params.model.increments.mean_input(GpRole::Transition);
-        let mut gp = Predictor::new(gp, mean_input, self.plays.len())?;
+        let mut gp = Predictor::new(gp, self.plays.len())?;
         let (x1, x2, u2) = (run.x[n - 1], run.x[n - 2], run.u[n - 2]);
         let x_now = gp.state(transition_input(x1, x2, u_prev, u2, &play))?;
         Some((gp, [x_now, x1], play))
@@ -1223,9 +1222,7 @@ impl Explorer {
             .map(|r| Sequence::new(&r.u, &r.x, &r.y))
             .collect();
         let data = build_dataset(&seqs, &self.plays)?;
-        Ok(data
-            .transition
-            .increments(self.params.model.increments.mean_input(GpRole::Transition)))
+        Ok(data.transition)
     }
 
     /// Trains the HBN ([`HysteresisModel::fit`] with [`ExploreParams::model`]) on every run observed.
@@ -1285,7 +1282,6 @@ impl Explorer {
         let (true, Some(play)) = (n >= 2, run.play) else {
             return last_x;
         };
-        let mean_input = self.params.model.increments.mean_input(GpRole::Transition);
         let input = transition_input(
             run.x[n - 1],
             run.x[n - 2],
@@ -1293,7 +1289,7 @@ impl Explorer {
             run.u[n - 2],
             &play,
         );
-        Predictor::new(gp, mean_input, self.plays.len())
+        Predictor::new(gp, self.plays.len())
             .and_then(|mut p| p.state(input))
             .unwrap_or(last_x)
     }
@@ -1304,36 +1300,28 @@ impl Explorer {
 struct Predictor<'a> {
     view: GpView<'a>,
     scratch: Vec<f64>,
-    /// The input added to the GP's mean when it learns increments.
-    mean_input: Option<usize>,
     /// Inputs the GP reads (4 plus the plays).
     dim: usize,
 }
 
 impl<'a> Predictor<'a> {
-    fn new(gp: &'a GaussianProcess, mean_input: Option<usize>, plays: usize) -> Option<Self> {
+    fn new(gp: &'a GaussianProcess, plays: usize) -> Option<Self> {
         let view = gp.view().ok()?;
         let scratch = vec![0.0; view.predict_scratch(Want::VARIANCE)];
         Some(Self {
             view,
             scratch,
-            mean_input,
             dim: TRANSITION_DIM + plays,
         })
     }
 
-    /// The mean state for one transition input (levels, whatever the GP learns).
+    /// The mean state for one transition input.
     fn state(&mut self, input: [f64; MAX_DIM]) -> Option<f64> {
         let pred = self
             .view
             .predict(input.get(..self.dim)?, Want::MEAN, &mut self.scratch)
             .ok()?;
-        let base = self
-            .mean_input
-            .and_then(|j| input.get(j).copied())
-            .unwrap_or(0.0);
-        let x = pred.mean + base;
-        x.is_finite().then_some(x)
+        pred.mean.is_finite().then_some(pred.mean)
     }
 
     /// The latent posterior covariance matrix of a set of transition inputs, row-major

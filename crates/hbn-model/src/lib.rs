@@ -59,12 +59,12 @@ pub use local::LocalData;
 #[allow(deprecated)]
 pub use model::HbnModel;
 pub use model::{
-    GpRole, HysteresisModel, INIT_NEIGHBOURS, MODEL_FORMAT, MODEL_FORMAT_OLDEST,
-    MODEL_FORMAT_VERSION, SignalStats, StartSummary, TrainingSummary,
+    GpRole, HysteresisModel, INIT_NEIGHBOURS, MODEL_FORMAT, MODEL_FORMAT_VERSION, SignalStats,
+    StartSummary, TrainingSummary,
 };
 pub use params::{
     Candidate, CheckedHbnParams, ConfigError, DEFAULT_EVIDENCE_KERNELS, DEFAULT_INDUCING,
-    DEFAULT_LAGS, DEFAULT_MEMORY, HbnParams, Increments, KernelChoice, KernelFamily, LinearMean,
-    Param, ParamValue, Problem, Selection, SensorInputs, SignalInfo, Signals, UnknownKernel,
+    DEFAULT_LAGS, DEFAULT_MEMORY, HbnParams, KernelChoice, LinearMean, Param, ParamValue, Problem,
+    Selection, SensorInputs, SignalInfo, Signals, UnknownKernel,
 };
 pub use tuning::{CandidateRow, FilterTuning, NoiseScales, ValidationReport};

@@ -13,10 +13,11 @@ use hbn_gp::{GpParams, MeanFunction, SparseParams, SubsetPolicy};
 use serde::{Deserialize, Serialize};
 use std::str::FromStr;
 
-/// A kernel family by name.
+/// The covariance families behind the kernel names (Eq. 5, 17, 18 of the thesis and ARD
+/// variants). Model files store a kernel as its family and direction factor.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
-pub enum KernelFamily {
+enum KernelFamily {
     /// Isotropic squared exponential (Eq. 5).
     Se,
     /// ARD squared exponential.
@@ -29,22 +30,56 @@ pub enum KernelFamily {
     Warped,
 }
 
-/// A kernel choice: family plus the optional direction-advantage factor (Eq. 19).
+/// A GP's kernel, by name: `matern52`, `se-ard`, `se` or `thesis`.
 ///
-/// Parsed from `se`, `se-ard`, `matern52`, `mahalanobis`, `warped`, each optionally with
-/// `+dir`; `thesis` is `warped+dir` (the thesis' Eq. 19 kernel).
+/// - `matern52`: ARD Matern 5/2 (the default; each GP chooses between it and `se-ard` by its
+///   evidence unless a kernel is set, [`HbnParams::kernel_evidence`]);
+/// - `se-ard`: ARD squared exponential;
+/// - `se`: isotropic squared exponential (the thesis' Eq. 5);
+/// - `thesis`: the thesis' Eq. 19 kernel, tanh-warped inputs under a Mahalanobis SE times the
+///   direction-advantage factor `1/2 (1 + g g')`. It helps open-loop simulation, but the
+///   filter loses track at input reversals more often than with the ARD kernels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub struct KernelChoice {
-    /// Family.
-    pub family: KernelFamily,
-    /// Multiply by `1/2 (1 + g g')`.
-    pub direction: bool,
+    family: KernelFamily,
+    direction: bool,
 }
 
 impl KernelChoice {
+    /// ARD Matern 5/2.
+    pub const MATERN52: Self = Self::plain(KernelFamily::Matern52);
+    /// ARD squared exponential.
+    pub const SE_ARD: Self = Self::plain(KernelFamily::SeArd);
+    /// Isotropic squared exponential.
+    pub const SE: Self = Self::plain(KernelFamily::Se);
+    /// The thesis' Eq. 19 kernel.
+    pub const THESIS: Self = Self {
+        family: KernelFamily::Warped,
+        direction: true,
+    };
+    /// Every kernel, in the order of [`KernelChoice::NAMES`].
+    pub const ALL: [Self; 4] = [Self::MATERN52, Self::SE_ARD, Self::SE, Self::THESIS];
     /// Names accepted by [`FromStr`].
-    pub const NAMES: &'static str =
-        "se, se-ard, matern52, mahalanobis, warped (each optionally +dir), thesis";
+    pub const NAMES: &'static str = "matern52, se-ard, se, thesis";
+
+    const fn plain(family: KernelFamily) -> Self {
+        Self {
+            family,
+            direction: false,
+        }
+    }
+
+    /// The kernel's name.
+    pub const fn name(self) -> &'static str {
+        match (self.family, self.direction) {
+            (KernelFamily::Se, false) => "se",
+            (KernelFamily::SeArd, false) => "se-ard",
+            (KernelFamily::Matern52, false) => "matern52",
+            (KernelFamily::Warped, true) => "thesis",
+            // Not constructible through this API; a hand-edited model file may hold one.
+            _ => "custom",
+        }
+    }
 
     /// The kernel structure for `dim` inputs with direction pair `dir`.
     pub fn spec(&self, dim: usize, dir: [usize; 2]) -> KernelSpec {
@@ -76,16 +111,12 @@ impl KernelChoice {
     }
 }
 
-/// The default, `matern52`: measured the most robust single kernel across the six simulators
-/// and noise levels (docs/results.md); training chooses between it and SE-ARD per GP by
-/// evidence unless a kernel is set ([`HbnParams::kernel_evidence`]). The thesis' direction factor (`+dir`, `thesis`) helps open-loop
-/// simulation but made the filter lose track at input reversals on several seeds.
+/// The default, `matern52`: the most robust single kernel across the simulators and noise
+/// levels of the accuracy report; training chooses between it and SE-ARD per GP by evidence
+/// unless a kernel is set ([`HbnParams::kernel_evidence`]).
 impl Default for KernelChoice {
     fn default() -> Self {
-        Self {
-            family: KernelFamily::Matern52,
-            direction: false,
-        }
+        Self::MATERN52
     }
 }
 
@@ -100,43 +131,19 @@ pub struct UnknownKernel {
 impl FromStr for KernelChoice {
     type Err = UnknownKernel;
     fn from_str(s: &str) -> Result<Self, UnknownKernel> {
-        let t = s.trim().to_ascii_lowercase();
-        if t == "thesis" {
-            return Ok(Self {
-                family: KernelFamily::Warped,
-                direction: true,
-            });
-        }
-        let (base, direction) = match t.strip_suffix("+dir") {
-            Some(b) => (b, true),
-            None => (t.as_str(), false),
-        };
-        let family = match base {
-            "se" => KernelFamily::Se,
-            "se-ard" | "ard" => KernelFamily::SeArd,
-            "matern52" | "matern" => KernelFamily::Matern52,
-            "mahalanobis" => KernelFamily::Mahalanobis,
-            "warped" => KernelFamily::Warped,
-            _ => {
-                return Err(UnknownKernel {
-                    given: s.to_owned(),
-                });
-            }
-        };
-        Ok(Self { family, direction })
+        let t = s.trim();
+        Self::ALL
+            .into_iter()
+            .find(|k| k.name().eq_ignore_ascii_case(t))
+            .ok_or_else(|| UnknownKernel {
+                given: s.to_owned(),
+            })
     }
 }
 
 impl std::fmt::Display for KernelChoice {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let base = match self.family {
-            KernelFamily::Se => "se",
-            KernelFamily::SeArd => "se-ard",
-            KernelFamily::Matern52 => "matern52",
-            KernelFamily::Mahalanobis => "mahalanobis",
-            KernelFamily::Warped => "warped",
-        };
-        write!(f, "{base}{}", if self.direction { "+dir" } else { "" })
+        f.write_str(self.name())
     }
 }
 
@@ -194,79 +201,18 @@ pub const DEFAULT_MEMORY: [f64; 2] = [0.05, 0.2];
 /// low-pass filter of the input with a time constant of 1 s (`docs/memory.md`, "Lags").
 pub const DEFAULT_LAGS: [f64; 1] = [1.0];
 
-/// What the GPs learn: the signal itself, or its change from the previous sample.
-///
-/// With increments, the transition GP is fitted to `x_k - x_{k-1}` and predicts
-/// `x_{k-1} + GP(...)` (and the sensor GP, with [`Increments::Both`], to `y_k - y_{k-1}`): a
-/// prior mean of "no change" instead of "the average level", so the kernel spends its
-/// flexibility on how the state moves rather than on where it is.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Increments {
-    /// Both GPs learn the signals themselves (the thesis; model files from before this option).
-    #[default]
-    None,
-    /// The transition GP learns `x_k - x_{k-1}`; the sensor GP learns `y_k`.
-    Transition,
-    /// The transition GP learns `x_k - x_{k-1}`, the sensor GP `y_k - y_{k-1}`.
-    Both,
-}
-
-impl Increments {
-    /// Every choice, in the order of their names.
-    pub const ALL: [Increments; 3] = [Increments::None, Increments::Transition, Increments::Both];
-
-    /// `none`, `transition` or `both`.
-    pub const fn name(self) -> &'static str {
-        match self {
-            Increments::None => "none",
-            Increments::Transition => "transition",
-            Increments::Both => "both",
-        }
-    }
-
-    /// The input whose value is the prior mean of `role`'s GP (`x_{k-1}` of the transition,
-    /// `y_{k-1}` of the sensor), if it learns increments.
-    pub const fn mean_input(self, role: crate::GpRole) -> Option<usize> {
-        match (self, role) {
-            (Increments::Transition | Increments::Both, crate::GpRole::Transition) => Some(0),
-            (Increments::Both, crate::GpRole::Sensor) => Some(1),
-            _ => None,
-        }
-    }
-}
-
-impl std::fmt::Display for Increments {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl std::str::FromStr for Increments {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        Increments::ALL
-            .into_iter()
-            .find(|i| i.name().eq_ignore_ascii_case(s.trim()))
-            .ok_or_else(|| format!("unknown increments `{s}`; choose none, transition or both"))
-    }
-}
-
 /// What the sensor GP reads ([`HbnParams::sensor_inputs`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum SensorInputs {
-    /// `[x_{k-1}, y_{k-1}, x_k]`, the thesis' sensor (Eq. 16); model files from before this
-    /// option. With `y_{k-1}` among its inputs the GP can learn the output's increments from
-    /// the state's, and then `y` does not pin the state's level: a drift of the estimate is
-    /// never corrected (docs/results.md, "A sensor of the state only").
+    /// `[x_{k-1}, y_{k-1}, x_k]`, the thesis' sensor (Eq. 16). With `y_{k-1}` among its inputs
+    /// the GP can learn the output's increments from the state's, and then `y` does not pin the
+    /// state's level: a drift of the estimate is never corrected.
     #[default]
     Thesis,
     /// `[x_{k-1}, x_k]`: the output as a function of the state's last two values, so every
     /// measurement says where the state is. It cannot model a sensor's own memory beyond what
-    /// `x_{k-1}` carries. With [`Increments::Both`] this sensor would have no `y_{k-1}` to
-    /// learn increments from: [`HbnParams::check`] refuses the pair, and model selection
-    /// leaves this alternative out.
+    /// `x_{k-1}` carries.
     State,
 }
 
@@ -402,7 +348,7 @@ pub struct HbnParams {
     /// Inducing points per GP: `Some(m)` trains sparse GPs (Titsias' bound) on every sample;
     /// `None` trains exact GPs on at most `max_points` samples. The default is `None`, with
     /// `Some(DEFAULT_INDUCING)` as the alternative that [`HbnParams::select`] may choose on
-    /// held-out data. Model files written before the sparse GP existed read as `None`.
+    /// held-out data.
     #[serde(default)]
     pub n_inducing: Option<usize>,
     /// Most support points per exact GP (unused by the sparse GP).
@@ -419,8 +365,8 @@ pub struct HbnParams {
     pub normalize: bool,
     /// Lower bound of each GP's noise variance (standardised units). The default `1e-4` (a noise
     /// standard deviation of 1% of the target's) keeps a GP fitted to noise-free or repeated
-    /// data from interpolating kinks exactly; measured on noise-free generalised-PI data it cut
-    /// the EKF's nRMSE from 0.155 to 0.055.
+    /// data from interpolating kinks exactly, which makes the filter's Jacobians erratic and
+    /// its estimate jump at the kinks.
     pub noise_floor: f64,
     /// BLR window: `+-` this fraction of each coordinate's range.
     pub blr_window: f64,
@@ -431,43 +377,34 @@ pub struct HbnParams {
     /// `floor(1 / validation)` folds (at most [`crate::tuning::MAX_FOLDS`]), fold `j` holding
     /// out the `j`-th block of this length from the end of every run. `0` turns tuning off
     /// (noise scales 1, EKF by default).
-    /// Model files written before tuning existed read as `0`.
     #[serde(default)]
     pub validation: f64,
-    /// What the GPs learn: levels or increments ([`Increments`]). Model files written before
-    /// this option read as [`Increments::None`].
-    #[serde(default)]
-    pub increments: Increments,
     /// Which GPs have a linear prior mean ([`LinearMean`]): a least-squares plane on their
-    /// inputs that the kernel models the rest of. Model files written before this option read
-    /// as [`LinearMean::None`].
+    /// inputs that the kernel models the rest of.
     #[serde(default)]
     pub linear_mean: LinearMean,
     /// What the sensor GP reads ([`SensorInputs`]): the thesis' `[x_{k-1}, y_{k-1}, x_k]` (the
     /// default), or the state's `[x_{k-1}, x_k]` alone. [`HbnParams::select`] may choose the
-    /// other on held-out data. Model files written before this option read as
-    /// [`SensorInputs::Thesis`] (and that value is not written).
+    /// other on held-out data. The thesis' sensor is not written to model files (it is the
+    /// default when the field is absent).
     #[serde(default, skip_serializing_if = "SensorInputs::is_thesis")]
     pub sensor_inputs: SensorInputs,
     /// Largest signal variance of both GPs, relative to the variance of what each kernel
     /// models (the targets', or with a linear mean the residual's), or `None` for only the
-    /// `1e5` box ([`hbn_gp::GpParams::max_signal_variance`]). Model files written before this
-    /// option read as `None`.
+    /// `1e5` box ([`hbn_gp::GpParams::max_signal_variance`]).
     #[serde(default)]
     pub max_signal_variance: Option<f64>,
     /// Play operators that give the transition GP the input's long memory
     /// ([`hbn_core::play`]): their radii as fractions of the training input's range
     /// (`max u - min u`), each in `(0, 1]`, at most [`hbn_core::MAX_PLAYS`]. Empty: the
-    /// thesis' transition on `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}]` alone. Model files written
-    /// before this option read as empty.
+    /// thesis' transition on `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}]` alone.
     #[serde(default)]
     pub memory: Vec<f64>,
     /// Lags that give the transition GP the input's recent past ([`hbn_core::play`]):
     /// first-order low-pass filters of `u` with these time constants in seconds (each
     /// finite and positive), after the plays; plays and lags at most
     /// [`hbn_core::MAX_PLAYS`] in all. Creep and viscoelastic relaxation, common in soft
-    /// actuators and sensors, depend on that past. Empty (the default): none. Model files
-    /// written before this option read as empty.
+    /// actuators and sensors, depend on that past. Empty (the default): none.
     #[serde(default)]
     pub lags: Vec<f64>,
     /// Alternative kernels and inducing settings that filter-aware training chooses among on
@@ -476,30 +413,19 @@ pub struct HbnParams {
     /// configuration only. Without held-out data (`validation = 0`, or too little data) the
     /// primary configuration is trained; the training report warns when the alternatives are
     /// not the default's (the user asked for a choice). Model files hold the
-    /// configuration that was chosen, with this list empty (and files written before selection
-    /// existed read as empty).
+    /// configuration that was chosen, with this list empty.
     #[serde(default)]
     pub select: Selection,
-    /// Sparse GPs start their hyperparameter search from the optimum of the exact GPs with
-    /// the same settings (one optimiser start), instead of [`HbnParams::n_starts`] starts of
-    /// their own. Model selection sets it for a sparse candidate whose kernels are those of
-    /// the primary, exact configuration: it has those exact GPs already, and the sparse
-    /// search then takes a third of the likelihood evaluations (docs/sparse.md, "Where the
-    /// search starts"). Set by itself, training fits the exact GPs first, which on 5000
-    /// samples cost more than it saves. Default `false`; model files written before it read
-    /// as `false`.
-    #[serde(default)]
-    pub sparse_from_exact: bool,
     /// Kernels each GP chooses among by its evidence, before model selection
     /// ([`crate::KernelEvidence`]): each GP's exact GP (on the `max_points` subset) is fitted
     /// with every kernel listed, and the one with the highest log marginal likelihood becomes
     /// [`HbnParams::transition_kernel`] or [`HbnParams::sensor_kernel`]. The default lists
-    /// [`DEFAULT_EVIDENCE_KERNELS`] (Matern 5/2 and SE-ARD): over 138 runs the choice was
-    /// 0.95x the nRMSE of Matern 5/2 on both GPs (0.985x on the 48 runs new to it), with
-    /// calibration unchanged (docs/results.md, "Kernels chosen by evidence"). Fewer than two: the kernels as set.
+    /// [`DEFAULT_EVIDENCE_KERNELS`] (Matern 5/2 and SE-ARD): neither kernel is best on every
+    /// system, and the evidence picks the better one per GP at the cost of one more exact fit
+    /// each. Fewer than two: the kernels as set.
     /// Setting a kernel ([`HbnParams::set`] with [`Param::Kernel`],
     /// [`Param::TransitionKernel`] or [`Param::SensorKernel`]) empties it. Model files hold
-    /// the chosen kernels with this list empty (and files written before it read as empty).
+    /// the chosen kernels with this list empty.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub kernel_evidence: Vec<KernelChoice>,
     /// Signal names, paths and units.
@@ -507,16 +433,8 @@ pub struct HbnParams {
 }
 
 /// The kernels each GP chooses among by evidence by default ([`HbnParams::kernel_evidence`]).
-pub const DEFAULT_EVIDENCE_KERNELS: [KernelChoice; 2] = [
-    KernelChoice {
-        family: KernelFamily::Matern52,
-        direction: false,
-    },
-    KernelChoice {
-        family: KernelFamily::SeArd,
-        direction: false,
-    },
-];
+pub const DEFAULT_EVIDENCE_KERNELS: [KernelChoice; 2] =
+    [KernelChoice::MATERN52, KernelChoice::SE_ARD];
 
 /// Model selection on held-out data: alternatives to the primary configuration
 /// ([`HbnParams::transition_kernel`], [`HbnParams::sensor_kernel`], [`HbnParams::n_inducing`]).
@@ -538,17 +456,14 @@ pub struct Selection {
     pub inducing: Vec<Option<usize>>,
     /// Lag sets ([`HbnParams::lags`], time constants in seconds) to try besides the primary
     /// one, each with every sparse configuration of the kernels and inducing settings above
-    /// (none when every one is exact): a sparse candidate's filter tuning runs a step twenty
-    /// times cheaper than an exact one's (docs/tuning.md, "Lags chosen on held-out data"). The default has one, [`DEFAULT_LAGS`]: creep and relaxation over
-    /// about a second. Older files read as empty (and an empty list is not written, so files
-    /// without lag choices are as before).
+    /// (none when every one is exact): a sparse candidate's filter tuning runs a step about
+    /// twenty times cheaper than an exact one's. The default has one, [`DEFAULT_LAGS`]: creep
+    /// and relaxation over about a second. An empty list is not written.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub lags: Vec<Vec<f64>>,
     /// Sensor inputs ([`SensorInputs`]) to try besides the primary one, each with the primary
-    /// configuration only (kernels, inducing setting, lags): one more candidate each. None
-    /// with [`Increments::Both`] when the alternative is [`SensorInputs::State`] (it has no
-    /// `y_{k-1}` to learn increments from). Older files read as empty (and an empty list is
-    /// not written).
+    /// configuration only (kernels, inducing setting, lags): one more candidate each. An empty
+    /// list is not written.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub sensor_inputs: Vec<SensorInputs>,
 }
@@ -572,12 +487,11 @@ pub struct Candidate {
     pub sensor_kernel: KernelChoice,
     /// Inducing points per GP, `None` for exact GPs.
     pub n_inducing: Option<usize>,
-    /// Time constants of the transition's lags ([`HbnParams::lags`]). Rows written before
-    /// lags were chosen read as empty (and empty lags are not written).
+    /// Time constants of the transition's lags ([`HbnParams::lags`]); empty lags are not
+    /// written.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub lags: Vec<f64>,
-    /// What the sensor GP reads. Rows written before this choice read as
-    /// [`SensorInputs::Thesis`] (and that value is not written).
+    /// What the sensor GP reads ([`SensorInputs::Thesis`] is not written).
     #[serde(default, skip_serializing_if = "SensorInputs::is_thesis")]
     pub sensor_inputs: SensorInputs,
 }
@@ -631,7 +545,6 @@ impl Default for HbnParams {
             blr_window: 0.025,
             blr: LocalRegression::default(),
             validation: 0.25,
-            increments: Increments::None,
             linear_mean: LinearMean::None,
             sensor_inputs: SensorInputs::Thesis,
             max_signal_variance: None,
@@ -643,7 +556,6 @@ impl Default for HbnParams {
                 lags: vec![DEFAULT_LAGS.to_vec()],
                 sensor_inputs: vec![SensorInputs::State],
             },
-            sparse_from_exact: false,
             kernel_evidence: DEFAULT_EVIDENCE_KERNELS.to_vec(),
             signals: Signals::default(),
         }
@@ -850,8 +762,13 @@ pub enum ParamValue {
 }
 
 /// [`HbnParams`] that passed [`HbnParams::check`]: training takes only these.
+///
+/// The second field is internal to model selection: a sparse candidate whose kernels are the
+/// primary exact configuration's starts its hyperparameter search from those exact GPs' optimum
+/// (one optimiser start), which takes about a third of the likelihood evaluations of its own
+/// starts.
 #[derive(Clone, Debug, PartialEq)]
-pub struct CheckedHbnParams(HbnParams);
+pub struct CheckedHbnParams(HbnParams, bool);
 
 impl std::ops::Deref for CheckedHbnParams {
     type Target = HbnParams;
@@ -884,15 +801,19 @@ impl CheckedHbnParams {
     /// The parameters of one of [`HbnParams::candidates`] (checked with the rest: every
     /// alternative was).
     pub(crate) fn for_candidate(&self, c: &Candidate) -> CheckedHbnParams {
-        CheckedHbnParams(self.0.with_candidate(c))
+        CheckedHbnParams(self.0.with_candidate(c), false)
     }
 
     /// [`Self::for_candidate`] for a sparse candidate whose searches start from the primary
-    /// exact GPs ([`HbnParams::sparse_from_exact`]).
+    /// exact GPs ([`Self::starts_from_exact`]).
     pub(crate) fn starting_from_exact(&self, c: &Candidate) -> CheckedHbnParams {
-        let mut p = self.0.with_candidate(c);
-        p.sparse_from_exact = true;
-        CheckedHbnParams(p)
+        CheckedHbnParams(self.0.with_candidate(c), true)
+    }
+
+    /// Whether a sparse GP's hyperparameter search starts from the optimum of the exact GP with
+    /// the same settings (one start) instead of its own starts.
+    pub(crate) fn starts_from_exact(&self) -> bool {
+        self.1
     }
 
     /// These parameters with `kernel` for the GP `role` (checked: every kernel of
@@ -903,7 +824,7 @@ impl CheckedHbnParams {
             crate::GpRole::Transition => p.transition_kernel = kernel,
             crate::GpRole::Sensor => p.sensor_kernel = kernel,
         }
-        CheckedHbnParams(p)
+        CheckedHbnParams(p, self.1)
     }
 
     /// These parameters without the kernel choice by evidence (the kernels as they are).
@@ -1022,9 +943,6 @@ impl HbnParams {
         }
         // Other sensors go with the primary configuration only.
         for &sensor_inputs in &self.select.sensor_inputs {
-            if sensor_inputs == SensorInputs::State && self.increments == Increments::Both {
-                continue;
-            }
             let c = Candidate {
                 sensor_inputs,
                 ..self.candidate()
@@ -1082,7 +1000,7 @@ impl HbnParams {
     /// Checks every field once; training then trusts them. Each error names the [`Param`].
     pub fn check(self) -> Result<CheckedHbnParams, ConfigError> {
         self.check_ref()?;
-        Ok(CheckedHbnParams(self))
+        Ok(CheckedHbnParams(self, false))
     }
 
     /// [`HbnParams::check`] without consuming the parameters.
@@ -1102,16 +1020,6 @@ impl HbnParams {
             }
         };
         positive(Param::Rate, self.rate_hz)?;
-        if self.sensor_inputs == SensorInputs::State && self.increments == Increments::Both {
-            return Err(ConfigError::new(
-                Param::SensorInputs,
-                Problem::Invalid {
-                    reason: "a sensor of the state only has no y_{k-1} to learn increments \
-                             from: use increments `transition` or `none`, or sensor inputs \
-                             `thesis`",
-                },
-            ));
-        }
         at_least(
             Param::MaxPoints,
             self.max_points as u64,
@@ -1852,8 +1760,7 @@ mod tests {
     }
 
     /// Sensor inputs set by name (a list: the primary, then the alternatives), read back the
-    /// same way; the state-only sensor cannot learn increments of y (refused as the primary,
-    /// left out as an alternative), and a model file without the field reads as the thesis'.
+    /// same way, and a model file without the field reads as the thesis'.
     #[test]
     fn sensor_inputs_are_set_checked_and_chosen() {
         let text = |t: &str| ParamValue::Text(t.to_owned());
@@ -1872,23 +1779,6 @@ mod tests {
         assert!(e.to_string().contains("thesis, state"), "{e}");
         let e = p.set(Param::SensorInputs, ParamValue::Int(2)).unwrap_err();
         assert_eq!(e.param, Param::SensorInputs);
-        // Increments of y need y_{k-1}.
-        p.set(Param::SensorInputs, text("state")).unwrap();
-        p.increments = Increments::Both;
-        let e = p.check_ref().unwrap_err();
-        assert_eq!(e.param, Param::SensorInputs);
-        p.increments = Increments::Transition;
-        assert!(p.check_ref().is_ok());
-        let d = HbnParams {
-            increments: Increments::Both,
-            ..HbnParams::default()
-        };
-        assert!(
-            d.candidates()
-                .iter()
-                .all(|c| c.sensor_inputs == SensorInputs::Thesis)
-        );
-        assert!(d.check_ref().is_ok());
         // Not written when it is the thesis' sensor, so older readers and files agree.
         let json = serde_json::to_string(&HbnParams {
             select: Selection::default(),
