@@ -234,10 +234,16 @@ def _training_args(args: Mapping[str, Any]) -> Dict[str, Any]:
     return {k: args[k] for k in _TRAINING if k in args}
 
 
+def _native(a: Any) -> np.ndarray:
+    """``a`` as a contiguous, aligned float64 array, copied only if it is not one already
+    (arrays that arrive through pickle protocol 5, e.g. on a Dask worker, can be misaligned)."""
+    return np.require(np.asarray(a, dtype=np.float64), requirements=["C", "A"])
+
+
 def _vector(a: Any, name: str) -> np.ndarray:
-    """A contiguous float64 1-D copy-if-needed of ``a``; ValueError otherwise."""
+    """A contiguous, aligned float64 1-D copy-if-needed of ``a``; ValueError otherwise."""
     try:
-        v = np.ascontiguousarray(np.asarray(a, dtype=np.float64))
+        v = _native(a)
     except (TypeError, ValueError) as e:
         raise ValueError(f"{name} must be numeric: {e}") from None
     if v.ndim == 0:
@@ -261,7 +267,7 @@ def _matrix(a: Any, name: str, dim: Optional[int] = None) -> np.ndarray:
         raise ValueError(f"{name} must be 1-D or 2-D, got shape {m.shape}")
     if dim is not None and m.shape[1] != dim:
         raise ValueError(f"{name} has {m.shape[1]} features, but the model was fitted with {dim}")
-    return np.ascontiguousarray(m)
+    return _native(m)
 
 
 def _fspath(path: PathLike) -> str:
@@ -721,7 +727,9 @@ class Estimate:
         >>> sorted(s)[:3], s["samples"]
         (['coverage_1sigma', 'coverage_2sigma', 'mean_nees'], 200)
         """
-        return dict(_hbn.score(self.x, self.x_std, _vector(x_ref, "x_ref")))
+        return dict(
+            _hbn.score(_vector(self.x, "x"), _vector(self.x_std, "x_std"), _vector(x_ref, "x_ref"))
+        )
 
 
 def _trajectories(a: Any, name: str) -> List[np.ndarray]:

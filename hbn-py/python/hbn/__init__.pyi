@@ -9,11 +9,13 @@ import numpy.typing as npt
 from . import _hbn
 
 __all__ = [
-    "GaussianProcess",
     "HysteresisModel",
     "Estimate",
     "Filter",
     "FilterOutput",
+    "GaussianProcess",
+    "Explorer",
+    "Simulator",
     "simulate",
     "oracle_estimate",
     "read_mcap",
@@ -21,6 +23,8 @@ __all__ = [
     "default_params",
     "default_log_options",
     "default_gp_params",
+    "default_explore_params",
+    "default_sim_params",
     "HbnError",
     "HbnIOError",
     "HbnFileNotFoundError",
@@ -54,6 +58,7 @@ def default_params() -> Dict[str, Any]: ...
 def default_log_options() -> Dict[str, Any]: ...
 def default_gp_params() -> Dict[str, Any]: ...
 def default_explore_params() -> Dict[str, Any]: ...
+def default_sim_params() -> Dict[str, Any]: ...
 
 PathLike = Union[str, os.PathLike[str]]
 ArrayLike = npt.ArrayLike
@@ -64,29 +69,32 @@ class GaussianProcess:
     lengthscales: Optional[Union[float, Sequence[float], np.ndarray]]
     signal_variance: Optional[float]
     noise_variance: Optional[float]
-    optimize: Optional[bool]
-    normalize: Optional[bool]
-    n_restarts: Optional[int]
-    max_iter: Optional[int]
-    max_points: Optional[int]
-    seed: Optional[int]
-    mean: Optional[str]
+    optimize: bool
+    normalize: bool
+    n_starts: int
+    max_iters: int
+    max_points: int
+    seed: int
+    n_inducing: Optional[int]
+    inducing_points: Optional[ArrayLike]
+    optimize_inducing: bool
+    mean: str
     def __init__(
         self,
-        kernel: str = "se-ard",
+        kernel: str = ...,
         lengthscales: Optional[Union[float, Sequence[float], np.ndarray]] = None,
         signal_variance: Optional[float] = None,
         noise_variance: Optional[float] = None,
-        optimize: Optional[bool] = None,
-        normalize: Optional[bool] = None,
-        n_restarts: Optional[int] = None,
-        max_iter: Optional[int] = None,
-        max_points: Optional[int] = None,
-        seed: Optional[int] = None,
+        optimize: bool = ...,
+        normalize: bool = ...,
+        n_starts: int = ...,
+        max_iters: int = ...,
+        max_points: int = ...,
+        seed: int = ...,
         n_inducing: Optional[int] = None,
         inducing_points: Optional[ArrayLike] = None,
-        optimize_inducing: bool = False,
-        mean: Optional[str] = None,
+        optimize_inducing: bool = ...,
+        mean: str = ...,
     ) -> None: ...
     def fit(self, X: ArrayLike, y: ArrayLike) -> GaussianProcess: ...
     @overload
@@ -161,21 +169,57 @@ class HysteresisModel:
         u: Union[ArrayLike, Sequence[ArrayLike]],
         x: Union[ArrayLike, Sequence[ArrayLike]],
         y: Union[ArrayLike, Sequence[ArrayLike]],
-        rate: Optional[float] = None,
+        rate_hz: float = ...,
         signals: Optional[Mapping[str, Any]] = None,
-        **params: Any,
+        *,
+        kernel: Union[str, Sequence[str], None] = ...,
+        transition_kernel: Optional[str] = ...,
+        sensor_kernel: Optional[str] = ...,
+        n_inducing: Union[int, None, Sequence[Optional[int]]] = ...,
+        max_points: int = ...,
+        subset_policy: str = ...,
+        n_starts: int = ...,
+        max_iters: int = ...,
+        seed: int = ...,
+        normalize: bool = ...,
+        noise_floor: float = ...,
+        blr_window: float = ...,
+        validation: float = ...,
+        memory: Sequence[float] = ...,
+        lags: Union[Sequence[float], Sequence[Sequence[float]]] = ...,
+        linear_mean: str = ...,
+        sensor_inputs: Union[str, Sequence[str]] = ...,
+        max_signal_variance: Optional[float] = ...,
     ) -> HysteresisModel: ...
     @classmethod
     def from_logs(
         cls,
-        paths: Union[PathLike, Sequence[PathLike]],
-        input: Optional[str] = None,
-        state: Optional[str] = None,
-        output: Optional[str] = None,
-        rate: Optional[float] = None,
-        time_source: Optional[str] = None,
-        max_gap: Optional[float] = None,
-        **params: Any,
+        logs: Union[PathLike, Sequence[PathLike]],
+        input: str = ...,
+        state: str = ...,
+        output: str = ...,
+        rate_hz: Optional[float] = ...,
+        time_source: str = ...,
+        max_gap_s: float = ...,
+        *,
+        kernel: Union[str, Sequence[str], None] = ...,
+        transition_kernel: Optional[str] = ...,
+        sensor_kernel: Optional[str] = ...,
+        n_inducing: Union[int, None, Sequence[Optional[int]]] = ...,
+        max_points: int = ...,
+        subset_policy: str = ...,
+        n_starts: int = ...,
+        max_iters: int = ...,
+        seed: int = ...,
+        normalize: bool = ...,
+        noise_floor: float = ...,
+        blr_window: float = ...,
+        validation: float = ...,
+        memory: Sequence[float] = ...,
+        lags: Union[Sequence[float], Sequence[Sequence[float]]] = ...,
+        linear_mean: str = ...,
+        sensor_inputs: Union[str, Sequence[str]] = ...,
+        max_signal_variance: Optional[float] = ...,
     ) -> HysteresisModel: ...
     def estimate(self, u: ArrayLike, y: ArrayLike, mode: Optional[str] = None) -> Estimate: ...
     def estimate_log(
@@ -186,14 +230,19 @@ class HysteresisModel:
         output: Optional[str] = None,
         csv: Optional[PathLike] = None,
         mcap: Optional[PathLike] = None,
-        time_source: Optional[str] = None,
-        max_gap: Optional[float] = None,
+        time_source: str = ...,
+        max_gap_s: float = ...,
     ) -> Estimate: ...
     def filter(self, mode: Optional[str] = None) -> Filter: ...
     def simulate_open_loop(self, u: ArrayLike) -> FloatArray: ...
     def save(self, path: PathLike) -> None: ...
     @classmethod
     def load(cls, path: PathLike) -> HysteresisModel: ...
+    def to_bytes(self) -> bytes: ...
+    @classmethod
+    def from_bytes(cls, data: bytes) -> HysteresisModel: ...
+    @property
+    def rate_hz(self) -> float: ...
     @property
     def rate(self) -> float: ...
     @property
@@ -228,22 +277,39 @@ class Explorer:
         u_min: float,
         u_max: float,
         max_step: float,
-        rate: Optional[float] = None,
-        seed: Optional[int] = None,
-        u_start: Optional[float] = None,
-        random_samples: Optional[int] = None,
-        alpha_start: Optional[float] = None,
-        alpha_end: Optional[float] = None,
-        alpha_ramp: Optional[int] = None,
-        refit_every: Optional[int] = None,
-        optimize_every: Optional[int] = None,
-        candidates: Optional[int] = None,
-        horizon: Optional[int] = None,
-        strategy: Optional[str] = None,
-        pool: Optional[int] = None,
-        lag: Optional[int] = None,
-        criterion: Optional[str] = None,
-        **params: Any,
+        rate_hz: float = ...,
+        seed: int = ...,
+        u_start: Optional[float] = ...,
+        random_samples: int = ...,
+        alpha_start: float = ...,
+        alpha_end: float = ...,
+        alpha_ramp: int = ...,
+        refit_every: int = ...,
+        optimize_every: int = ...,
+        candidates: int = ...,
+        horizon: int = ...,
+        strategy: str = ...,
+        pool: int = ...,
+        lag: int = ...,
+        criterion: str = ...,
+        *,
+        kernel: Union[str, Sequence[str], None] = ...,
+        transition_kernel: Optional[str] = ...,
+        sensor_kernel: Optional[str] = ...,
+        n_inducing: Union[int, None, Sequence[Optional[int]]] = ...,
+        max_points: int = ...,
+        subset_policy: str = ...,
+        n_starts: int = ...,
+        max_iters: int = ...,
+        normalize: bool = ...,
+        noise_floor: float = ...,
+        blr_window: float = ...,
+        validation: float = ...,
+        memory: Sequence[float] = ...,
+        lags: Union[Sequence[float], Sequence[Sequence[float]]] = ...,
+        linear_mean: str = ...,
+        sensor_inputs: Union[str, Sequence[str]] = ...,
+        max_signal_variance: Optional[float] = ...,
     ) -> None: ...
     def propose(self) -> float: ...
     def observe(self, u: float, x: float, y: float) -> None: ...
@@ -267,9 +333,9 @@ class Simulator:
     def __init__(
         self,
         system: str,
-        seed: Optional[int] = None,
-        noise_gain: Optional[float] = None,
-        rate: Optional[float] = None,
+        seed: int = ...,
+        noise_gain: float = ...,
+        rate_hz: float = ...,
     ) -> None: ...
     def step(self, u: float) -> Tuple[float, float]: ...
     @property
@@ -278,23 +344,26 @@ class Simulator:
 def simulate(
     system: str,
     steps: int,
-    seed: Optional[int] = None,
-    noise_gain: Optional[float] = None,
-    rate: Optional[float] = None,
+    seed: int = ...,
+    noise_gain: float = ...,
+    rate_hz: float = ...,
 ) -> Dict[str, FloatArray]: ...
 def oracle_estimate(
     system: str,
     u: ArrayLike,
     x: ArrayLike,
     y: ArrayLike,
-    noise_gain: Optional[float] = None,
-    rate: Optional[float] = None,
+    noise_gain: float = ...,
+    rate_hz: float = ...,
 ) -> Dict[str, FloatArray]: ...
 def list_topics(path: PathLike) -> List[Dict[str, Any]]: ...
 def read_mcap(
     path: PathLike,
     signals: Mapping[str, str],
-    rate: Optional[float] = None,
-    time_source: Optional[str] = None,
-    max_gap: Optional[float] = None,
+    rate_hz: Optional[float] = ...,
+    time_source: str = ...,
+    max_gap_s: float = ...,
 ) -> Dict[str, FloatArray]: ...
+
+# Deprecated alias of HysteresisModel (a DeprecationWarning at runtime).
+HbnModel = HysteresisModel
