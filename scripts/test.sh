@@ -69,7 +69,7 @@ if [ ! -x "$VENV/bin/python" ]; then
   python3 -m venv "$VENV"
 fi
 "$VENV/bin/python" -m pip install --quiet --upgrade pip
-"$VENV/bin/python" -m pip install numpy scikit-learn matplotlib pytest
+"$VENV/bin/python" -m pip install numpy scikit-learn matplotlib pytest "dask[distributed]"
 
 echo "== Python: build the wheel (cargo compiles the engine in release mode: a few minutes the"
 echo "   first time; pip -v shows cargo's progress) and install it"
