@@ -3,8 +3,6 @@ model, planning, every bad keyword named, NaN rejected, defaults from the librar
 simulator equal to hbn.simulate, and the worked example."""
 
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -179,14 +177,3 @@ def test_the_simulator_gives_what_simulate_gives():
     with pytest.raises(hbn.ConfigError) as e:
         hbn.Simulator("no-such-system")
     assert e.value.keyword == "system"
-
-
-def test_the_example_runs(repo):
-    r = subprocess.run(
-        [sys.executable, str(repo / "examples" / "explore_in_the_loop.py"),
-         "--system", "duhem", "--samples", "400"],
-        capture_output=True, text=True, timeout=600,
-    )
-    assert r.returncode == 0, r.stderr
-    assert "bounds kept: True; increment bound kept: True" in r.stdout
-    assert "nRMSE explorer" in r.stdout and "nRMSE random ramps" in r.stdout
