@@ -10,7 +10,7 @@
 //! schemas and messages are [`IoError`]s whose messages name the file, topic or field and say
 //! what would fix them.
 //!
-//! Not supported (yet): protobuf, ROS 1 and `ros2idl` channels ([`IoError::UnsupportedEncoding`]),
+//! Not supported: protobuf, ROS 1 and `ros2idl` channels ([`IoError::UnsupportedEncoding`]),
 //! `wstring` fields, CDR parameter lists (XCDR1 PL_CDR / XCDR2 delimited).
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]

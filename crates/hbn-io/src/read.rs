@@ -130,9 +130,10 @@ impl Read for Counting {
 }
 
 /// The next message of `reader`, `None` at the end. The mcap crate (0.26) indexes slices with
-/// lengths read from the file (`read.rs`, attachment records: a crafted file panicked with
-/// "slice index starts at 50 but ends at 49", found by the `mcap_ingest` fuzz target), so a
-/// panic inside it is caught here and reported as a corrupt file, like its errors.
+/// lengths read from the file (`read.rs`, attachment records: a crafted file makes it panic
+/// with "slice index starts at 50 but ends at 49", a case the `mcap_ingest` fuzz target
+/// reaches), so a panic inside it is caught here and reported as a corrupt file, like its
+/// errors.
 fn next_message(
     file: &Path,
     reader: &mut Messages,
@@ -695,8 +696,9 @@ pub fn read_signals_observed(
 mod tests {
     use super::*;
 
-    /// A Header record whose `library` string claims 2.3 GB in a 24-byte record (found by the
-    /// `mcap_ingest` fuzz target, an out-of-memory under libFuzzer): a short, plain error.
+    /// A Header record whose `library` string claims 2.3 GB in a 24-byte record (a case of the
+    /// `mcap_ingest` fuzz target; read unchecked, it runs out of memory under libFuzzer): a
+    /// short, plain error.
     #[test]
     fn a_string_longer_than_its_record_is_a_plain_error() {
         let file = Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -392,10 +392,10 @@ fn fuzz_truncations_and_bit_flips() {
 
 #[test]
 fn a_chunk_whose_records_overrun_it_is_an_error_in_every_build() {
-    // Found by the mcap_ingest fuzz target: an uncompressed chunk whose record claims more
+    // A case of the mcap_ingest fuzz target: an uncompressed chunk whose record claims more
     // bytes than the chunk has left. The mcap crate (0.26, sans_io/linear_reader.rs) subtracts
     // the record's length from the chunk's remainder without a check: with overflow checks
-    // (debug and test builds) that panicked; without (release) it wraps and the read fails.
+    // (debug and test builds) that panics; without (release) it wraps and the read fails.
     // The workspace turns overflow checks off for the mcap crate alone (Cargo.toml), so every
     // build reports a corrupt file.
     let file = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -414,7 +414,7 @@ fn a_chunk_whose_records_overrun_it_is_an_error_in_every_build() {
 
 #[test]
 fn a_record_that_makes_the_mcap_crate_panic_is_a_corrupt_file() {
-    // Found by the mcap_ingest fuzz target: a record whose lengths make the mcap crate (0.26,
+    // A case of the mcap_ingest fuzz target: a record whose lengths make the mcap crate (0.26,
     // read.rs) index a slice backwards and panic, in every build. hbn-io catches it and
     // reports a corrupt file.
     let file = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
