@@ -65,7 +65,7 @@
 //! [`oracle_estimate`] gives, for a simulated trajectory, the exact posterior mean of each state
 //! given the input and sensor output so far, the true past states and the simulator itself: no
 //! causal estimator has a lower expected squared error on that trajectory, so it measures how
-//! much any estimator could still gain (`docs/results.md`, "The floor under causal estimation").
+//! much any estimator could still gain (`docs/accuracy.md` reports it beside the estimators).
 //!
 //! ## Building blocks
 //!
