@@ -960,13 +960,12 @@ mod tests {
         }
     }
 
-    /// Tables of format versions 3 (before the linear mean), 4 (before the lags) and 5 (before
-    /// the split ranges) still read (firmware built then holds them): the same tables with
-    /// the split ranges removed (version 5), the lags' count too (version 4), and each GP's
-    /// linear-slope count too (version 3), give the same view, scratch size and steps as the
-    /// current tables.
+    /// Tables of format versions 3 (no linear mean), 4 (no lags) and 5 (no split ranges) read,
+    /// as a firmware may hold them: the same tables with the split ranges removed (version 5),
+    /// the lags' count too (version 4), and each GP's linear-slope count too (version 3), give
+    /// the same view, scratch size and steps as the current tables.
     #[test]
-    fn version_3_4_and_5_tables_still_read() {
+    fn version_3_4_and_5_tables_read_as_the_current_ones() {
         let m = model(Some(16));
         let t = model_tables(&m, Mode::Ekf).unwrap();
         assert_eq!(t.layout[1], tables::VERSION);
@@ -997,7 +996,8 @@ mod tests {
         }
     }
 
-    /// `old` (a layout of an older version of `t`'s tables) reads as the same model as `t`.
+    /// `old` (a layout of a lower format version of `t`'s tables) reads as the same model as
+    /// `t`.
     fn check_old_tables(t: &ModelTables, old: &[u32]) {
         let version = old[1];
         assert_eq!(
@@ -1027,10 +1027,10 @@ mod tests {
     }
 
     /// A sparse model (m = 32) trained on 1200 samples: the step on its f32 tables stays
-    /// within 2% of the range of x of the f64 step (measured: 0.2% EKF, 1.3% EKF+BLR).
+    /// within 2% of the range of x of the f64 step (on this model: 0.2% EKF, 1.3% EKF+BLR).
     /// The mean `k^T alpha` cancels, so f32 tables keep each weight as two f32 parts: read back,
     /// the weights agree with the model's to about 48 bits (one f32 part alone gives 24, and
-    /// moved a sparse model's estimate by 5% of the range of x), exact and sparse.
+    /// moves a sparse model's estimate by 5% of the range of x), exact and sparse.
     #[test]
     fn f32_tables_keep_the_mean_weights_to_48_bits() {
         for m in [model(Some(16)), model(None)] {
@@ -1053,10 +1053,11 @@ mod tests {
     }
 
     /// A sparse model (m = 32) trained on 1200 samples, with each kernel: the step on its f32
-    /// tables stays within 2% of the range of x of the f64 step (measured: 1e-7 of it). With
-    /// the squared exponential the sensor GP rides a near-linear ridge (signal variance e^10
-    /// and more); with every real rounded to f32 its estimate was off by 13-23% of the range,
-    /// 3% with the hyperparameters and inputs in two parts but the variance factors in one.
+    /// tables stays within 2% of the range of x of the f64 step (on these models: about 1e-7
+    /// of it). With the squared exponential the sensor GP rides a near-linear ridge (signal
+    /// variance e^10 and more); with every real rounded to f32 its estimate is off by 13-23% of
+    /// the range, and by 3% with the hyperparameters and inputs in two parts but the variance
+    /// factors in one.
     #[test]
     fn f32_tables_stay_close() {
         let cfg = SimConfig {
