@@ -327,8 +327,8 @@ pub fn step(data: &[u8]) {
             dirs: b.vec(n),
             alpha: b.vec(n),
             f1: b.vec(tri),
-            // Sparse views had a second factor until the two were folded into one; its bytes
-            // are still consumed so that the committed corpora keep their meaning.
+            // The byte layout has room for a second factor, which no view has; its bytes are
+            // consumed and ignored so that the committed corpora keep their meaning.
             out: {
                 let _second_factor = b.vec(tri);
                 [b.f64(), b.f64(), b.f64()]
@@ -436,8 +436,8 @@ pub fn step(data: &[u8]) {
         sensor_local: nb(&sl, 3, &STARTS[sl.4]),
         blr,
         init,
-        // The byte layout predates play operators (the corpus replays as it was); the step
-        // advances the plays with or without them.
+        // The byte layout has no play operators (so that the committed corpora keep their
+        // meaning); the step advances the plays with or without them.
         plays: Plays::NONE,
     };
     let mut scratch = vec![0.0; Estimator::scratch_len(&model)];
