@@ -5,8 +5,8 @@ usage: python3 scripts/check_avx2_encoding.py BINARY
 `hbn_core::simd::vectorised` runs the estimator's hot loops in a function compiled for AVX2
 (`hbn_core::simd::run_avx2`). An instruction in the old SSE encoding inside it (a library's
 inline assembly: `libm::sqrt` is `sqrtsd`) mixes the two encodings, which on some CPUs stalls
-every such instruction: on an AMD EPYC machine it made the exact GP's EKF step 3x slower and
-the UKF step 9x (docs/benchmarks.md, session 26). The compiler cannot re-encode inline
+every such instruction: on an AMD EPYC machine it makes the exact GP's EKF step several times
+slower and the UKF step about 9x slower. The compiler cannot re-encode inline
 assembly, so this reads the machine code: every instruction of every `run_avx2` copy, and of
 the AVX2 kernels written with intrinsics (`lower_packed_times_avx2`), that names an xmm or ymm
 register must be VEX-encoded (its mnemonic starts with `v`).
