@@ -1207,7 +1207,7 @@ impl FilterCore {
 pub struct FilterStep {
     /// Estimate of the state.
     x: f64,
-    /// Its standard deviation.
+    /// Standard deviation of the estimate of the state.
     x_std: f64,
     /// Predicted measurement before the update.
     y_pred: f64,
