@@ -41,7 +41,7 @@ fn bench_step(c: &mut Criterion) {
             // One configuration: the default's held-out choice between exact and sparse GPs
             // would otherwise bench whichever it picked under this case's label.
             select: Selection::default(),
-            // Matern 5/2 on both GPs, as the figures of docs/benchmarks.md (the default's choice
+            // Matern 5/2 on both GPs, a fixed kernel for every run (the default's choice
             // by evidence could take SE-ARD, whose step costs about the same).
             kernel_evidence: Vec::new(),
             ..HbnParams::default()

@@ -4,7 +4,7 @@
 //! 128 (`triangular_m64`, `triangular_m128`).
 //!
 //! `cargo bench --bench gp`. The scikit-learn comparison on the same data in the same run is
-//! `python3 benches/compare_sklearn.py` (see docs/benchmarks.md).
+//! `python3 benches/compare_sklearn.py` (its figures are in docs/performance.md).
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use hbn::core::rng::Rng;

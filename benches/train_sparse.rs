@@ -1,25 +1,30 @@
-//! Training time of the default (sparse) HBN on many samples: both GPs (d = 4 and 3) with
-//! `m` inducing points on every sample of simulated logs.
+//! Training time of a sparse HBN on many samples: both GPs (d = 4 and 3) with `m` inducing
+//! points on every sample of simulated logs.
 //!
-//! `cargo bench --bench train_sparse -- [SAMPLES] [M]` (defaults 100000 and 128). Prints one
-//! line per run: samples, m, seconds for both GPs, and the training report's figures, after
-//! a timeline: when each GP's search starts ended (the refinement on every sample, the
-//! held-out refits and the filter tuning follow). `LINEAR_MEAN=none|transition|both` and
-//! `MAX_SIGNAL_VARIANCE=v` in the environment set [`HbnParams::linear_mean`] and
-//! [`HbnParams::max_signal_variance`].
+//! `cargo bench --bench train_sparse -- [SAMPLES] [M] [LINEAR_MEAN] [MAX_SIGNAL_VARIANCE]`
+//! (defaults 100000, 128, the default linear mean and no bound; LINEAR_MEAN is `none`,
+//! `transition` or `both`, [`HbnParams::linear_mean`]; MAX_SIGNAL_VARIANCE is a number,
+//! [`HbnParams::max_signal_variance`]). Prints one line per run: samples, m, seconds for both
+//! GPs, and the training report's figures, after a timeline: when each GP's search starts ended
+//! (the refinement on every sample, the held-out refits and the filter tuning follow).
 
 use hbn::model::{HbnParams, HysteresisModel, Selection, Sequence};
 use hbn::sim::{InputKind, SimConfig, SystemKind, generate_input, simulate};
 use std::time::Instant;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    // `cargo bench` passes `--bench`; keep only the numbers.
-    let nums: Vec<usize> = std::env::args()
+    // `cargo bench` passes `--bench`; keep the positional arguments.
+    let args: Vec<String> = std::env::args()
         .skip(1)
-        .filter_map(|a| a.parse().ok())
+        .filter(|a| !a.starts_with("--"))
         .collect();
-    let samples = nums.first().copied().unwrap_or(100_000);
-    let m = nums.get(1).copied().unwrap_or(128);
+    let samples: usize = args.first().map_or(Ok(100_000), |a| a.parse())?;
+    let m: usize = args.get(1).map_or(Ok(128), |a| a.parse())?;
+    let linear_mean: hbn::model::LinearMean = match args.get(2) {
+        Some(v) => v.parse()?,
+        None => hbn::model::LinearMean::default(),
+    };
+    let max_signal_variance: Option<f64> = args.get(3).map(|v| v.parse()).transpose()?;
     // Ten logs of a soft actuator driven by different random inputs.
     let logs = 10;
     let per_log = samples / logs;
@@ -48,14 +53,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             y: &t.y,
         })
         .collect();
-    let linear_mean = match std::env::var("LINEAR_MEAN") {
-        Ok(v) => v.parse()?,
-        Err(_) => hbn::model::LinearMean::default(),
-    };
-    let max_signal_variance = match std::env::var("MAX_SIGNAL_VARIANCE") {
-        Ok(v) => Some(v.parse()?),
-        Err(_) => None,
-    };
     let params = HbnParams {
         n_inducing: Some(m),
         linear_mean,
