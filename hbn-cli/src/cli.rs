@@ -413,10 +413,10 @@ pub struct SimulateArgs {
 #[derive(Clone, Debug, Args)]
 pub struct ReadArgs {
     /// Clock to place samples at.
-    #[arg(long, value_enum, default_value_t = log_options().time_source.into())]
+    #[arg(help_heading = "Data", long, value_enum, default_value_t = log_options().time_source.into())]
     pub time_source: TimeSourceArg,
     /// Largest allowed gap between two samples of a signal (seconds).
-    #[arg(long, allow_negative_numbers = true, default_value_t = log_options().max_gap_s)]
+    #[arg(help_heading = "Data", long, allow_negative_numbers = true, default_value_t = log_options().max_gap_s)]
     pub max_gap: f64,
 }
 
@@ -447,77 +447,77 @@ impl ReadArgs {
     after_help = "Example:\n  hbn train --log run1.mcap --log run2.mcap --input /valve.pressure \
      --state /mocap.angle --output /strain.data --out model.hbn\n\n\
      Each log is one trajectory; its signals are resampled to one rate (default: the native rate\n\
-     of the input signal in the first log). Kernels: se, se-ard, matern52, mahalanobis, warped\n\
-     (each optionally +dir), thesis; default: each GP chooses between matern52 and se-ard by\n\
-     its evidence (the exact GP's log marginal likelihood)."
+     of the input signal in the first log). Kernels: matern52, se-ard, se, thesis; default: each\n\
+     GP chooses between matern52 and se-ard by its evidence (the exact GP's log marginal\n\
+     likelihood). Every option: docs/options.md."
 )]
 pub struct TrainArgs {
     /// Training log (repeat for several trajectories).
-    #[arg(long = "log", required = true)]
+    #[arg(help_heading = "Data", long = "log", required = true)]
     pub logs: Vec<PathBuf>,
     /// Input signal u (Foxglove message path).
-    #[arg(long, default_value = hbn_pipeline::DEFAULT_INPUT, value_parser = parse_path)]
+    #[arg(help_heading = "Data", long, default_value = hbn_pipeline::DEFAULT_INPUT, value_parser = parse_path)]
     pub input: SignalPath,
     /// State signal x (the reference the model learns).
-    #[arg(long, default_value = hbn_pipeline::DEFAULT_STATE, value_parser = parse_path)]
+    #[arg(help_heading = "Data", long, default_value = hbn_pipeline::DEFAULT_STATE, value_parser = parse_path)]
     pub state: SignalPath,
     /// Sensor output signal y.
-    #[arg(long, default_value = hbn_pipeline::DEFAULT_OUTPUT, value_parser = parse_path)]
+    #[arg(help_heading = "Data", long, default_value = hbn_pipeline::DEFAULT_OUTPUT, value_parser = parse_path)]
     pub output: SignalPath,
     /// Resampling rate (Hz); default: the input's native rate in the first log.
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(help_heading = "Data", long, allow_negative_numbers = true)]
     pub rate: Option<f64>,
     /// Kernel of both GPs. Default: each GP chooses between matern52 and se-ard by its
     /// evidence (the exact GP's log marginal likelihood); naming a kernel turns that off.
     /// Several, comma-separated, are chosen among on held-out data (model selection; each
     /// costs one training).
-    #[arg(long, value_parser = parse_kernel, value_delimiter = ',', value_name = "KERNEL[,..]")]
+    #[arg(help_heading = "Model", long, value_parser = parse_kernel, value_delimiter = ',', value_name = "KERNEL[,..]")]
     pub kernel: Vec<KernelChoice>,
     /// Kernel of the transition GP (overrides --kernel; turns the choice by evidence off).
-    #[arg(long, value_parser = parse_kernel)]
+    #[arg(help_heading = "Model", long, value_parser = parse_kernel)]
     pub transition_kernel: Option<KernelChoice>,
     /// Kernel of the sensor GP (overrides --kernel; turns the choice by evidence off).
-    #[arg(long, value_parser = parse_kernel)]
+    #[arg(help_heading = "Model", long, value_parser = parse_kernel)]
     pub sensor_kernel: Option<KernelChoice>,
     /// Inducing points per GP for sparse GPs trained on every sample, or `exact`: exact GPs on
     /// at most --max-points samples each. Several, comma-separated (`exact,64,128`), are
     /// chosen among on held-out data, with every --kernel. Default `exact,64`: the held-out
-    /// data choose (docs/results.md, "Sparse or exact"); with --validation 0, exact.
-    #[arg(long, value_parser = parse_inducing, value_delimiter = ',', value_name = "M|exact[,..]")]
+    /// data choose (docs/sparse.md); with --validation 0, exact.
+    #[arg(help_heading = "Model", long, value_parser = parse_inducing, value_delimiter = ',', value_name = "M|exact[,..]")]
     pub inducing: Vec<Inducing>,
     /// Most support points per exact GP (with --inducing exact).
-    #[arg(long, default_value_t = params().max_points)]
+    #[arg(help_heading = "Model", long, default_value_t = params().max_points)]
     pub max_points: usize,
     /// How to choose the support points when a log has more samples.
-    #[arg(long, value_enum, default_value_t = params().subset_policy.into())]
+    #[arg(help_heading = "Training", long = "subset-policy", alias = "subset", value_enum, default_value_t = params().subset_policy.into())]
     pub subset: SubsetArg,
     /// Optimiser starts per GP.
-    #[arg(long, default_value_t = params().n_starts)]
+    #[arg(help_heading = "Training", long, default_value_t = params().n_starts)]
     pub starts: usize,
     /// L-BFGS iterations per start.
-    #[arg(long, default_value_t = params().max_iters)]
+    #[arg(help_heading = "Training", long, default_value_t = params().max_iters)]
     pub max_iters: u64,
     /// Seed of random starts and subsets.
-    #[arg(long, default_value_t = params().seed)]
+    #[arg(help_heading = "Training", long, default_value_t = params().seed)]
     pub seed: u64,
     /// Lower bound of each GP's noise variance (standardised units).
-    #[arg(long, allow_negative_numbers = true, default_value_t = params().noise_floor)]
+    #[arg(help_heading = "Training", long, allow_negative_numbers = true, default_value_t = params().noise_floor)]
     pub noise_floor: f64,
     /// Do not standardise GP inputs and outputs.
-    #[arg(long, default_value_t = !params().normalize)]
+    #[arg(help_heading = "Training", long, default_value_t = !params().normalize)]
     pub no_normalize: bool,
     /// BLR window as a fraction of each coordinate's range.
-    #[arg(long, allow_negative_numbers = true, default_value_t = params().blr_window)]
+    #[arg(help_heading = "Model", long, allow_negative_numbers = true, default_value_t = params().blr_window)]
     pub blr_window: f64,
     /// Fraction of every log held out at a time to learn the filter's noise scales and default
     /// mode (blocked cross-validation: 0.25 holds out each quarter of every log in turn);
     /// 0 turns filter tuning off.
-    #[arg(long, allow_negative_numbers = true, default_value_t = params().validation)]
+    #[arg(help_heading = "Training", long, allow_negative_numbers = true, default_value_t = params().validation)]
     pub validation: f64,
     /// The input's long memory: radii of play operators (backlashes) whose outputs the
     /// transition GP reads besides u_{k-1} and u_{k-2}, as fractions of the input's range,
     /// comma-separated (at most 4), or `none` for the thesis' four inputs. docs/memory.md.
-    #[arg(long, value_parser = parse_memory, default_value_t = Memory(params().memory), value_name = "R[,..]|none")]
+    #[arg(help_heading = "Model", long, value_parser = parse_memory, default_value_t = Memory(params().memory), value_name = "R[,..]|none")]
     pub memory: Memory,
     /// The input's recent past: time constants in seconds of first-order low-pass filters
     /// (lags) of u whose outputs the transition GP reads after the plays, comma-separated
@@ -525,33 +525,33 @@ pub struct TrainArgs {
     /// (soft actuators). Given more than once, the first is the primary set and the others
     /// are tried on held-out data with the sparse candidates (default: `none`, with `1` tried;
     /// `--lags none` alone trains without lags and tries none). docs/memory.md.
-    #[arg(long, value_parser = parse_lags, value_name = "TAU[,..]|none")]
+    #[arg(help_heading = "Model", long, value_parser = parse_lags, value_name = "TAU[,..]|none")]
     pub lags: Vec<Lags>,
     /// Which GPs have a linear prior mean (the targets' least-squares plane on the GP's inputs,
     /// the kernel modelling the rest): `none`, `transition` or `both`. On the sensor GP it can
     /// cost observability. docs/sparse.md.
-    #[arg(long, value_parser = parse_linear_mean, default_value_t = params().linear_mean, value_name = "none|transition|both")]
+    #[arg(help_heading = "Model", long, value_parser = parse_linear_mean, default_value_t = params().linear_mean, value_name = "none|transition|both")]
     pub linear_mean: LinearMean,
     /// What the sensor GP reads: `thesis` ([x_{k-1}, y_{k-1}, x_k]) or `state` ([x_{k-1},
     /// x_k], so every measurement pins the state's level); several, comma-separated, are
     /// chosen among on held-out data, the first being the primary one (default
     /// `thesis,state`; `--sensor-inputs thesis` alone tries no other). docs/tuning.md.
-    #[arg(long, value_parser = parse_sensor_inputs, value_delimiter = ',', value_name = "thesis|state[,..]")]
+    #[arg(help_heading = "Model", long, value_parser = parse_sensor_inputs, value_delimiter = ',', value_name = "thesis|state[,..]")]
     pub sensor_inputs: Vec<SensorInputs>,
     /// Largest signal variance of both GPs, as a multiple of the variance of what each kernel
     /// models, or `none` for only the 1e5 box: keeps a near-linear fit from extrapolating like
     /// a polynomial. docs/sparse.md.
-    #[arg(long, value_parser = parse_cap, default_value_t = Cap(params().max_signal_variance), value_name = "V|none")]
+    #[arg(help_heading = "Model", long, value_parser = parse_cap, default_value_t = Cap(params().max_signal_variance), value_name = "V|none")]
     pub max_signal_variance: Cap,
     /// Log reading options.
     #[command(flatten)]
     pub read: ReadArgs,
     /// Output model file.
-    #[arg(long)]
+    #[arg(help_heading = "Output", long)]
     pub out: PathBuf,
     /// Print the summary as JSON (what `hbn inspect --json` prints, with the training run's
     /// samples and time).
-    #[arg(long)]
+    #[arg(help_heading = "Output", long)]
     pub json: bool,
 }
 
@@ -749,37 +749,37 @@ pub struct ExploreArgs {
     #[arg(long)]
     pub max_step: Option<f64>,
     /// Weight of the uncertainty-seeking step at the start of the plan.
-    #[arg(long, default_value_t = explore().alpha_start)]
+    #[arg(help_heading = "Advanced", long, default_value_t = explore().alpha_start)]
     pub alpha_start: f64,
     /// Weight of the uncertainty-seeking step at the end of the ramp.
-    #[arg(long, default_value_t = explore().alpha_end)]
+    #[arg(help_heading = "Advanced", long, default_value_t = explore().alpha_end)]
     pub alpha_end: f64,
     /// Samples over which the weight grows from --alpha-start to --alpha-end.
-    #[arg(long, default_value_t = explore().alpha_ramp)]
+    #[arg(help_heading = "Advanced", long, default_value_t = explore().alpha_ramp)]
     pub alpha_ramp: usize,
     /// Refit the transition GP on the planned samples every N samples.
-    #[arg(long, default_value_t = explore().refit_every, value_name = "N")]
+    #[arg(help_heading = "Advanced", long, default_value_t = explore().refit_every, value_name = "N")]
     pub refit_every: usize,
     /// Candidate steps evaluated per sample (--strategy steps).
-    #[arg(long, default_value_t = explore().candidates)]
+    #[arg(help_heading = "Advanced", long, default_value_t = explore().candidates)]
     pub candidates: usize,
     /// Random ramps drawn per uncertainty-seeking choice; the best by --criterion is
     /// followed (--strategy ramps). More seeks harder (docs/exploration.md).
-    #[arg(long, default_value_t = explore().pool, value_name = "N")]
+    #[arg(help_heading = "Advanced", long, default_value_t = explore().pool, value_name = "N")]
     pub pool: usize,
     /// Look-ahead (samples) of the uncertainty search: a candidate ramp is scored over its
     /// first N samples.
-    #[arg(long, default_value_t = explore().horizon, value_name = "N")]
+    #[arg(help_heading = "Advanced", long, default_value_t = explore().horizon, value_name = "N")]
     pub horizon: usize,
     /// How the input moves: `ramps` (to a target level at a constant slope; the next ramp
     /// seeks uncertainty with probability a) or `steps` (the thesis' per-sample rule).
-    #[arg(long, default_value_t = explore().strategy.name().to_owned(),
+    #[arg(help_heading = "Advanced", long, default_value_t = explore().strategy.name().to_owned(),
           value_parser = ["ramps", "steps"])]
     pub strategy: String,
     /// How a seeking choice of --strategy ramps scores the pool: `reduction` (the ramp whose
     /// samples would lower the transition GP's variance most, summed over where all the pool's
     /// ramps go) or `variance` (the ramp along which it is most uncertain).
-    #[arg(long, default_value_t = explore().criterion.name().to_owned(),
+    #[arg(help_heading = "Advanced", long, default_value_t = explore().criterion.name().to_owned(),
           value_parser = ["reduction", "variance"])]
     pub criterion: String,
     /// Seed of the random steps.
