@@ -579,10 +579,8 @@ fn demo_is_the_worked_example() {
         "README says the default mode holds 96.9% on held-out data: {out}"
     );
     // The plotted band is not collapsed on the test log: the default mode's 2-sd band holds
-    // most of the logged state (34% before filter-aware training; 97.6% before the play
-    // operators, 89.9% with them, 92.5% with the kernels chosen by evidence, 94.0% with the
-    // std scales set on every held-out sample, 93.4% with L-BFGS-B's line search settings;
-    // calibration is judged over the 48 runs of docs/results.md).
+    // most of the logged state (calibration over many runs is the accuracy report's,
+    // docs/accuracy.md).
     let default_row = printed
         .iter()
         .find(|l| {

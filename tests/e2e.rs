@@ -116,9 +116,9 @@ fn simulate_log_train_estimate_beats_open_loop() {
             "{system}: EKF+BLR nRMSE {blr} above the bound 0.08"
         );
         // The mode the held-out data chose is within 15% of the better of EKF and EKF+BLR
-        // on this unseen log. (EKF+BLR alone can trail the EKF by more with sparse GPs, which
-        // the default may choose: measured on 54 runs, in 5 by over 10%. With the kernels
-        // chosen by evidence, session 24, Preisach here chose EKF+BLR at 1.104x the EKF.)
+        // on this unseen log. (EKF+BLR alone can trail the EKF by more than 10% with sparse
+        // GPs, which the default may choose; here Preisach chooses EKF+BLR at about 1.1x the
+        // EKF.)
         assert!(
             default <= 1.15 * ekf.min(blr),
             "{system}: default mode {chosen} {default} vs EKF {ekf}, EKF+BLR {blr}"
@@ -178,8 +178,8 @@ fn saved_model_estimates_identically() {
     }
 }
 
-/// Play operators ride along in the model file, and a model file from before they existed
-/// (no `memory` parameter, no `play_radii`) loads as a model without them: it estimates bit
+/// Play operators ride along in the model file, and a model file without them (no `memory`
+/// parameter, no `play_radii`) loads as a model without them: it estimates bit
 /// for bit as the same model trained with `memory` empty.
 #[test]
 fn model_files_with_and_without_play_operators_load() {
@@ -196,7 +196,7 @@ fn model_files_with_and_without_play_operators_load() {
     let back = HysteresisModel::from_json(&model.to_json().unwrap(), "mem").unwrap();
     assert_eq!(back.plays().unwrap(), plays);
 
-    // Without memory, written as an older build wrote it.
+    // Without memory, and without the fields.
     let params = HbnParams {
         memory: Vec::new(),
         max_points: 100,
@@ -233,9 +233,9 @@ fn model_files_with_and_without_play_operators_load() {
 }
 
 /// Lags ride along in the model file at the model's rate, reach the transition GP as inputs
-/// after the plays, and change the estimate; a file from before lags existed (no `lags`
-/// parameter) loads as a model without them, estimating bit for bit as before. (What they
-/// gain on a system with creep is measured in docs/memory.md, not here: with this test's small
+/// after the plays, and change the estimate; a file without the `lags` parameter loads as a
+/// model without them, estimating bit for bit as one trained without them. (What they gain on
+/// a system with creep is the accuracy report's, not this test's: with this test's small
 /// training budget the soft actuator's estimate is not better with them.)
 #[test]
 fn lags_ride_along_and_reach_the_transition_gp() {
@@ -254,7 +254,7 @@ fn lags_ride_along_and_reach_the_transition_gp() {
     let back = HysteresisModel::from_json(&with.to_json().unwrap(), "lags").unwrap();
     assert_eq!(back.plays().unwrap(), plays);
 
-    // Without lags, written as an older build wrote it.
+    // Without lags, and without the field.
     let mut v: serde_json::Value = serde_json::from_str(&plain.to_json().unwrap()).unwrap();
     let params = v["model"]["params"].as_object_mut().unwrap();
     assert!(params.remove("lags").is_some());

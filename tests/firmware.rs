@@ -1,4 +1,4 @@
-//! The firmware path end to end (issue 14): simulate, train a sparse (m = 32) and an exact
+//! The firmware path end to end: simulate, train a sparse (m = 32) and an exact
 //! model, `hbn estimate`, `hbn export` as C and Rust in f64 and f32, build the C example
 //! (`make -C examples/firmware-c`, gcc and the hbn-ffi static library) and the no_std Rust
 //! example, run both on the test log, and compare with `hbn estimate`'s CSV:
@@ -6,10 +6,9 @@
 //! - f64: equal bit for bit (x, x_std and flags);
 //! - f32: max |dx| at most [`F32_BOUND`] (2%) of the range of `hbn estimate`'s x, every
 //!   model. The sparse models' estimates are ill-conditioned in the model's reals
-//!   (multiplying every real by `1 +- 1e-8` moved x by 2.6% of its range, session 12's probe,
+//!   (multiplying every real by `1 +- 1e-8` moves x by a few percent of its range,
 //!   docs/firmware.md); the f32 tables keep the reals they are sensitive to in two f32 parts
-//!   (the split ranges of `hbn_core::tables`), which brought them from 0.65-4.3% to within
-//!   the bound.
+//!   (the split ranges of `hbn_core::tables`), which keeps them within the bound.
 //!
 //! Also the export's error messages, and that a failed export leaves nothing behind.
 

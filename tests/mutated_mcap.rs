@@ -1,4 +1,4 @@
-//! Damaged MCAP logs through `hbn estimate` and `hbn train` (issue 12): deterministic, seeded
+//! Damaged MCAP logs through `hbn estimate` and `hbn train`: deterministic, seeded
 //! mutations of a log written by `hbn simulate` and of the committed fixture
 //! `fixtures/json_zstd.mcap` (written by the official MCAP writer: chunked, zstd): bit flips,
 //! truncation at random offsets, duplicated records and reordered records (the record framing

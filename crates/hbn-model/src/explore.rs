@@ -140,8 +140,8 @@ pub struct ExploreParams {
     /// seeking stayed within 0.024 of where they began). Default 50.
     pub horizon: usize,
     /// Samples a refit may take. `0` (default): every refit of the transition GP runs inside
-    /// [`Explorer::observe`], which then blocks for it (about 3 ms per sample on average over
-    /// 2000 samples, up to 0.8 s when hyperparameters are re-learned; docs/benchmarks.md).
+    /// [`Explorer::observe`], which then blocks for it (a few milliseconds per sample on average, up to about a second when hyperparameters
+    /// are re-learned).
     /// `lag > 0`: each refit runs on a thread beside the loop, on the data observed when it
     /// starts, and `observe()` waits only if it has not finished when its GP is due: a
     /// re-learning of the hyperparameters is used `lag` samples after it starts; the first
@@ -378,8 +378,7 @@ impl std::str::FromStr for Strategy {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Criterion {
     /// The mean latent variance of the transition GP along the ramp's first `horizon`
-    /// samples: the ramp where the model is least sure (uncertainty sampling; the default
-    /// until session 21).
+    /// samples: the ramp where the model is least sure (uncertainty sampling).
     Variance,
     /// The reduction of the transition GP's latent variance, summed over the paths of all
     /// the pool's ramps, that observing the ramp's first `horizon` samples would bring

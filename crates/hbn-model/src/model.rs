@@ -128,7 +128,7 @@ pub struct TrainingSummary {
     #[serde(default)]
     pub starts: Vec<StartSummary>,
     /// Filter-aware training on held-out data (`None`: not tuned, e.g. `validation = 0` or
-    /// too little data, or a model file from before tuning existed).
+    /// too little data).
     #[serde(default)]
     pub validation: Option<crate::tuning::ValidationReport>,
     /// Each GP's evidence under every kernel it chose among ([`HbnParams::kernel_evidence`];

@@ -186,11 +186,9 @@ impl Default for Signals {
 
 /// Inducing points per GP of the default model's sparse candidate: by default, training
 /// chooses on held-out data between exact GPs (on at most `max_points` samples) and sparse GPs
-/// with this many inducing points (on every sample); see [`HbnParams::select`]. Measured
-/// (`docs/results.md`, "Sparse or exact"): neither is better everywhere. Sparse GPs are more
-/// accurate on long noisy logs (0.71x-0.94x at noise gain 1) and less accurate on noise-free
-/// or repeated inputs (up to 3x); the held-out choice is 0.95x the exact model's nRMSE on
-/// non-repeating logs, 0.97x on the judged grid and 1.02x on the thesis' repeated input.
+/// with this many inducing points (on every sample); see [`HbnParams::select`]. Neither is
+/// better everywhere: sparse GPs learn from every sample of long noisy logs, exact GPs follow
+/// noise-free or repeated inputs more closely (docs/sparse.md).
 pub const DEFAULT_INDUCING: usize = 64;
 
 /// Default [`HbnParams::memory`]: two play operators, of 5% and 20% of the input's range
@@ -286,7 +284,7 @@ impl std::str::FromStr for SensorInputs {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum LinearMean {
-    /// Both GPs have a constant mean (the thesis; model files from before this option).
+    /// Both GPs have a constant mean (the thesis).
     #[default]
     None,
     /// The transition GP has a linear mean, the sensor GP a constant one.

@@ -60,7 +60,7 @@ pub struct FilterTuning {
     pub ekf: NoiseScales,
     /// Scales of the EKF with local regression.
     pub ekf_blr: NoiseScales,
-    /// Scales of the unscented filter (model files from before it existed: scale 1).
+    /// Scales of the unscented filter (scale 1 when the file has none).
     #[serde(default)]
     pub ukf: NoiseScales,
     /// The mode with the best held-out score (the EKF for untuned models).
@@ -110,7 +110,7 @@ pub struct Holdout {
     pub held_out: usize,
     /// Samples in all.
     pub samples: usize,
-    /// Folds (model files from before cross-validation: 1, the end of every run).
+    /// Folds (1 when the file gives none: the end of every run).
     #[serde(default = "one_fold")]
     pub folds: usize,
 }
@@ -173,7 +173,6 @@ pub struct ValidationReport {
     pub samples: usize,
     /// Held-out samples the search for the `q` and `r` scales ran on (after the cap,
     /// [`MAX_VALIDATION_SAMPLES`]): all of `samples` when there are few, a subset otherwise.
-    /// Model files from before session 29, where both were the same, read as 0.
     #[serde(default)]
     pub searched: usize,
     /// One row per mode.
@@ -181,8 +180,7 @@ pub struct ValidationReport {
     /// The mode chosen as the default (lowest tuned NLPD).
     pub default_mode: Mode,
     /// Model selection ([`crate::Selection`]): one row per candidate trained, in the order
-    /// trained; empty when there was one configuration. Model files from before selection
-    /// read as empty.
+    /// trained; empty when there was one configuration.
     #[serde(default)]
     pub candidates: Vec<CandidateRow>,
 }
@@ -208,25 +206,23 @@ pub struct CandidateRow {
     /// own training runs (`lost`) when another did not.
     pub chosen: bool,
     /// Times its filter, in its default mode, lost the state (flag `relocalised`) when run
-    /// over the runs it was trained on, after tuning; 0 when not scored (and in model files
-    /// from before session 25).
+    /// over the runs it was trained on, after tuning; 0 when not scored.
     #[serde(default)]
     pub lost: usize,
 }
 
 /// Held-out samples the search runs the filter over at most, all folds together (a prefix of
-/// each held-out block, in proportion): bounds the cost of tuning on long logs. Measured on the
-/// README's demo (3 x 1000 samples, 4 folds): 750 gave the same scales' coverage on the test
-/// log as 1000 and 1500 (96.9%, 97.4%, 97.8% in the default mode) at half the cost.
+/// each held-out block, in proportion): bounds the cost of tuning on long logs. On the README's
+/// demo (3 x 1000 samples, 4 folds) 750 give the scales about the coverage on the test log
+/// that 1000 and 1500 give, at half the cost.
 pub const MAX_VALIDATION_SAMPLES: usize = 750;
 /// Held-out samples at most that the learned `(q, r)` of each mode are run over once more to
 /// set the `std` scale, the held-out table's scores and the default mode (all folds together,
 /// spread over the runs, whole blocks or pieces of them). The search of `(q, r)` makes dozens
 /// of filter runs and keeps to [`MAX_VALIDATION_SAMPLES`]; these two runs per mode can afford
-/// more. Measured on logs of 5 x 10,000 samples (session 29): the filter's error varies by 5x
-/// from one stretch of 500 samples to the next, so the 750 samples the search scores (four
-/// stretches of 187) had set `std` scales that put 44-86% of fresh logs' truth inside the
-/// 2-sigma band.
+/// more: on long logs the filter's error varies by several times from one stretch of 500
+/// samples to the next, and `std` scales set on the search's 750 samples alone miscalibrate
+/// the band on fresh logs.
 pub const MAX_CALIBRATION_SAMPLES: usize = 4000;
 /// Shortest piece of a held-out block that [`spread`] scores, where the cap forces pieces.
 const MIN_SPREAD_PIECE: usize = 200;
@@ -241,8 +237,8 @@ pub const MAX_FOLDS: usize = 4;
 
 /// Samples of a run before a held-out block that the filter runs over unscored (fewer where the
 /// block starts earlier): the block is scored from the filter's running state, as most of a
-/// long log is, not from a cold start. Measured on the 16-cell grid of `docs/results.md`, cold
-/// starts on short blocks had made the learned scales fit start-up transients.
+/// long log is, not from a cold start; cold starts on short blocks would make the learned scales
+/// fit start-up transients.
 pub const BURN_IN: usize = 20;
 
 /// A held-out block: what the filter runs over (up to [`BURN_IN`] samples of the run before
