@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Runs every code block of the READMEs, as a reader would copy it.
 
-    scripts/check_docs.py [--python PY] [--hbn BIN] [FILE.md ...]   (default: README.md, hbn-py/README.md)
+    scripts/check_docs.py [--python PY] [--hbn BIN] [FILE.md ...]
+        (default: README.md, ARCHITECTURE.md, CONTRIBUTING.md, hbn-py/README.md, docs/*.md)
     scripts/check_docs.py --self-test
 
 Fenced blocks by language:
@@ -21,6 +22,8 @@ code block fails the check. Exit status 1 when a block fails.
 """
 
 import argparse
+import contextlib
+import io
 import os
 import re
 import subprocess
@@ -32,6 +35,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 SHELLS = {"sh", "bash", "shell"}
 # Markdown files whose ```rust blocks are doctests, and the file that includes them.
+# What every run checks: the READMEs, the maintainers' pages and every page under docs/.
+DEFAULT_FILES = ["README.md", "ARCHITECTURE.md", "CONTRIBUTING.md", "hbn-py/README.md"] + sorted(
+    str(p.relative_to(ROOT)) for p in (ROOT / "docs").glob("*.md")
+)
 DOCTESTED = {"README.md": ("src/lib.rs", 'include_str!("../README.md")')}
 
 
@@ -182,17 +189,21 @@ def self_test(args):
         for i, (text, want) in enumerate(cases):
             f = Path(d) / f"case{i}.md"
             f.write_text(text)
-            got = min(1, check([str(f)], args))
+            # The cases that must fail print FAIL lines: keep them unless the case goes wrong.
+            captured = io.StringIO()
+            with contextlib.redirect_stdout(captured):
+                got = min(1, check([str(f)], args))
             if got != want:
+                print(captured.getvalue(), end="")
                 print(f"SELF-TEST FAIL: case {i} gave {got} failures, expected {want}:\n{text}")
                 bad += 1
-    print("self-test", "failed" if bad else "passed")
+    print("self-test", "failed" if bad else f"passed ({len(cases)} cases)")
     return bad
 
 
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("files", nargs="*", default=["README.md", "hbn-py/README.md"])
+    p.add_argument("files", nargs="*", default=DEFAULT_FILES)
     p.add_argument("--python", default=sys.executable)
     p.add_argument("--hbn", default=str(ROOT / "target" / "release" / "hbn"))
     p.add_argument("--self-test", action="store_true")
