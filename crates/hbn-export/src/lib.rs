@@ -992,13 +992,13 @@ mod tests {
         v3.remove(first);
         v3[1] = 3;
         for old in [v5, v4, v3] {
-            check_old_tables(&t, &old);
+            check_lower_version_tables(&t, &old);
         }
     }
 
     /// `old` (a layout of a lower format version of `t`'s tables) reads as the same model as
     /// `t`.
-    fn check_old_tables(t: &ModelTables, old: &[u32]) {
+    fn check_lower_version_tables(t: &ModelTables, old: &[u32]) {
         let version = old[1];
         assert_eq!(
             tables::scratch_len(old).unwrap(),
