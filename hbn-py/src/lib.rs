@@ -12,6 +12,9 @@
 //! `ModelFileError`, `ConfigError` (ValueError; `.keyword` names the argument to change) and
 //! `TrainingError` (RuntimeError). Heavy calls run with the GIL released, inside
 //! `catch_unwind`, so a bug surfaces as a `RuntimeError` rather than a panic.
+//!
+//! A keyword argument is the Rust name of what it sets ([`Param::name`], the field of
+//! `HbnParams`; [`LogOption::name`]): `n_starts`, `max_points`, `rate_hz`, `max_gap_s`.
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::PathBuf;
@@ -239,7 +242,8 @@ fn problem_parts(p: &Problem) -> (Option<String>, String) {
             (Some(value.to_string()), format!("must be at least {min}"))
         }
         Problem::Unknown { given, choices } => {
-            (Some(format!("{given:?}")), format!("choose one of {choices}"))
+            // Quoted as Python's repr quotes a string.
+            (Some(format!("'{given}'")), format!("choose one of {choices}"))
         }
         Problem::WrongType { expected } => (None, format!("expected {expected}")),
         Problem::Invalid { reason } => (None, (*reason).to_owned()),
@@ -423,13 +427,13 @@ fn log_options(
     py: Python<'_>,
     rate_hz: Option<f64>,
     time_source: Option<&str>,
-    max_gap: Option<f64>,
+    max_gap_s: Option<f64>,
 ) -> PyResult<LogOptions> {
     let mut o = LogOptions::default();
     if let Some(t) = time_source {
         o.time_source = hbn_pipeline::parse_time_source(t).map_err(|e| raise(py, e))?;
     }
-    if let Some(g) = max_gap {
+    if let Some(g) = max_gap_s {
         o.max_gap_s = g;
     }
     o.rate_hz = rate_hz;
@@ -740,8 +744,10 @@ impl GaussianProcessCore {
         optimize_inducing: bool,
         mean: Option<&str>,
     ) -> PyResult<Self> {
-        let choice =
-            KernelChoice::from_str(kernel).map_err(|e| raise(py, Fail::config("kernel", e)))?;
+        let choice = KernelChoice::from_str(kernel).map_err(|e| {
+            let rule = format!("choose one of {}", KernelChoice::NAMES);
+            raise(py, Fail::config_value("kernel", &format!("'{}'", e.given), rule))
+        })?;
         let mut params = GpParams::new(choice.spec(dim, [0, 1]));
         if let Some(mean) = mean {
             params.mean = mean
@@ -871,14 +877,14 @@ impl GaussianProcessCore {
     fn warnings(&self) -> Vec<String> {
         self.inner.report().warnings()
     }
-    /// The model as JSON (the format of `save`).
+    /// The model as JSON (the format of `save`; GIL released).
     fn to_json(&self, py: Python<'_>) -> PyResult<String> {
-        self.inner.to_json().map_err(|e| raise(py, e))
+        detached(py, || Ok(self.inner.to_json()?))
     }
-    /// Parses `to_json` output.
+    /// Parses `to_json` output (GIL released).
     #[staticmethod]
     fn from_json(py: Python<'_>, text: &str) -> PyResult<Self> {
-        let inner = GaussianProcess::from_json(text, "<string>").map_err(|e| raise(py, e))?;
+        let inner = detached(py, || Ok(GaussianProcess::from_json(text, "<string>")?))?;
         Ok(Self::wrap(inner))
     }
     /// Writes the model atomically.
@@ -1130,16 +1136,15 @@ impl HysteresisModelCore {
     fn sensor(&self) -> GaussianProcessCore {
         GaussianProcessCore::wrap(self.inner.sensor().clone())
     }
-    /// The model as JSON (the format of `save`, shared with the CLI).
+    /// The model as JSON (the format of `save`, shared with the CLI; GIL released).
     fn to_json(&self, py: Python<'_>) -> PyResult<String> {
-        self.inner.to_json().map_err(|e| raise(py, e))
+        detached(py, || Ok(self.inner.to_json()?))
     }
-    /// Parses `to_json` output.
+    /// Parses `to_json` output (GIL released).
     #[staticmethod]
     fn from_json(py: Python<'_>, text: &str) -> PyResult<Self> {
-        Ok(Self::wrap(
-            HysteresisModel::from_json(text, "<string>").map_err(|e| raise(py, e))?,
-        ))
+        let inner = detached(py, || Ok(HysteresisModel::from_json(text, "<string>")?))?;
+        Ok(Self::wrap(inner))
     }
     /// The bytes of the model file `save` writes (GIL released): what a pickled model holds.
     fn to_bytes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {

@@ -338,7 +338,7 @@ def test_renamed_keywords_warn_and_still_work():
     assert gp.n_starts == 2
     with pytest.warns(DeprecationWarning, match="use max_iters="):
         m = hbn.HysteresisModel.fit(
-            d["u"], d["x"], d["y"], rate=50.0, max_iter=20, max_points=40, n_starts=1,
+            d["u"], d["x"], d["y"], rate_hz=50.0, max_iter=20, max_points=40, n_starts=1,
             validation=0.0,
         )
     assert m.params["max_iters"] == 20 and m.rate_hz == 50.0

@@ -13,7 +13,7 @@ def test_gp_bad_data():
         hbn.GaussianProcess().fit(np.where(X > 0.5, np.nan, X), y)
     with pytest.raises(ValueError, match="same number of samples"):
         hbn.GaussianProcess().fit(X, y[:-1])
-    with pytest.raises(ValueError, match="unknown kernel"):
+    with pytest.raises(hbn.ConfigError, match="invalid kernel='rbf': choose one of matern52"):
         hbn.GaussianProcess(kernel="rbf").fit(X, y)
     with pytest.raises(ValueError, match="length scale"):
         hbn.GaussianProcess(lengthscales=[1.0, 2.0], optimize=False).fit(X, y)

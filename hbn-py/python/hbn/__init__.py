@@ -200,9 +200,9 @@ _F = TypeVar("_F", bound=Callable[..., Any])
 
 
 def _renamed(**old_to_new: str) -> Callable[[_F], _F]:
-    """Accepts the keywords of the previous release under their old names for one more
-    release, with a ``DeprecationWarning`` naming the new one. The signature (``help()``,
-    ``inspect.signature``) shows only the new names."""
+    """Accepts renamed keywords under their deprecated names for one release, with a
+    ``DeprecationWarning`` naming the current one. The signature (``help()``,
+    ``inspect.signature``) shows only the current names."""
 
     def wrap(f: _F) -> _F:
         @functools.wraps(f)
@@ -806,6 +806,7 @@ _TRAINING_PARAMETERS_DOC = """
     their own training runs while another does not. Each candidate costs one training. The
     table is ``summary["validation"]["candidates"]``, and :attr:`HysteresisModel.params` holds
     the configuration chosen.
+
 """
 
 
