@@ -27,6 +27,9 @@ echo "== Rust tests (release: the end-to-end tests train GPs; also builds target
 echo "   tests/firmware.rs builds the C and no_std Rust firmware examples: needs make and cc)"
 cargo test --release --workspace --exclude hbn-py
 
+echo "== The Rust user example: MCAP logs -> model -> streaming filter (examples/train_and_stream.rs)"
+cargo run --release --quiet --example train_and_stream
+
 echo "== The AVX2 code of target/release/hbn holds no legacy-SSE instruction (objdump; optional)"
 python3 scripts/check_avx2_encoding.py target/release/hbn
 
