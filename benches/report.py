@@ -510,8 +510,12 @@ def accuracy(plan: Plan, raw: Path, hbn: Path, ctx: Context) -> List[str]:
     say(f"thesis experiment started: {' '.join(thesis_cmd[1:])}")
     methods, notes = grid_methods()
     say(f"grid: {len(plan.grid_systems)} simulators x {len(plan.grid_gains)} gains x {len(plan.grid_seeds)} seeds, methods {', '.join(methods)}")
-    with open(raw / "grid.log", "w") as log:
-        doc = runner.grid(plan.grid_systems, plan.grid_gains, plan.grid_seeds, raw / "grid", methods=methods, log=log)
+    try:
+        with open(raw / "grid.log", "w") as log:
+            doc = runner.grid(plan.grid_systems, plan.grid_gains, plan.grid_seeds, raw / "grid", methods=methods, log=log)
+    except BaseException:
+        proc.kill()
+        raise
     say(f"grid done ({len(doc['runs'])} runs, {doc.get('total_seconds', 0):.0f} s); waiting for the thesis experiment")
     if proc.wait() != 0:
         raise RuntimeError(f"hbn experiment failed (exit {proc.returncode}); see {raw / 'thesis_experiment.log'}")
