@@ -1548,12 +1548,21 @@ mod tests {
     fn set_and_get_by_name() {
         let mut p = HbnParams::default();
         p.set(Param::MaxPoints, ParamValue::Int(7)).unwrap();
-        p.set(Param::Kernel, ParamValue::Text("se-ard+dir".into()))
+        p.set(Param::Kernel, ParamValue::Text("thesis".into()))
             .unwrap();
         p.set(Param::SubsetPolicy, ParamValue::Text("random".into()))
             .unwrap();
         assert_eq!(p.max_points, 7);
-        assert_eq!(p.sensor_kernel.to_string(), "se-ard+dir");
+        assert_eq!(p.sensor_kernel, KernelChoice::THESIS);
+        assert_eq!(p.sensor_kernel.to_string(), "thesis");
+        // The removed names are refused, with the accepted ones in the message.
+        for old in ["se-ard+dir", "ard", "matern", "mahalanobis", "warped"] {
+            let e = p.set(Param::Kernel, ParamValue::Text(old.into())).unwrap_err();
+            assert!(e.to_string().contains("matern52, se-ard, se, thesis"), "{e}");
+        }
+        for k in KernelChoice::ALL {
+            assert_eq!(k.name().parse::<KernelChoice>().unwrap(), k);
+        }
         assert_eq!(p.subset_policy, SubsetPolicy::Random);
         assert_eq!(p.get(Param::MaxPoints), Some(ParamValue::Int(7)));
         let e = p
