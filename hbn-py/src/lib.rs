@@ -983,6 +983,12 @@ impl HysteresisModelCore {
         max_gap_s: Option<f64>,
         params: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
+        if logs.is_empty() {
+            return Err(raise(
+                py,
+                Fail::config_value("logs", "[]", "give at least one MCAP log"),
+            ));
+        }
         let p = hbn_params(py, params)?;
         let opts = log_options(py, rate_hz, time_source, max_gap_s)?;
         let d = TrainSignals::default();

@@ -363,3 +363,18 @@ def test_unknown_keywords_are_type_errors():
         hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], max_pointz=10)
     with pytest.raises(TypeError):
         hbn.Explorer(0.0, 1.0, 0.1, n_restart=1)
+
+
+def test_every_public_item_has_a_docstring():
+    missing = [name for name, f in public_callables() if name.split(".")[-1] != "__init__" and not (f.__doc__ or "").strip()]
+    for name in hbn.__all__:
+        obj = getattr(hbn, name)
+        if inspect.isclass(obj) or inspect.isfunction(obj):
+            if not (obj.__doc__ or "").strip():
+                missing.append(name)
+        if inspect.isclass(obj):
+            for attr, member in vars(obj).items():
+                if isinstance(member, property) and not attr.startswith("_"):
+                    if not (member.fget.__doc__ or "").strip():
+                        missing.append(f"{name}.{attr}")
+    assert not missing, missing
