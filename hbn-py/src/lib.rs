@@ -39,9 +39,7 @@ use pyo3::exceptions::{
 };
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
-use pyo3::types::{
-    PyBool, PyBytes, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple, PyType,
-};
+use pyo3::types::{PyBool, PyBytes, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple, PyType};
 
 // ---------------------------------------------------------------------------------------------
 // Names: the Python keyword of every setting is its Rust name
@@ -194,7 +192,8 @@ impl Fail {
     /// at fault too (`invalid memory=[0.1, 1.5]: must be in (0, 1], got 1.5`).
     fn problem(keyword: &str, problem: &Problem, given: Option<&Bound<'_, PyAny>>) -> Self {
         let (value, rule) = problem_parts(problem);
-        let list = given.is_some_and(|g| g.is_instance_of::<PyList>() || g.is_instance_of::<PyTuple>());
+        let list =
+            given.is_some_and(|g| g.is_instance_of::<PyList>() || g.is_instance_of::<PyTuple>());
         let repr = given.and_then(|g| g.repr().ok()).map(|r| r.to_string());
         match (repr, value) {
             (Some(r), Some(_)) if list => Self::config_value(keyword, &r, problem),
@@ -229,21 +228,27 @@ impl Fail {
 /// The value a [`Problem`] names (if any) and the rule it breaks, without the value.
 fn problem_parts(p: &Problem) -> (Option<String>, String) {
     match p {
-        Problem::NotPositive { value } => {
-            (Some(value.to_string()), "must be a finite number > 0".into())
-        }
-        Problem::OutOfRange { value, min, max } => {
-            (Some(value.to_string()), format!("must be in ({min}, {max}]"))
-        }
-        Problem::Between { value, min, max } => {
-            (Some(value.to_string()), format!("must be in [{min}, {max}]"))
-        }
+        Problem::NotPositive { value } => (
+            Some(value.to_string()),
+            "must be a finite number > 0".into(),
+        ),
+        Problem::OutOfRange { value, min, max } => (
+            Some(value.to_string()),
+            format!("must be in ({min}, {max}]"),
+        ),
+        Problem::Between { value, min, max } => (
+            Some(value.to_string()),
+            format!("must be in [{min}, {max}]"),
+        ),
         Problem::TooSmall { value, min } => {
             (Some(value.to_string()), format!("must be at least {min}"))
         }
         Problem::Unknown { given, choices } => {
             // Quoted as Python's repr quotes a string.
-            (Some(format!("'{given}'")), format!("choose one of {choices}"))
+            (
+                Some(format!("'{given}'")),
+                format!("choose one of {choices}"),
+            )
         }
         Problem::WrongType { expected } => (None, format!("expected {expected}")),
         Problem::Invalid { reason } => (None, (*reason).to_owned()),
@@ -523,9 +528,7 @@ fn hbn_params(py: Python<'_>, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Hb
             .map_err(|e| raise(py, Fail::problem(e.param.name(), &e.problem, Some(&v))))?;
     }
     if let Err(e) = p.check_ref() {
-        let given = kwargs
-            .get_item(e.param.name())?
-            .filter(|g| !g.is_none());
+        let given = kwargs.get_item(e.param.name())?.filter(|g| !g.is_none());
         return Err(raise(
             py,
             Fail::problem(e.param.name(), &e.problem, given.as_ref()),
@@ -746,7 +749,10 @@ impl GaussianProcessCore {
     ) -> PyResult<Self> {
         let choice = KernelChoice::from_str(kernel).map_err(|e| {
             let rule = format!("choose one of {}", KernelChoice::NAMES);
-            raise(py, Fail::config_value("kernel", &format!("'{}'", e.given), rule))
+            raise(
+                py,
+                Fail::config_value("kernel", &format!("'{}'", e.given), rule),
+            )
         })?;
         let mut params = GpParams::new(choice.spec(dim, [0, 1]));
         if let Some(mean) = mean {
@@ -1700,10 +1706,7 @@ fn default_gp_params(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     d.set_item("max_points", p.max_points)?;
     d.set_item("seed", p.seed)?;
     d.set_item("mean", p.mean.name())?;
-    d.set_item(
-        "optimize_inducing",
-        SparseParams::new(1).optimize_inducing,
-    )?;
+    d.set_item("optimize_inducing", SparseParams::new(1).optimize_inducing)?;
     Ok(d)
 }
 
