@@ -416,7 +416,8 @@ def grid_section(doc: Mapping[str, Any], plan: Plan, notes: Sequence[str]) -> Li
         "- **excess over the floor**: `(hbn - floor) / (baseline - floor)`, the share of the better",
         "  baseline's error above the floor that hbn still has (0: hbn reaches the floor).",
         "",
-        f"Simulators {systems}; noise gains {gains}; seeds {seeds}; each cell is the mean over the seeds.",
+        f"Simulators {systems}; noise gains {gains}; "
+        + (f"seed {seeds}." if len(plan.grid_seeds) == 1 else f"seeds {seeds}; each cell is the mean over the seeds."),
         "",
         "| system | noise gain | runs | nRMSE hbn | scikit-learn GP-EKF | LSTM | floor | hbn / better baseline | excess over the floor |",
         "|---|---|---|---|---|---|---|---|---|",
