@@ -4,7 +4,7 @@
 Usage::
 
     python3 benches/report.py --quick                  # both pages, about 10 minutes on 2 cores
-    python3 benches/report.py --full                   # both pages, the whole grid (hours)
+    python3 benches/report.py --full                   # both pages, the whole grid (about an hour)
     python3 benches/report.py --quick --raw /tmp/runs  # also keep the raw runs (JSON, CSV)
     python3 benches/report.py --quick --only performance
 

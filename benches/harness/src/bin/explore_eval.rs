@@ -5,8 +5,10 @@
 //! per run (`system,seed,samples,method,nrmse,seconds`); `benches/explore/table.py` summarises
 //! the lines.
 //!
-//!     explore_eval --systems bouc-wen,preisach --sizes 500,1000 --seeds 1,2,3 \
-//!         [--methods random-ramps,explore-ramps]
+//! ```text
+//! explore_eval --systems bouc-wen,preisach --sizes 500,1000 --seeds 1,2,3 \
+//!     [--methods random-ramps,explore-ramps]
+//! ```
 //!
 //! Methods:
 //! - `random-ramps`: the default model on random ramps (simulator seed SEED);

@@ -1,7 +1,9 @@
 //! Fits a GP (SE-ARD plus noise, standardised targets) to a JSON data file and prints the
 //! timing and the log marginal likelihood as one JSON object, for `benches/compare_sklearn.py`:
 //!
-//!     fit_timing DATA.json [--starts N] [--repeats R]
+//! ```text
+//! fit_timing DATA.json [--starts N] [--repeats R]
+//! ```
 //!
 //! DATA.json is `{"x": [...row-major...], "y": [...], "d": D}`; every sample is a support
 //! point (`max_points` = n).
@@ -14,7 +16,7 @@ use std::time::Instant;
 /// One GP fit timed, as JSON on stdout.
 #[derive(Parser)]
 struct Args {
-    /// Data file: {"x": [row-major inputs], "y": [targets], "d": inputs per row}.
+    /// Data file: JSON with `x` (the inputs, row-major), `y` (the targets) and `d` (inputs per row).
     data: PathBuf,
     /// Optimiser starts.
     #[arg(long, default_value_t = 1)]

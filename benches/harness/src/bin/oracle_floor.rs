@@ -5,7 +5,9 @@
 //! `benches/baselines/common.py` matches), the nRMSE of the clean state (the simulator run from
 //! `u` alone, without noise) and the oracle's mean NEES.
 //!
-//!     oracle_floor --systems bouc-wen,duhem --gains 0,1,10 --seeds 1,2,3 [--steps 1000]
+//! ```text
+//! oracle_floor --systems bouc-wen,duhem --gains 0,1,10 --seeds 1,2,3 [--steps 1000]
+//! ```
 use clap::Parser;
 use hbn_model::metrics::{calibration, nrmse};
 use hbn_sim::{DEFAULT_MAX_INCREMENT, InputKind, SimConfig, SystemKind, generate_input};

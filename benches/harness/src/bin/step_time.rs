@@ -4,8 +4,10 @@
 //! fastest and the median pass in microseconds per step. On a shared machine whose speed drifts,
 //! the fastest pass is the step's own cost and the median says how much the machine took.
 //!
-//!     step_time --model exact.hbn --model m64.hbn --log test.mcap [--modes ekf,ekf-blr,ukf]
-//!         [--passes 15]
+//! ```text
+//! step_time --model exact.hbn --model m64.hbn --log test.mcap [--modes ekf,ekf-blr,ukf] \
+//!     [--passes 15]
+//! ```
 //!
 //! For a profile, run it under `perf record` with one mode and many passes
 //! (`--modes ekf --passes 1000`): the model is loaded, not trained, so nearly all samples fall
