@@ -133,7 +133,7 @@ pub enum IoError {
     /// A gap between consecutive samples inside the resampling window is too long.
     #[error(
         "`{path}` has a gap of {gap_s:.3} s {}, longer than the largest gap allowed \
-         ({max_gap_s} s); raise it (`--max-gap`, Python `max_gap=`) or cut the log around the gap",
+         ({max_gap_s} s); raise it (`--max-gap`, Python `max_gap_s=`) or cut the log around the gap",
         gap_start(*at_s)
     )]
     Gap {
