@@ -379,7 +379,7 @@ fn an_os_error_is_said_once() {
 }
 
 #[test]
-fn reading_errors_name_flags_not_rust_names() {
+fn reading_errors_name_the_flag_and_the_python_keyword() {
     let gap = hbn_io::IoError::Gap {
         path: "/input.data".into(),
         at_s: -0.25,
@@ -388,7 +388,7 @@ fn reading_errors_name_flags_not_rust_names() {
     }
     .to_string();
     assert!(
-        gap.contains("--max-gap") && !gap.contains("max_gap_s"),
+        gap.contains("`--max-gap`") && gap.contains("`max_gap_s=`"),
         "{gap}"
     );
     assert!(
