@@ -82,7 +82,7 @@ echo "== Python tests (the wheel, then the baselines of benches/baselines; the L
 HBN_BIN="$ROOT/target/release/hbn" "$VENV/bin/python" -m pytest -q hbn-py/tests
 HBN_BIN="$ROOT/target/release/hbn" "$VENV/bin/python" -m pytest -q benches/baselines
 
-echo "== Every code block of README.md and hbn-py/README.md (shell with target/release/hbn on"
+echo "== Every code block of the READMEs, ARCHITECTURE.md, CONTRIBUTING.md and docs/ (shell with target/release/hbn on"
 echo "   PATH, Python with the wheel; Rust blocks ran above as doctests)"
 "$VENV/bin/python" scripts/check_docs.py --self-test
 "$VENV/bin/python" scripts/check_docs.py --python "$VENV/bin/python" --hbn "$ROOT/target/release/hbn"
