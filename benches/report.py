@@ -42,8 +42,10 @@ Modes:
   on all six simulators (bouc-wen, duhem, preisach, soft-actuator, maxwell-slip,
   generalized-pi) at noise gains 0, 1 and 10, seeds 1-3; more repetitions.
 
-Requirements: the Python wheel (``pip install ./hbn-py``), numpy and scikit-learn (torch for the
-LSTM), and cargo: the script first builds ``target/release/hbn`` and the harness programs
+Requirements: Rust (cargo), Python 3 and pip. When the Python that runs the script cannot
+import numpy, scikit-learn and the wheel, the script creates ``target/report-venv``, installs
+them there (the wheel built from this checkout) and runs itself in it; torch (the LSTM) is
+used when installed there. Cargo: the script first builds ``target/release/hbn`` and the harness programs
 (``cargo build --release -p hbn-cli -p hbn-harness``; ``--no-build`` uses them as they are).
 Every program runs on one thread (BLAS, OpenMP and rayon; set ``RAYON_NUM_THREADS`` etc. to
 change it), so the times are comparable and the run leaves a core to the rest of a shared
@@ -81,6 +83,41 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benches"))
 sys.path.insert(0, str(ROOT / "benches" / "baselines"))
+#: The private environment the script runs itself in when the Python that started it lacks
+#: numpy, scikit-learn or the wheel (a fresh clone): like scripts/test.sh's.
+REPORT_VENV = ROOT / "target" / "report-venv"
+
+
+def _ensure_environment() -> None:
+    """Re-runs this script in ``target/report-venv`` (created if missing, with numpy,
+    scikit-learn and the wheel of this checkout built and installed) when the running Python
+    cannot import numpy, scikit-learn and hbn, so that ``python3 benches/report.py --quick``
+    works on a fresh clone with only Rust, Python and pip. The wheel is reinstalled from the
+    checkout on every such run, so the report measures the code it is run from."""
+    try:
+        import hbn  # noqa: F401
+        import numpy  # noqa: F401
+        import sklearn  # noqa: F401
+
+        return
+    except ImportError as e:
+        missing = e.name
+    venv_python = REPORT_VENV / "bin" / "python"
+    if Path(sys.prefix).resolve() == REPORT_VENV.resolve():
+        sys.exit(f"benches/report.py: {missing} is not importable in {REPORT_VENV}: remove it and run again")
+    print(f"[report] {missing} is not importable here: running in {REPORT_VENV} "
+          "(numpy, scikit-learn and the wheel of this checkout; the first build takes minutes)",
+          flush=True)
+    if not venv_python.exists():
+        subprocess.run([sys.executable, "-m", "venv", str(REPORT_VENV)], check=True)
+    pip = [str(venv_python), "-m", "pip", "install", "--quiet"]
+    subprocess.run(pip + ["numpy", "scikit-learn"], check=True)
+    subprocess.run(pip + ["--force-reinstall", "--no-deps", str(ROOT / "hbn-py")], check=True)
+    os.execv(str(venv_python), [str(venv_python), str(Path(__file__).resolve()), *sys.argv[1:]])
+
+
+if __name__ == "__main__":
+    _ensure_environment()
 
 import numpy as np  # noqa: E402
 
