@@ -418,6 +418,10 @@ pub struct ReadArgs {
     /// Largest allowed gap between two samples of a signal (seconds).
     #[arg(help_heading = "Data", long, allow_negative_numbers = true, default_value_t = log_options().max_gap_s)]
     pub max_gap: f64,
+    /// Warn when a signal spans less than this fraction of its log (the grid covers only the
+    /// span all signals share).
+    #[arg(help_heading = "Data", long, allow_negative_numbers = true, default_value_t = log_options().min_coverage)]
+    pub min_coverage: f64,
 }
 
 impl Default for ReadArgs {
@@ -426,6 +430,7 @@ impl Default for ReadArgs {
         Self {
             time_source: o.time_source.into(),
             max_gap: o.max_gap_s,
+            min_coverage: o.min_coverage,
         }
     }
 }
@@ -437,6 +442,8 @@ impl ReadArgs {
             time_source: self.time_source.into(),
             max_gap_s: self.max_gap,
             rate_hz,
+            min_coverage: self.min_coverage,
+            ..log_options()
         }
     }
 }
@@ -467,6 +474,10 @@ pub struct TrainArgs {
     /// Resampling rate (Hz); default: the input's native rate in the first log.
     #[arg(help_heading = "Data", long, allow_negative_numbers = true)]
     pub rate: Option<f64>,
+    /// Fewest samples of the state, over all logs, where all signals overlap: fewer is an
+    /// error (the state is what the model learns from).
+    #[arg(help_heading = "Data", long, default_value_t = log_options().min_state_samples)]
+    pub min_state_samples: usize,
     /// Kernel of both GPs. Default: each GP chooses between matern52 and se-ard by its
     /// evidence (the exact GP's log marginal likelihood); naming a kernel turns that off.
     /// Several, comma-separated, are chosen among on held-out data (model selection; each
@@ -562,10 +573,12 @@ pub struct TrainArgs {
      hbn estimate --model model.hbn --log test.mcap --mode all --csv est.csv\n\n\
      The MCAP output has one JSON channel /hbn/estimate (x, x_std, y_pred, innovation, nis,\n\
      flags, flag_names) on the input log's clock: open it in Foxglove beside the input log.\n\
-     CSV columns: t,x,x_std,y_pred,innovation,nis,flags,flag_names (t in seconds from the first\n\
-     sample; flags as a bit mask and as names joined by |). With --mode all, each mode is\n\
-     written to its own files, the mode's name added to the file name: est-ekf.csv,\n\
-     est-ekf-blr.csv, ... Terms: docs/glossary.md."
+     CSV columns: t,u,y,x,x_std,y_pred,innovation,nis,flags,flag_names (t in seconds from the\n\
+     first sample; u and y the input and sensor samples the filter ran on, on the model's grid:\n\
+     fed to an f64 firmware export they give the same x bit for bit, docs/firmware.md; flags\n\
+     as a bit mask and as names joined by |). With --mode all, each mode is written to its own\n\
+     files, the mode's name added to the file name: est-ekf.csv, est-ekf-blr.csv, ...\n\
+     Terms: docs/glossary.md."
 )]
 pub struct EstimateArgs {
     /// Model file from `hbn train`.

@@ -67,9 +67,13 @@ pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<HysteresisModel>
         state: args.state.clone(),
         output: args.output.clone(),
     };
-    let opts = args.read.options(args.rate);
+    let opts = hbn_pipeline::LogOptions {
+        min_state_samples: args.min_state_samples,
+        ..args.read.options(args.rate)
+    };
     let params = args.params();
     let candidates = params.candidates();
+    let mut render = Renderer::default();
     if candidates.len() > 1 {
         // With the kernels chosen by evidence first, the candidates' kernels are not known yet.
         let evidence = params.chooses_kernels_by_evidence();
@@ -77,7 +81,8 @@ pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<HysteresisModel>
             .iter()
             .map(|c| if evidence { c.shape() } else { c.to_string() })
             .collect();
-        ui.notice(format!(
+        // Shown once the logs are read and checked, not before an error about them.
+        render.when_logs_read = Some(format!(
             "model selection: training {} candidates side by side ({}{}); the one with the \
              lowest held-out NLPD, if at least as accurate held out as the first, becomes the model",
             candidates.len(),
@@ -85,7 +90,6 @@ pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<HysteresisModel>
             if evidence { ", each GP's kernel chosen by evidence first" } else { "" }
         ));
     }
-    let mut render = Renderer::default();
     let trained = train_from_logs(&args.logs, &signals, opts, params, &mut |e| {
         render.event(ui, e)
     });

@@ -42,6 +42,8 @@ pub fn flag(setting: Setting) -> &'static str {
             LogOption::State => "--state",
             LogOption::Output => "--output",
             LogOption::Mode => "--mode",
+            LogOption::MinCoverage => "--min-coverage",
+            LogOption::MinStateSamples => "--min-state-samples",
         },
     }
 }
@@ -121,6 +123,8 @@ pub struct Renderer {
     reading: Option<ProgressBar>,
     training: Option<ProgressBar>,
     experiment: Option<ProgressBar>,
+    /// A notice to show once the logs are read and checked (what training is about to do).
+    pub when_logs_read: Option<String>,
 }
 
 impl Renderer {
@@ -156,6 +160,24 @@ impl Renderer {
                 "resampling {path} from {native_hz:.1} Hz to {rate_hz:.1} Hz (`{}`)",
                 file.display()
             )),
+            Event::PartialCoverage {
+                file,
+                path,
+                covered_s,
+                log_s,
+            } => ui.warn(format!(
+                "{path} spans only {covered_s:.2} s of the {log_s:.2} s of `{}` ({:.0}%); hbn uses \
+                 only the span all signals share, so the rest of the log is left out: record \
+                 every signal for the whole log, or cut the log to where they overlap \
+                 (--min-coverage sets this warning's threshold)",
+                file.display(),
+                100.0 * covered_s / log_s
+            )),
+            Event::LogsRead { .. } => {
+                if let Some(msg) = self.when_logs_read.take() {
+                    ui.notice(msg);
+                }
+            }
             Event::Training { gp, progress } => {
                 let bar = self.training.get_or_insert_with(|| {
                     crate::progress::bar(ui.quiet, 2 * progress.n_starts as u64, "training")

@@ -434,7 +434,25 @@ fn log_options(
     time_source: Option<&str>,
     max_gap_s: Option<f64>,
 ) -> PyResult<LogOptions> {
+    log_options_with(py, rate_hz, time_source, max_gap_s, None, None)
+}
+
+/// [`log_options`] with the coverage thresholds (training from logs).
+fn log_options_with(
+    py: Python<'_>,
+    rate_hz: Option<f64>,
+    time_source: Option<&str>,
+    max_gap_s: Option<f64>,
+    min_coverage: Option<f64>,
+    min_state_samples: Option<usize>,
+) -> PyResult<LogOptions> {
     let mut o = LogOptions::default();
+    if let Some(c) = min_coverage {
+        o.min_coverage = c;
+    }
+    if let Some(n) = min_state_samples {
+        o.min_state_samples = n;
+    }
     if let Some(t) = time_source {
         o.time_source = hbn_pipeline::parse_time_source(t).map_err(|e| raise(py, e))?;
     }
@@ -977,7 +995,7 @@ impl HysteresisModelCore {
     /// same logs, paths and parameters give the same model file.
     #[staticmethod]
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (logs, input, state, output, rate_hz, time_source, max_gap_s, params))]
+    #[pyo3(signature = (logs, input, state, output, rate_hz, time_source, max_gap_s, params, min_coverage=None, min_state_samples=None))]
     fn from_logs(
         py: Python<'_>,
         logs: Vec<PathBuf>,
@@ -988,6 +1006,8 @@ impl HysteresisModelCore {
         time_source: Option<&str>,
         max_gap_s: Option<f64>,
         params: Option<&Bound<'_, PyDict>>,
+        min_coverage: Option<f64>,
+        min_state_samples: Option<usize>,
     ) -> PyResult<Self> {
         if logs.is_empty() {
             return Err(raise(
@@ -996,7 +1016,14 @@ impl HysteresisModelCore {
             ));
         }
         let p = hbn_params(py, params)?;
-        let opts = log_options(py, rate_hz, time_source, max_gap_s)?;
+        let opts = log_options_with(
+            py,
+            rate_hz,
+            time_source,
+            max_gap_s,
+            min_coverage,
+            min_state_samples,
+        )?;
         let d = TrainSignals::default();
         let signals = TrainSignals {
             input: match input {
@@ -1683,6 +1710,8 @@ fn default_log_options(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     d.set_item(LogOption::TimeSource.name(), o.time_source.name())?;
     d.set_item(LogOption::MaxGap.name(), o.max_gap_s)?;
     d.set_item(LogOption::Rate.name(), o.rate_hz)?;
+    d.set_item(LogOption::MinCoverage.name(), o.min_coverage)?;
+    d.set_item(LogOption::MinStateSamples.name(), o.min_state_samples)?;
     d.set_item(LogOption::Input.name(), hbn_pipeline::DEFAULT_INPUT)?;
     d.set_item(LogOption::State.name(), hbn_pipeline::DEFAULT_STATE)?;
     d.set_item(LogOption::Output.name(), hbn_pipeline::DEFAULT_OUTPUT)?;

@@ -24,11 +24,15 @@ pub enum LogOption {
     Output,
     /// The estimation mode.
     Mode,
+    /// [`crate::LogOptions::min_coverage`].
+    MinCoverage,
+    /// [`crate::LogOptions::min_state_samples`].
+    MinStateSamples,
 }
 
 impl LogOption {
     /// Every option.
-    pub const ALL: [LogOption; 8] = [
+    pub const ALL: [LogOption; 10] = [
         LogOption::Rate,
         LogOption::MaxGap,
         LogOption::TimeSource,
@@ -37,6 +41,8 @@ impl LogOption {
         LogOption::State,
         LogOption::Output,
         LogOption::Mode,
+        LogOption::MinCoverage,
+        LogOption::MinStateSamples,
     ];
 
     /// The Rust name.
@@ -50,6 +56,8 @@ impl LogOption {
             LogOption::State => "state",
             LogOption::Output => "output",
             LogOption::Mode => "mode",
+            LogOption::MinCoverage => "min_coverage",
+            LogOption::MinStateSamples => "min_state_samples",
         }
     }
 }
@@ -115,6 +123,29 @@ pub enum PipelineError {
         rate_hz: f64,
         /// Samples needed.
         min: usize,
+    },
+    /// Too few samples of the state where all signals overlap, over all logs, to train on
+    /// ([`crate::LogOptions::min_state_samples`]).
+    #[error(
+        "the state `{path}` has only {samples} samples where all signals overlap, in {logs} \
+         log(s) (at least {min} needed to train): record the state for as long as the input \
+         and the sensor, or lower the threshold (`--min-state-samples`, Python \
+         `min_state_samples=`){}",
+        shortest.as_ref().map_or_else(String::new, |(file, covered)| format!(
+            "; in `{}` it has {covered}", file.display()
+        ))
+    )]
+    TooFewStateSamples {
+        /// The state's path.
+        path: String,
+        /// Its samples inside the grids, all logs together.
+        samples: usize,
+        /// Logs read.
+        logs: usize,
+        /// Samples needed.
+        min: usize,
+        /// The log where the state covers the least of the others' span, and how much (text).
+        shortest: Option<(PathBuf, String)>,
     },
     /// A signal path (given, or stored in a model) that does not parse.
     #[error("the {option} signal path: {source}")]

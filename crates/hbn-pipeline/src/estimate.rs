@@ -17,9 +17,12 @@ use crate::train::{DEFAULT_INPUT, DEFAULT_OUTPUT, DEFAULT_STATE};
 pub const ESTIMATE_TOPIC: &str = "/hbn/estimate";
 /// Schema name of the estimate messages.
 pub const ESTIMATE_SCHEMA: &str = "hbn/Estimate";
-/// CSV header (`t` in seconds from the first grid sample; `flags` the guard flags as a bit mask,
-/// `flag_names` the same as names joined by `|`, see [`hbn_core::Flags::names`]).
-pub const CSV_HEADER: &str = "t,x,x_std,y_pred,innovation,nis,flags,flag_names";
+/// CSV header: `t` in seconds from the first grid sample; `u` and `y` the input and sensor
+/// samples the filter ran on (the log on the model's grid), so a program that reads them from
+/// the CSV gets the same bits (every number is written as the shortest text that reads back to
+/// the same `f64`); then the estimate; `flags` the guard flags as a bit mask, `flag_names` the
+/// same as names joined by `|`, see [`hbn_core::Flags::names`].
+pub const CSV_HEADER: &str = "t,u,y,x,x_std,y_pred,innovation,nis,flags,flag_names";
 
 /// The signal paths to read for a model: explicit ones, else those the model was trained
 /// with, else the defaults.
@@ -334,16 +337,19 @@ pub fn read_at_model_rate(
 }
 
 impl LogEstimate {
-    /// The estimate as CSV text ([`CSV_HEADER`]).
+    /// The estimate as CSV text ([`CSV_HEADER`]), with the `u` and `y` it was computed from.
+    /// Numbers are written with Rust's `{}` (the shortest decimal that parses back to the same
+    /// `f64`), so `u`, `y` fed from this file to an `f64` export reproduce `x` bit for bit.
     pub fn csv_text(&self) -> String {
         use std::fmt::Write as _;
         let est = &self.estimate;
-        let mut s = String::with_capacity(64 * est.len() + 64);
+        let mut s = String::with_capacity(100 * est.len() + 64);
         s.push_str(CSV_HEADER);
         s.push('\n');
         let mut names = String::new();
+        let (u, y) = (self.log.column(0), self.log.column(1));
         for (k, t) in self.log.aligned.t_s.iter().enumerate() {
-            let g = |v: &Vec<f64>| v.get(k).copied().unwrap_or(f64::NAN);
+            let g = |v: &[f64]| v.get(k).copied().unwrap_or(f64::NAN);
             let flags = est.flags.get(k).copied().unwrap_or(0);
             names.clear();
             for (i, n) in Flags(flags).names().enumerate() {
@@ -354,7 +360,9 @@ impl LogEstimate {
             }
             let _ = writeln!(
                 s,
-                "{t},{},{},{},{},{},{flags},{names}",
+                "{t},{},{},{},{},{},{},{},{flags},{names}",
+                g(u),
+                g(y),
                 g(&est.x),
                 g(&est.x_std),
                 g(&est.y_pred),

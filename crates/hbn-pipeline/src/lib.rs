@@ -41,8 +41,8 @@ pub use estimate::{
 };
 pub use eval::{Evaluation, Method, Score, evaluate_log};
 pub use log::{
-    CheckedLogOptions, Event, LogData, LogOptions, Observer, RATE_NOTICE_TOLERANCE, load_log,
-    parse_signal, parse_time_source, round_rate,
+    CheckedLogOptions, DEFAULT_MIN_COVERAGE, DEFAULT_MIN_STATE_SAMPLES, Event, LogData, LogOptions,
+    Observer, RATE_NOTICE_TOLERANCE, load_log, parse_signal, parse_time_source, round_rate,
 };
 pub use sim::{START_NS, SimLog, log_times, sequences, simulate_log};
 pub use train::{

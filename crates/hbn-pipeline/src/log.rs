@@ -20,7 +20,25 @@ pub struct LogOptions {
     /// Grid rate (Hz); `None`: the native rate of the first signal of the first log, rounded to
     /// 0.1 Hz (training), or the model's rate (estimation).
     pub rate_hz: Option<f64>,
+    /// A signal whose samples span less than this fraction of the log's span (from the first
+    /// sample of any signal to the last) is reported ([`Event::PartialCoverage`]): the grid
+    /// covers only the span all signals share, so such a signal leaves most of the log unused.
+    pub min_coverage: f64,
+    /// Training only: the fewest samples of the state signal, over all logs, where all signals
+    /// overlap (the state is what the model learns from). Fewer is
+    /// [`PipelineError::TooFewStateSamples`].
+    pub min_state_samples: usize,
 }
+
+/// Default [`LogOptions::min_coverage`]: a signal that spans less than half of its log.
+pub const DEFAULT_MIN_COVERAGE: f64 = 0.5;
+
+/// Default [`LogOptions::min_state_samples`]. It refuses what cannot be a model (a camera that
+/// stopped after a few frames) and leaves small experiments possible. Filter tuning needs more:
+/// each held-out block needs [`hbn_model::tuning::MIN_TUNING_SAMPLES`] samples, so with the
+/// default `validation = 0.25` a model trained on fewer than 200 samples keeps untuned noise
+/// scales, and the training summary says so.
+pub const DEFAULT_MIN_STATE_SAMPLES: usize = 100;
 
 impl Default for LogOptions {
     fn default() -> Self {
@@ -28,6 +46,8 @@ impl Default for LogOptions {
             time_source: TimeSource::LogTime,
             max_gap_s: ResampleOptions::DEFAULT_MAX_GAP_S,
             rate_hz: None,
+            min_coverage: DEFAULT_MIN_COVERAGE,
+            min_state_samples: DEFAULT_MIN_STATE_SAMPLES,
         }
     }
 }
@@ -57,6 +77,16 @@ impl LogOptions {
             }
         };
         positive(LogOption::MaxGap, self.max_gap_s)?;
+        if !(0.0..=1.0).contains(&self.min_coverage) {
+            return Err(OptionError {
+                option: LogOption::MinCoverage,
+                problem: Problem::Between {
+                    value: self.min_coverage,
+                    min: 0.0,
+                    max: 1.0,
+                },
+            });
+        }
         if let Some(r) = self.rate_hz {
             positive(LogOption::Rate, r)?;
         }
@@ -116,6 +146,25 @@ pub enum Event<'a> {
         /// The grid rate.
         rate_hz: f64,
     },
+    /// A signal spans less than [`LogOptions::min_coverage`] of its log: the grid, which
+    /// covers only the span all signals share, leaves the rest of the log unused.
+    PartialCoverage {
+        /// The log.
+        file: &'a Path,
+        /// The signal.
+        path: &'a SignalPath,
+        /// How long the signal's samples span (s).
+        covered_s: f64,
+        /// How long the log's samples span, all signals together (s).
+        log_s: f64,
+    },
+    /// Every log was read and passed its checks; training starts.
+    LogsRead {
+        /// Trajectories (logs) to train on.
+        logs: usize,
+        /// Grid samples over all of them.
+        samples: usize,
+    },
     /// An optimiser start of one GP finished.
     Training {
         /// Which GP.
@@ -154,6 +203,11 @@ pub struct LogData {
     pub paths: Vec<SignalPath>,
     /// Native rate of each signal (median interval), if it has one.
     pub native_rates: Vec<Option<f64>>,
+    /// Samples of each signal (as recorded, before resampling) where all signals overlap,
+    /// which is the span the grid covers.
+    pub samples_in_grid: Vec<usize>,
+    /// Samples of each signal in the log, as recorded.
+    pub samples_recorded: Vec<usize>,
     /// The aligned samples.
     pub aligned: Aligned,
 }
@@ -219,6 +273,28 @@ pub fn load_log(
     )
     .map_err(read_err)?;
     let native: Vec<Option<f64>> = raw.iter().map(hbn_io::native_rate_hz).collect();
+    // The log's span, all signals together, and the share of it each signal spans.
+    let first = raw.iter().filter_map(|s| s.t_ns.first().copied()).min();
+    let last = raw.iter().filter_map(|s| s.t_ns.last().copied()).max();
+    if let (Some(first), Some(last)) = (first, last)
+        && last > first
+    {
+        let log_s = (last - first) as f64 * 1e-9;
+        for (path, signal) in paths.iter().zip(&raw) {
+            let covered_s = match (signal.t_ns.first(), signal.t_ns.last()) {
+                (Some(a), Some(b)) => b.saturating_sub(*a) as f64 * 1e-9,
+                _ => 0.0,
+            };
+            if covered_s < opts.min_coverage * log_s {
+                observe(Event::PartialCoverage {
+                    file,
+                    path,
+                    covered_s,
+                    log_s,
+                });
+            }
+        }
+    }
     let rate = match rate_hz {
         Some(r) => r,
         None => {
@@ -257,10 +333,33 @@ pub fn load_log(
         },
     )
     .map_err(read_err)?;
+    // The overlap of all signals' spans, where the grid lies.
+    let overlap_start = raw
+        .iter()
+        .filter_map(|s| s.t_ns.first().copied())
+        .max()
+        .unwrap_or(0);
+    let overlap_end = raw
+        .iter()
+        .filter_map(|s| s.t_ns.last().copied())
+        .min()
+        .unwrap_or(0);
+    let samples_in_grid = raw
+        .iter()
+        .map(|s| {
+            s.t_ns
+                .iter()
+                .filter(|&&t| (overlap_start..=overlap_end).contains(&t))
+                .count()
+        })
+        .collect();
+    let samples_recorded = raw.iter().map(|s| s.t_ns.len()).collect();
     Ok(LogData {
         file: file.to_owned(),
         paths: paths.to_vec(),
         native_rates: native,
+        samples_in_grid,
+        samples_recorded,
         aligned,
     })
 }

@@ -97,16 +97,48 @@ pub fn train_from_logs(
     for file in logs {
         let log = load_log(file, &paths, rate, &opts, observe)?;
         rate = Some(log.rate_hz());
-        if log.len() < MIN_LOG_SAMPLES {
-            return Err(PipelineError::ShortLog {
-                file: file.clone(),
-                samples: log.len(),
-                rate_hz: log.rate_hz(),
-                min: MIN_LOG_SAMPLES,
-            });
-        }
         data.push(log);
     }
+    // The state is what the model learns from: refuse to train on a sliver of it.
+    let state_samples: usize = data
+        .iter()
+        .map(|d| d.samples_in_grid.get(1).copied().unwrap_or(0))
+        .sum();
+    if state_samples < opts.min_state_samples {
+        let shortest = data
+            .iter()
+            .min_by_key(|d| d.samples_in_grid.get(1).copied().unwrap_or(0))
+            .map(|d| {
+                (
+                    d.file.clone(),
+                    format!(
+                        "{} of its {} samples over the {:.2} s where all signals overlap",
+                        d.samples_in_grid.get(1).copied().unwrap_or(0),
+                        d.samples_recorded.get(1).copied().unwrap_or(0),
+                        d.duration_s()
+                    ),
+                )
+            });
+        return Err(PipelineError::TooFewStateSamples {
+            path: signals.state.to_string(),
+            samples: state_samples,
+            logs: data.len(),
+            min: opts.min_state_samples,
+            shortest,
+        });
+    }
+    if let Some(log) = data.iter().find(|d| d.len() < MIN_LOG_SAMPLES) {
+        return Err(PipelineError::ShortLog {
+            file: log.file.clone(),
+            samples: log.len(),
+            rate_hz: log.rate_hz(),
+            min: MIN_LOG_SAMPLES,
+        });
+    }
+    observe(Event::LogsRead {
+        logs: data.len(),
+        samples: data.iter().map(LogData::len).sum(),
+    });
     let mut described = params.signals.clone();
     for (info, path) in [
         (&mut described.input, &signals.input),

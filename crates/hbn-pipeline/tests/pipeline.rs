@@ -86,13 +86,23 @@ fn a_50_hz_log_trains_a_50_hz_model_and_estimates_are_written() {
     .unwrap();
     assert_eq!(est.log.rate_hz(), 50.0);
     assert_eq!(est.estimate.len(), 400);
-    // CSV: header and one row per grid sample, x as computed.
+    // CSV: header and one row per grid sample; u and y the filter ran on and x as computed,
+    // each reading back to the same bits.
     let csv = std::fs::read_to_string(d.path().join("est.csv")).unwrap();
     let rows: Vec<&str> = csv.lines().collect();
     assert_eq!(rows[0], hbn_pipeline::CSV_HEADER);
     assert_eq!(rows.len(), 401);
-    let x5: f64 = rows[6].split(',').nth(1).unwrap().parse().unwrap();
-    assert_eq!(x5, est.estimate.x[5]);
+    for (k, row) in rows[1..].iter().enumerate() {
+        let v: Vec<f64> = row
+            .split(',')
+            .skip(1)
+            .take(3)
+            .map(|c| c.parse().unwrap())
+            .collect();
+        assert_eq!(v[0].to_bits(), est.log.column(0)[k].to_bits(), "u at {k}");
+        assert_eq!(v[1].to_bits(), est.log.column(1)[k].to_bits(), "y at {k}");
+        assert_eq!(v[2].to_bits(), est.estimate.x[k].to_bits(), "x at {k}");
+    }
     // MCAP: the estimate channel on the log's clock (20 ms apart, starting at the log's start).
     let back = hbn_io::read_signals(
         &d.path().join("est.mcap"),

@@ -917,6 +917,8 @@ class HysteresisModel:
         rate_hz: Optional[float] = _L["rate_hz"],
         time_source: str = _L["time_source"],
         max_gap_s: float = _L["max_gap_s"],
+        min_coverage: float = _L["min_coverage"],
+        min_state_samples: int = _L["min_state_samples"],
         *,
         kernel: Union[str, Sequence[str], None] = _P["kernel"],
         transition_kernel: Optional[str] = _P["transition_kernel"],
@@ -945,7 +947,9 @@ class HysteresisModel:
         ``hbn simulate`` writes). ``rate_hz``: grid rate in Hz (``None``: the native rate of
         ``input`` in the first log, rounded to 0.1 Hz); the model keeps it. ``time_source``
         (``"log"`` or ``"header"``) and ``max_gap_s`` (the largest gap between two samples of a
-        signal, seconds) say how the logs are read (``docs/your-robot.md``).
+        signal, seconds) say how the logs are read (``docs/your-robot.md``). ``min_coverage``:
+        warn when a signal spans less than this fraction of its log; ``min_state_samples``: the
+        fewest state samples, over all logs, where all signals overlap (fewer is an error).
         {training}
         >>> import hbn
         >>> m = hbn.HysteresisModel.from_logs("fixtures/json_zstd.mcap", input="/input.data",
@@ -963,6 +967,8 @@ class HysteresisModel:
             str(time_source),
             _float(max_gap_s, "max_gap_s"),
             params,
+            _float(min_coverage, "min_coverage"),
+            _count(min_state_samples, "min_state_samples"),
         )
         return cls(core)
 

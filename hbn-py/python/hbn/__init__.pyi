@@ -201,6 +201,8 @@ class HysteresisModel:
         rate_hz: Optional[float] = ...,
         time_source: str = ...,
         max_gap_s: float = ...,
+        min_coverage: float = ...,
+        min_state_samples: int = ...,
         *,
         kernel: Union[str, Sequence[str], None] = ...,
         transition_kernel: Optional[str] = ...,

@@ -172,6 +172,8 @@ class HysteresisModelCore:
         time_source: Optional[str],
         max_gap_s: Optional[float],
         params: Optional[Dict[str, Any]],
+        min_coverage: Optional[float] = ...,
+        min_state_samples: Optional[int] = ...,
     ) -> HysteresisModelCore: ...
     def estimate(
         self, u: npt.NDArray[np.float64], y: npt.NDArray[np.float64], mode: Optional[str]

@@ -1,0 +1,148 @@
+//! What a robot builder's first logs do to `hbn train`: a state topic (a camera) that stops
+//! early, or covers only part of the log. Each topic has its own rate and span, as on a rig.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// One topic of a hand-written log: name, message times (s) and `data` values.
+struct Topic<'a> {
+    name: &'a str,
+    t_s: Vec<f64>,
+    values: Vec<f64>,
+}
+
+/// Samples of `f` at `rate_hz` from `start_s` for `duration_s`.
+fn topic<'a>(
+    name: &'a str,
+    rate_hz: f64,
+    start_s: f64,
+    duration_s: f64,
+    f: impl Fn(f64) -> f64,
+) -> Topic<'a> {
+    let n = (duration_s * rate_hz).round() as usize;
+    let t_s: Vec<f64> = (0..n).map(|k| start_s + k as f64 / rate_hz).collect();
+    let values = t_s.iter().map(|&t| f(t)).collect();
+    Topic { name, t_s, values }
+}
+
+/// Writes `topics` as JSON messages `{"data": v}` at their log times, time-ordered.
+fn write_log(file: &Path, topics: &[Topic<'_>]) {
+    let w = std::io::BufWriter::new(std::fs::File::create(file).unwrap());
+    let mut out = mcap::WriteOptions::new().create(w).unwrap();
+    let schema = br#"{"type":"object","properties":{"data":{"type":"number"}}}"#;
+    let schema_id = out.add_schema("Scalar", "jsonschema", schema).unwrap();
+    let mut messages = Vec::new();
+    for tp in topics {
+        let id = out
+            .add_channel(schema_id, tp.name, "json", &BTreeMap::new())
+            .unwrap();
+        for (&t, &v) in tp.t_s.iter().zip(&tp.values) {
+            messages.push(((1e9 + t * 1e9).round() as u64, id, v));
+        }
+    }
+    messages.sort_by_key(|m| m.0);
+    for (k, (t, id, v)) in messages.into_iter().enumerate() {
+        let body = format!("{{\"data\":{v}}}");
+        out.write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id: id,
+                sequence: k as u32,
+                log_time: t,
+                publish_time: t,
+            },
+            body.as_bytes(),
+        )
+        .unwrap();
+    }
+    out.finish().unwrap();
+}
+
+/// A hysteretic rig: the valve ramps, the bend lags it, the strain sensor follows the bend.
+fn rig(state_start_s: f64, state_duration_s: f64, state_hz: f64) -> Vec<Topic<'static>> {
+    let u = |t: f64| 0.5 + 0.4 * (0.7 * t).sin() * (0.13 * t).cos();
+    let x = move |t: f64| 0.8 * u(t - 0.15) + 0.1 * (0.7 * t).cos();
+    vec![
+        topic("/valve", 100.0, 0.0, 20.0, u),
+        topic("/camera", state_hz, state_start_s, state_duration_s, x),
+        topic("/strain", 100.0, 0.005, 20.0, move |t| 2.0 * x(t) + 0.05),
+    ]
+}
+
+/// `hbn train` on `log`: (error, stderr).
+fn train(log: &Path, out: &Path, extra: &[&str]) -> (Option<String>, String) {
+    let mut args = vec![
+        "hbn",
+        "train",
+        "--log",
+        log.to_str().unwrap(),
+        "--input",
+        "/valve.data",
+        "--state",
+        "/camera.data",
+        "--output",
+        "/strain.data",
+        "--max-points",
+        "60",
+        "--starts",
+        "1",
+        "--max-iters",
+        "30",
+        "--inducing",
+        "exact",
+        "--lags",
+        "none",
+        "--sensor-inputs",
+        "thesis",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let (mut stdout, mut stderr) = (Vec::new(), Vec::new());
+    let r = hbn_cli::run_with(args, &mut stdout, &mut stderr);
+    (
+        r.err().map(|e| hbn_cli::error_message(&e)),
+        String::from_utf8_lossy(&stderr).into_owned(),
+    )
+}
+
+#[test]
+fn a_camera_that_stops_after_three_frames_is_refused_and_writes_no_model() {
+    let d = tempfile::tempdir().unwrap();
+    let (log, model) = (d.path().join("rig.mcap"), d.path().join("m.hbn"));
+    write_log(&log, &rig(0.0, 0.1, 30.0));
+    let (e, stderr) = train(&log, &model, &[]);
+    let e = e.expect("three state samples must not train a model");
+    assert!(
+        e.contains("/camera.data")
+            && e.contains("of its 3 samples")
+            && e.contains("--min-state-samples"),
+        "{e}"
+    );
+    assert!(!model.exists(), "a refused training leaves no model file");
+    // The coverage warning names the topic and how much of the log it spans.
+    assert!(stderr.contains("/camera.data spans only"), "{stderr}");
+    // The model-selection notice comes only once the data passed their checks.
+    assert!(!stderr.contains("model selection"), "{stderr}");
+}
+
+#[test]
+fn a_camera_that_covers_part_of_the_log_trains_with_a_warning() {
+    let d = tempfile::tempdir().unwrap();
+    let (log, model) = (d.path().join("rig.mcap"), d.path().join("m.hbn"));
+    // The camera records the first 8 s of 20 (240 frames at 30 Hz).
+    write_log(&log, &rig(0.0, 8.0, 30.0));
+    let (e, stderr) = train(&log, &model, &[]);
+    assert!(e.is_none(), "{e:?}");
+    assert!(model.exists());
+    assert!(
+        stderr.contains("/camera.data spans only") && stderr.contains("--min-coverage"),
+        "{stderr}"
+    );
+    // Raising the threshold for state samples above what the log holds refuses it; lowering
+    // the coverage threshold silences the warning.
+    let (e, _) = train(&log, &model, &["--min-state-samples", "1000"]);
+    assert!(e.expect("too few").contains("at least 1000 needed"));
+    let (e, stderr) = train(&log, &d.path().join("m2.hbn"), &["--min-coverage", "0.3"]);
+    assert!(e.is_none(), "{e:?}");
+    assert!(!stderr.contains("spans only"), "{stderr}");
+}
