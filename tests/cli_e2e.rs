@@ -230,29 +230,30 @@ fn simulate_train_inspect_estimate_eval() {
     let mut lines = text.lines();
     assert_eq!(
         lines.next(),
-        Some("t,x,x_std,y_pred,innovation,nis,flags,flag_names")
+        Some("t,u,y,x,x_std,y_pred,innovation,nis,flags,flag_names")
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 600);
-    assert!(rows.iter().all(|r| r.len() == 8));
+    assert!(rows.iter().all(|r| r.len() == 10));
     // The flag names spell out the bit mask.
     for r in &rows {
-        let bits: u32 = r[6].parse().expect("flags");
+        let bits: u32 = r[8].parse().expect("flags");
         let names: Vec<&str> = hbn_core::Flags(bits).names().collect();
-        assert_eq!(r[7], names.join("|"), "{r:?}");
+        assert_eq!(r[9], names.join("|"), "{r:?}");
     }
-    assert!(rows[0][7].contains("initialised"), "{:?}", rows[0]);
+    assert!(rows[0][9].contains("initialised"), "{:?}", rows[0]);
     assert_eq!(rows[0][0], "0");
     let t_last: f64 = rows[599][0].parse().expect("t");
     assert!((t_last - 5.99).abs() < 1e-9, "{t_last}");
     assert!(
-        rows.iter().all(|r| r[6].parse::<u32>().is_ok()),
+        rows.iter().all(|r| r[8].parse::<u32>().is_ok()),
         "flags are integers"
     );
     assert!(
-        rows.iter()
-            .all(|r| r[1].parse::<f64>().map(f64::is_finite).unwrap_or(false)),
-        "x is finite"
+        rows.iter().all(|r| r[1..4]
+            .iter()
+            .all(|c| c.parse::<f64>().is_ok_and(f64::is_finite))),
+        "u, y and x are finite"
     );
     let topics = hbn_io::list_topics(Path::new(&mcap)).expect("topics");
     assert_eq!(topics.len(), 1);
@@ -269,7 +270,7 @@ fn simulate_train_inspect_estimate_eval() {
     // On the input log's clock: the simulated log starts at 1 s.
     assert_eq!(sig[0].t_ns[0], 1_000_000_000);
     assert_eq!(sig[0].t_ns[599], 1_000_000_000 + 599 * 10_000_000);
-    let csv_x0: f64 = rows[0][1].parse().expect("x");
+    let csv_x0: f64 = rows[0][3].parse().expect("x");
     assert_eq!(sig[0].value[0], csv_x0);
 
     // Without --mode, estimate runs the model's default mode (chosen on held-out data).

@@ -1,7 +1,9 @@
-//! The firmware path end to end: simulate, train a sparse (m = 32) and an exact
-//! model, `hbn estimate`, `hbn export` as C and Rust in f64 and f32, build the C example
-//! (`make -C examples/firmware-c`, gcc and the hbn-ffi static library) and the no_std Rust
-//! example, run both on the test log, and compare with `hbn estimate`'s CSV:
+//! The firmware path end to end, as docs/firmware.md shows it: simulate an MCAP log, train
+//! sparse (m = 32) and exact models, `hbn estimate --csv`, `hbn export` as C and Rust in f64
+//! and f32, build the C example (`make -C examples/firmware-c`, cc and the hbn-ffi static
+//! library) and the no_std Rust example, feed them the `u` and `y` columns of `hbn estimate`'s
+//! CSV (the C program reads that CSV itself; the Rust runner gets the two columns, as
+//! `cut -d, -f2,3 est.csv` writes them), and compare with the CSV's estimate:
 //!
 //! - f64: equal bit for bit (x, x_std and flags);
 //! - f32: max |dx| at most [`F32_BOUND`] (2%) of the range of `hbn estimate`'s x, every
@@ -17,10 +19,9 @@ use std::process::{Command, Stdio};
 
 use hbn::pipeline::{LogOption, SignalChoice, read_at_model_rate};
 
-/// Bound on max |x_f32 - x_f64| as a fraction of the range of x. Measured here (the test
-/// prints it), since the split ranges: about 1e-8 of x (0.0000%) for all four models, whose
-/// variance factors f32 would move by over 1% and are kept in two parts (0.7-1.1% for the
-/// sparse models and 0.87% for the exact one before); see docs/firmware.md.
+/// Bound on max |x_f32 - x_f64| as a fraction of the range of x. The test prints what it
+/// measures for each model; the export keeps the reals f32 would move by over 1% in two parts,
+/// which keeps every model far inside the bound (docs/firmware.md).
 const F32_BOUND: f64 = 0.02;
 
 fn root() -> PathBuf {
@@ -53,6 +54,23 @@ fn ok_with_stderr(args: &[&str]) -> (String, String) {
 
 fn ok(args: &[&str]) -> String {
     ok_with_stderr(args).0
+}
+
+/// The named columns of a CSV, as text: a header line naming them, then each row's fields.
+fn columns(text: &str, names: &[&str]) -> String {
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let cols: Vec<usize> = names
+        .iter()
+        .map(|n| header.iter().position(|h| h == n).expect(n))
+        .collect();
+    let mut out = names.join(",") + "\n";
+    for l in lines.filter(|l| !l.trim().is_empty()) {
+        let v: Vec<&str> = l.split(',').collect();
+        out.push_str(&cols.iter().map(|&c| v[c]).collect::<Vec<_>>().join(","));
+        out.push('\n');
+    }
+    out
 }
 
 /// `(x, x_std, flags)` rows of a CSV whose header names those columns.
@@ -144,8 +162,10 @@ fn range(v: &[(f64, f64, u32)]) -> f64 {
     hi - lo
 }
 
+/// MCAP -> `hbn estimate --csv` -> the `u`, `y` columns -> the C and Rust exports: the f64
+/// exports' x, x_std and flags equal the CSV's bit for bit.
 #[test]
-fn exported_models_reproduce_hbn_estimate_in_c_and_rust() {
+fn mcap_to_csv_to_firmware_equals_hbn_estimate() {
     let dir = tempfile::tempdir().expect("tempdir");
     let p = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
     ok(&[
@@ -217,8 +237,15 @@ fn exported_models_reproduce_hbn_estimate_in_c_and_rust() {
             "--csv",
             &est_csv,
         ]);
-        let reference = read_estimates(&std::fs::read_to_string(&est_csv).expect("est.csv"));
-        // The u, y hbn estimate ran on: the log on the model's grid.
+        let est_text = std::fs::read_to_string(&est_csv).expect("est.csv");
+        let reference = read_estimates(&est_text);
+        // The firmware's input: the CSV's u and y, as `cut -d, -f2,3 est.csv` writes them.
+        let samples = columns(&est_text, &["u", "y"]);
+        assert!(
+            est_text.starts_with("t,u,y,") && samples.starts_with("u,y\n"),
+            "{samples:.40}"
+        );
+        // They are the u, y hbn estimate ran on (the log on the model's grid), bit for bit.
         let loaded = hbn::model::HysteresisModel::load(Path::new(&model)).expect("load");
         let log = read_at_model_rate(
             &loaded,
@@ -229,9 +256,18 @@ fn exported_models_reproduce_hbn_estimate_in_c_and_rust() {
             &mut |_| {},
         )
         .expect("read the test log");
-        let mut samples = String::from("u,y\n");
-        for (u, y) in log.column(0).iter().zip(log.column(1)) {
-            samples.push_str(&format!("{u:?},{y:?}\n"));
+        let csv_uy: Vec<(f64, f64)> = samples
+            .lines()
+            .skip(1)
+            .map(|l| {
+                let (u, y) = l.split_once(',').expect("u,y");
+                (u.parse().expect("u"), y.parse().expect("y"))
+            })
+            .collect();
+        assert_eq!(csv_uy.len(), log.column(0).len());
+        for (k, (u, y)) in csv_uy.iter().enumerate() {
+            assert_eq!(u.to_bits(), log.column(0)[k].to_bits(), "{kind}: u at {k}");
+            assert_eq!(y.to_bits(), log.column(1)[k].to_bits(), "{kind}: y at {k}");
         }
         assert_eq!(reference.len(), log.column(0).len());
         let span = range(&reference);
@@ -263,7 +299,14 @@ fn exported_models_reproduce_hbn_estimate_in_c_and_rust() {
                 &c_dir,
                 &dir.path().join(format!("{kind}-c-{precision}-build")),
             );
-            let c_out = read_estimates(&run_with_stdin(&mut Command::new(&bin), &samples));
+            // The documented path feeds the estimate CSV itself (the program takes the columns
+            // its header names `u` and `y`); the f32 run gets the two-column file.
+            let c_input = if precision == "f64" {
+                &est_text
+            } else {
+                &samples
+            };
+            let c_out = read_estimates(&run_with_stdin(&mut Command::new(&bin), c_input));
             // Rust
             let rs_dir = dir.path().join(format!("{kind}-rust-{precision}"));
             ok(&[
@@ -420,13 +463,13 @@ fn export_errors_name_the_flag_and_leave_nothing_behind() {
     );
 }
 
-/// The figures of docs/firmware.md ("Accuracy of f32 and of small m"): the README's training
+/// Prints a table of the accuracy of f32 exports and of small m: the README's training
 /// protocol (three bouc-wen logs of 1000 samples, one input, fresh noise) and a held-out test
 /// log with another input; sparse models with m = 16, 32, 64 and the default exact model, each
 /// in its default mode, in f64 and from its f32 tables. Run with
 /// `cargo test --release --test firmware -- --ignored --nocapture`.
 #[test]
-#[ignore = "measurement for docs/firmware.md (about 2 minutes)"]
+#[ignore = "a measurement (about 2 minutes)"]
 fn measure_f32_and_small_m() {
     use hbn::core::Estimator;
     use hbn::core::tables::{Tables, widen};
