@@ -61,7 +61,7 @@ fn estimate_warns_about_other_rates_and_data_outside_the_training_range() {
     let (_, err) = hbn(&["estimate", "--model", &model, "--log", &slow]);
     assert!(
         err.contains(
-            "warning: /input.data is recorded at 50.0 Hz but the model was trained at 100.0 Hz"
+            "warning: /input.data is recorded at 50.0 Hz here but at 100.0 Hz in the training logs"
         ),
         "{err}"
     );

@@ -59,12 +59,24 @@ fn write_log(file: &Path, topics: &[Topic<'_>]) {
 
 /// A hysteretic rig: the valve ramps, the bend lags it, the strain sensor follows the bend.
 fn rig(state_start_s: f64, state_duration_s: f64, state_hz: f64) -> Vec<Topic<'static>> {
+    rig_with_strain(state_start_s, state_duration_s, state_hz, 100.0)
+}
+
+/// [`rig`] with the strain sensor at `strain_hz`.
+fn rig_with_strain(
+    state_start_s: f64,
+    state_duration_s: f64,
+    state_hz: f64,
+    strain_hz: f64,
+) -> Vec<Topic<'static>> {
     let u = |t: f64| 0.5 + 0.4 * (0.7 * t).sin() * (0.13 * t).cos();
     let x = move |t: f64| 0.8 * u(t - 0.15) + 0.1 * (0.7 * t).cos();
     vec![
         topic("/valve", 100.0, 0.0, 20.0, u),
         topic("/camera", state_hz, state_start_s, state_duration_s, x),
-        topic("/strain", 100.0, 0.005, 20.0, move |t| 2.0 * x(t) + 0.05),
+        topic("/strain", strain_hz, 0.005, 20.0, move |t| {
+            2.0 * x(t) + 0.05
+        }),
     ]
 }
 
@@ -145,4 +157,48 @@ fn a_camera_that_covers_part_of_the_log_trains_with_a_warning() {
     let (e, stderr) = train(&log, &d.path().join("m2.hbn"), &["--min-coverage", "0.3"]);
     assert!(e.is_none(), "{e:?}");
     assert!(!stderr.contains("spans only"), "{stderr}");
+}
+
+/// The valve at 100 Hz sets the grid; the strain sensor runs at 50 Hz, in training as at run
+/// time: estimating on such a log says nothing about rates. A log whose sensor runs at another
+/// rate than in training is warned about.
+#[test]
+fn rates_like_the_training_logs_are_not_warned_about() {
+    let d = tempfile::tempdir().unwrap();
+    let p = |n: &str| d.path().join(n);
+    write_log(&p("train.mcap"), &rig_with_strain(0.0, 20.0, 30.0, 50.0));
+    let (e, _) = train(&p("train.mcap"), &p("m.hbn"), &[]);
+    assert!(e.is_none(), "{e:?}");
+    let (model, csv) = (p("m.hbn"), p("est.csv"));
+    let estimate = |log: &Path| {
+        let args = [
+            "hbn",
+            "estimate",
+            "--model",
+            model.to_str().unwrap(),
+            "--log",
+            log.to_str().unwrap(),
+            "--csv",
+            csv.to_str().unwrap(),
+        ];
+        let (mut stdout, mut stderr) = (Vec::new(), Vec::new());
+        let r = hbn_cli::run_with(args, &mut stdout, &mut stderr);
+        assert!(
+            r.is_ok(),
+            "{:?}",
+            r.err().map(|e| hbn_cli::error_message(&e))
+        );
+        String::from_utf8_lossy(&stderr).into_owned()
+    };
+    write_log(&p("run.mcap"), &rig_with_strain(0.0, 20.0, 30.0, 50.0));
+    let stderr = estimate(&p("run.mcap"));
+    assert!(!stderr.contains("recorded at"), "{stderr}");
+    write_log(&p("other.mcap"), &rig_with_strain(0.0, 20.0, 30.0, 25.0));
+    let stderr = estimate(&p("other.mcap"));
+    assert!(
+        stderr.contains(
+            "/strain.data is recorded at 25.0 Hz here but at 50.0 Hz in the training logs"
+        ),
+        "{stderr}"
+    );
 }

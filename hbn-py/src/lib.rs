@@ -684,6 +684,7 @@ fn signal_info(
         name: get("name")?.unwrap_or(default.name),
         path: get("path")?,
         unit: get("unit")?,
+        native_rate_hz: None,
     })
 }
 

@@ -156,6 +156,10 @@ pub struct SignalInfo {
     pub path: Option<String>,
     /// Unit, if known.
     pub unit: Option<String>,
+    /// The rate it was recorded at in the training logs (Hz, the median interval's; the first
+    /// log's), if it was read from logs. Estimation compares a log's rates with it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub native_rate_hz: Option<f64>,
 }
 
 /// The three signals of the HBN.
@@ -175,6 +179,7 @@ impl Default for Signals {
             name: n.into(),
             path: None,
             unit: None,
+            native_rate_hz: None,
         };
         Self {
             input: s("u"),
@@ -1557,8 +1562,13 @@ mod tests {
         assert_eq!(p.sensor_kernel.to_string(), "thesis");
         // The removed names are refused, with the accepted ones in the message.
         for old in ["se-ard+dir", "ard", "matern", "mahalanobis", "warped"] {
-            let e = p.set(Param::Kernel, ParamValue::Text(old.into())).unwrap_err();
-            assert!(e.to_string().contains("matern52, se-ard, se, thesis"), "{e}");
+            let e = p
+                .set(Param::Kernel, ParamValue::Text(old.into()))
+                .unwrap_err();
+            assert!(
+                e.to_string().contains("matern52, se-ard, se, thesis"),
+                "{e}"
+            );
         }
         for k in KernelChoice::ALL {
             assert_eq!(k.name().parse::<KernelChoice>().unwrap(), k);

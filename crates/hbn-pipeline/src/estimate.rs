@@ -65,6 +65,9 @@ pub struct LogEstimate {
     pub estimate: Estimate,
     /// The mode it ran in.
     pub mode: Mode,
+    /// The rate each signal of `log` was recorded at in the training logs (Hz), as the model
+    /// records it; `None` where it does not.
+    pub trained_rates: Vec<Option<f64>>,
 }
 
 /// Share of samples flagged [`hbn_core::Flags::EXTRAPOLATION`] above which an estimate
@@ -105,13 +108,16 @@ pub enum EstimateWarning {
         /// Samples in all.
         total: usize,
     },
-    /// A signal's native rate differs from the rate the model was trained at: the log was
-    /// resampled, and a hysteresis model learned at one rate predicts another rate's steps.
+    /// A signal is recorded at another rate than in the training logs (or, where the model
+    /// does not record those, than the model's rate): the log is resampled differently from
+    /// the training logs, and the model sees other interpolation than it learned from.
     RateMismatch {
         /// The signal.
         path: String,
-        /// Its native rate (Hz).
+        /// Its native rate in this log (Hz).
         native_hz: f64,
+        /// Its native rate in the training logs (Hz), if the model records it.
+        trained_hz: Option<f64>,
         /// The model's rate (Hz).
         model_hz: f64,
     },
@@ -148,6 +154,19 @@ impl std::fmt::Display for EstimateWarning {
             EstimateWarning::RateMismatch {
                 path,
                 native_hz,
+                trained_hz: Some(trained_hz),
+                model_hz,
+            } => write!(
+                f,
+                "{path} is recorded at {native_hz:.1} Hz here but at {trained_hz:.1} Hz in the \
+                 training logs (the model runs at {model_hz:.1} Hz): the log is resampled \
+                 differently from the training logs; record it at the training rate, or train \
+                 on logs recorded like this one"
+            ),
+            EstimateWarning::RateMismatch {
+                path,
+                native_hz,
+                trained_hz: None,
                 model_hz,
             } => write!(
                 f,
@@ -191,14 +210,25 @@ impl LogEstimate {
         if times > 0 {
             out.push(EstimateWarning::Lost { times, total });
         }
+        // A signal recorded at another rate than in the training logs (or, for a model that does
+        // not record those rates, than the model's grid).
         let model_hz = self.log.rate_hz();
-        for (path, native) in self.log.paths.iter().zip(&self.log.native_rates) {
+        for (i, (path, native)) in self
+            .log
+            .paths
+            .iter()
+            .zip(&self.log.native_rates)
+            .enumerate()
+        {
+            let trained_hz = self.trained_rates.get(i).copied().flatten();
+            let reference = trained_hz.unwrap_or(model_hz);
             if let Some(native_hz) = *native
-                && (native_hz - model_hz).abs() > crate::RATE_NOTICE_TOLERANCE * model_hz
+                && (native_hz - reference).abs() > crate::RATE_NOTICE_TOLERANCE * reference
             {
                 out.push(EstimateWarning::RateMismatch {
                     path: path.to_string(),
                     native_hz,
+                    trained_hz,
                     model_hz,
                 });
             }
@@ -280,6 +310,8 @@ pub fn estimate_log_modes(
     }
     let which = [LogOption::Input, LogOption::Output];
     let log = read_at_model_rate(model, file, signals, &which, log_options, observe)?;
+    let s = model.signals();
+    let trained_rates = vec![s.input.native_rate_hz, s.output.native_rate_hz];
     let mut out = Vec::with_capacity(modes.len());
     for &mode in modes {
         let estimate = model.estimate(log.column(0), log.column(1), mode)?;
@@ -287,6 +319,7 @@ pub fn estimate_log_modes(
             log: log.clone(),
             estimate,
             mode,
+            trained_rates: trained_rates.clone(),
         });
     }
     let mut written: Vec<PathBuf> = Vec::new();
@@ -451,6 +484,8 @@ mod tests {
                 file: "log.mcap".into(),
                 paths: Vec::new(),
                 native_rates: Vec::new(),
+                samples_in_grid: Vec::new(),
+                samples_recorded: Vec::new(),
                 aligned: hbn_io::Aligned {
                     rate_hz: 100.0,
                     t0_ns: 0,
@@ -464,7 +499,36 @@ mod tests {
                 ..Estimate::default()
             },
             mode: Mode::Ekf,
+            trained_rates: Vec::new(),
         }
+    }
+
+    /// A log recorded at the training logs' rates is not warned about, even where those differ
+    /// from the model's grid; one recorded at other rates is, naming both.
+    #[test]
+    fn rates_are_compared_with_the_training_logs() {
+        let mut e = flagged(10, |_| 0);
+        e.log.paths = vec!["/valve.p".parse().unwrap(), "/strain.ohms".parse().unwrap()];
+        e.log.aligned.rate_hz = 200.0;
+        // The valve at the grid's 200 Hz, the strain sensor at 100 Hz, as in training.
+        e.log.native_rates = vec![Some(200.0), Some(100.0)];
+        e.trained_rates = vec![Some(200.0), Some(100.0)];
+        assert!(e.warnings().is_empty(), "{:?}", e.warnings());
+        // The strain sensor now at 50 Hz.
+        e.log.native_rates = vec![Some(200.0), Some(50.0)];
+        let w = e.warnings();
+        assert_eq!(w.len(), 1, "{w:?}");
+        let text = w[0].to_string();
+        assert!(
+            text.contains("/strain.ohms")
+                && text.contains("50.0 Hz")
+                && text.contains("100.0 Hz in the training logs"),
+            "{text}"
+        );
+        // A model without recorded rates compares with its grid.
+        e.trained_rates = vec![None, None];
+        e.log.native_rates = vec![Some(200.0), Some(100.0)];
+        assert_eq!(e.warnings().len(), 1);
     }
 
     /// One re-start of a lost filter is worth a warning; the share of outliers is, above

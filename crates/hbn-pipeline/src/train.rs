@@ -140,12 +140,18 @@ pub fn train_from_logs(
         samples: data.iter().map(LogData::len).sum(),
     });
     let mut described = params.signals.clone();
-    for (info, path) in [
+    for (i, (info, path)) in [
         (&mut described.input, &signals.input),
         (&mut described.state, &signals.state),
         (&mut described.output, &signals.output),
-    ] {
+    ]
+    .into_iter()
+    .enumerate()
+    {
         info.path = Some(path.to_string());
+        info.native_rate_hz = data
+            .first()
+            .and_then(|d| d.native_rates.get(i).copied().flatten());
     }
     let params = match rate {
         Some(r) => params.with_rate(r)?,
