@@ -479,7 +479,7 @@ fn model_rate_differs_from_log_rate_prints_a_notice() {
     assert!(!err.contains("note:"), "{err}");
     assert!(
         err.contains(
-            "warning: /input.data is recorded at 100.0 Hz but the model was trained at 50.0 Hz"
+            "warning: /input.data is recorded at 100.0 Hz here but at 50.0 Hz in the training logs"
         ),
         "{err}"
     );
