@@ -38,8 +38,9 @@ pub struct TrainingReport {
     pub n_samples: usize,
     /// Support points kept (exact GP) or inducing points used (sparse GP).
     pub n_support: usize,
-    /// Inducing points asked for (sparse GP only); fewer are used when the data have fewer
-    /// distinct inputs.
+    /// Inducing points asked for (sparse GP only); fewer are used when the kernel matrix of
+    /// the inputs has a lower numerical rank (every other input's variance given the points
+    /// chosen is below `1e-10` of the signal variance, [`crate::sparse::greedy_variance_selection`]).
     #[serde(default)]
     pub n_inducing_requested: Option<usize>,
     /// The policy applied when samples exceeded the maximum (`None` = all kept).
@@ -111,9 +112,16 @@ impl TrainingReport {
         if let Some(asked) = self.n_inducing_requested
             && asked > self.n_support
         {
+            // The greedy selection stops once every candidate's variance given the points
+            // chosen is below 1e-10 of the signal variance (`greedy_variance_selection`): the
+            // kernel matrix of the inputs has that numerical rank, whatever their number.
             w.push(format!(
-                "asked for {asked} inducing points; the data support only {} distinct ones",
-                self.n_support
+                "{n} of the {asked} inducing points asked for are used: under the learned \
+                 kernel every training input's variance given these {n} is below 1e-10 of the \
+                 signal variance (the inputs span few of the kernel's length scales), so more \
+                 points would change nothing; not a fault: {n} inducing points give the same \
+                 fit, and inputs that vary more (wider or faster excitation) would use more",
+                n = self.n_support
             ));
         }
         if self.jitter_evaluations > 0 {
@@ -517,6 +525,38 @@ impl GaussianProcess {
 mod tests {
     use super::*;
     use crate::{GpParams, fit};
+
+    /// What "fewer inducing points than asked" counts: not distinct inputs (all 2000 differ
+    /// here) but the numerical rank of the learned kernel's matrix over them. A smooth relation
+    /// on inputs that span a fraction of one length scale is determined by a few points; the
+    /// warning says so, and that asking for that many gives the same fit.
+    #[test]
+    fn fewer_inducing_points_counts_the_kernel_rank() {
+        let x: Vec<f64> = (0..2000).map(|i| i as f64 / 2000.0).collect();
+        let y: Vec<f64> = x.iter().map(|v| 0.3 * v + 0.1 * v * v).collect();
+        let mut params = GpParams::new(KernelSpec::se_ard(1));
+        params.n_starts = 1;
+        params.max_iters = 30;
+        params.sparse = Some(crate::SparseParams::new(32));
+        let gp = fit(&params, &x, &y).unwrap();
+        let used = gp.n_support();
+        assert!(used < 32, "{used}");
+        let w = gp.report().warnings();
+        let msg = w.iter().find(|w| w.contains("inducing points asked for")).unwrap();
+        assert!(msg.starts_with(&format!("{used} of the 32 inducing points asked for")), "{msg}");
+        assert!(msg.contains("below 1e-10 of the signal variance"), "{msg}");
+        assert!(msg.contains("give the same fit"), "{msg}");
+        assert!(!msg.contains("distinct"), "{msg}");
+        // The same number asked for: the same fit, and no warning.
+        params.sparse = Some(crate::SparseParams::new(used));
+        let again = fit(&params, &x, &y).unwrap();
+        assert_eq!(again.n_support(), used);
+        assert!(
+            !again.report().warnings().iter().any(|w| w.contains("asked for")),
+            "{:?}",
+            again.report().warnings()
+        );
+    }
 
     fn trained() -> GaussianProcess {
         let x: Vec<f64> = (0..120).map(|i| (i as f64 * 0.731).sin() * 2.0).collect();
