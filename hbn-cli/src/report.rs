@@ -32,6 +32,7 @@ pub fn flag(setting: Setting) -> &'static str {
             Param::LinearMean => "--linear-mean",
             Param::MaxSignalVariance => "--max-signal-variance",
             Param::SensorInputs => "--sensor-inputs",
+            Param::FirmwareBudget => "--firmware-budget",
         },
         Setting::Log(o) => match o {
             LogOption::Rate => "--rate",

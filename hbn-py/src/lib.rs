@@ -303,6 +303,7 @@ impl From<ModelError> for Fail {
                 Fail::new(Kind::ModelFile, e.to_string())
             }
             ModelError::Data(_) => Fail::new(Kind::Data, e.to_string()),
+            ModelError::FirmwareBudget { .. } => Fail::new(Kind::Training, e.to_string()),
         }
     }
 }

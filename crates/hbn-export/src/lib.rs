@@ -37,8 +37,6 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use hbn_core::gp::{GpView, Variance};
-use hbn_core::kernel::profile_and_slope;
 use hbn_core::tables::{self, TableSink, Tables};
 use hbn_core::{CoreError, EkfConfig, Estimator, HbnView, InitPrior, Mode};
 use hbn_model::{HysteresisModel, ModelError};
@@ -159,102 +157,9 @@ impl TableSink for ModelTables {
     }
 }
 
-/// Largest change of a GP's latent variance, as a fraction of what the filter adds it to,
-/// that rounding the GP's variance factor to `f32` may cause before the tables keep the factor
-/// in two parts ([`f32_variance_error`], [`factors_in_two_parts`]).
-pub const F32_VARIANCE_TOLERANCE: f64 = 0.01;
-
-/// Most probes [`f32_variance_error`] takes at a GP's support (inducing) points.
-const VARIANCE_PROBES: usize = 64;
-
-/// How far rounding `gp`'s variance factor to `f32` moves its latent variance where the filter
-/// uses it: the largest `|var_f32 - var_f64| / (var_f64 + noise)` over probes at up to 64 of
-/// its support (inducing) points and midway between consecutive ones, latent variances
-/// clamped at 0 as the GP clamps them, with the GP's noise variance as `noise` where the
-/// filter adds it (`with_noise`), else 0. The variance `k(x,x) - |F k|^2` cancels in as many
-/// digits as the signal variance exceeds the posterior's, so a GP with a large signal variance
-/// (a kernel on a near-linear ridge) can lose there all that `f32` keeps (an error of 1).
-pub fn f32_variance_error(gp: &GpView<'_>, with_noise: bool) -> f64 {
-    let p = gp.parts();
-    let (n, d) = (gp.len(), gp.dim());
-    let spec = *p.kernel.spec();
-    let sf2 = p.kernel.signal_variance();
-    let (factor, exact) = match p.variance {
-        Variance::Exact { chol_packed } => (chol_packed, true),
-        Variance::Sparse { variance_factor } => (variance_factor, false),
-    };
-    let rounded: Vec<f64> = factor.iter().map(|&v| f64::from(v as f32)).collect();
-    let feature = |i: usize| &p.features[i * d..(i + 1) * d];
-    let sign = |i: usize| p.directions.get(i).copied().unwrap_or(1.0);
-    // |F k|^2: `L^{-1} k` by forward substitution (exact), `R k` (sparse); rows packed.
-    let quad = |f: &[f64], k: &[f64]| -> f64 {
-        let mut w = vec![0.0; n];
-        for i in 0..n {
-            let row = &f[i * (i + 1) / 2..][..=i];
-            w[i] = if exact {
-                let dot: f64 = row[..i].iter().zip(&w[..i]).map(|(a, b)| a * b).sum();
-                (k[i] - dot) / row[i]
-            } else {
-                row.iter().zip(k).map(|(a, b)| a * b).sum()
-            };
-        }
-        w.iter().map(|v| v * v).sum()
-    };
-    let mut worst = 0.0f64;
-    let mut k = vec![0.0; n];
-    let step = n.div_ceil(VARIANCE_PROBES).max(1);
-    for i in (0..n).step_by(step) {
-        let next = (i + step).min(n - 1);
-        for (probe, g) in [
-            (feature(i).to_vec(), sign(i)),
-            (
-                feature(i)
-                    .iter()
-                    .zip(feature(next))
-                    .map(|(a, b)| 0.5 * (a + b))
-                    .collect(),
-                sign(i),
-            ),
-        ] {
-            for (j, kj) in k.iter_mut().enumerate() {
-                let r2: f64 = probe
-                    .iter()
-                    .zip(feature(j))
-                    .map(|(a, b)| (a - b) * (a - b))
-                    .sum();
-                *kj =
-                    sf2 * profile_and_slope(spec.profile, r2).0 * spec.direction_factor(g, sign(j));
-            }
-            // The latent variance, clamped at 0 as the GP does.
-            let kss = sf2 * spec.direction_factor(g, g);
-            let var = (kss - quad(factor, &k)).max(0.0);
-            let var32 = (kss - quad(&rounded, &k)).max(0.0);
-            let noise = if with_noise { p.noise_var } else { 0.0 };
-            let err = (var32 - var).abs() / (var + noise);
-            // 0 / 0 (no latent variance and no noise): nothing to lose.
-            if !err.is_nan() {
-                worst = worst.max(err);
-            }
-        }
-    }
-    worst
-}
-
-/// Which variance factors (transition, sensor) the tables keep in two parts: those whose
-/// latent variance rounding to `f32` would move by more than [`F32_VARIANCE_TOLERANCE`] of
-/// what the filter adds it to ([`f32_variance_error`]). The transition's variance enters the
-/// process noise with its noise variance; the sensor's enters the process noise alone.
-pub fn factors_in_two_parts(view: &HbnView<'_>) -> [bool; 2] {
-    f32_variance_errors(view).map(|err| err > F32_VARIANCE_TOLERANCE)
-}
-
-/// [`f32_variance_error`] of the transition GP (with its noise) and of the sensor GP (without).
-pub fn f32_variance_errors(view: &HbnView<'_>) -> [f64; 2] {
-    [
-        f32_variance_error(&view.transition, true),
-        f32_variance_error(&view.sensor, false),
-    ]
-}
+pub use hbn_model::firmware::{
+    F32_VARIANCE_TOLERANCE, f32_variance_error, f32_variance_errors, factors_in_two_parts,
+};
 
 impl ModelTables {
     /// Encodes `view` with `config` ([`tables::encode_with`]), the variance factors that

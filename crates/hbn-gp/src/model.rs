@@ -542,8 +542,14 @@ mod tests {
         let used = gp.n_support();
         assert!(used < 32, "{used}");
         let w = gp.report().warnings();
-        let msg = w.iter().find(|w| w.contains("inducing points asked for")).unwrap();
-        assert!(msg.starts_with(&format!("{used} of the 32 inducing points asked for")), "{msg}");
+        let msg = w
+            .iter()
+            .find(|w| w.contains("inducing points asked for"))
+            .unwrap();
+        assert!(
+            msg.starts_with(&format!("{used} of the 32 inducing points asked for")),
+            "{msg}"
+        );
         assert!(msg.contains("below 1e-10 of the signal variance"), "{msg}");
         assert!(msg.contains("give the same fit"), "{msg}");
         assert!(!msg.contains("distinct"), "{msg}");
@@ -552,7 +558,11 @@ mod tests {
         let again = fit(&params, &x, &y).unwrap();
         assert_eq!(again.n_support(), used);
         assert!(
-            !again.report().warnings().iter().any(|w| w.contains("asked for")),
+            !again
+                .report()
+                .warnings()
+                .iter()
+                .any(|w| w.contains("asked for")),
             "{:?}",
             again.report().warnings()
         );

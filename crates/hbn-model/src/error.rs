@@ -150,6 +150,19 @@ pub enum ModelError {
         #[source]
         source: std::io::Error,
     },
+    /// No configuration a flash budget allows fits it ([`crate::HbnParams::firmware_budget`]).
+    #[error(
+        "no model fits a firmware budget of {budget} bytes: the smallest trained ({inducing} \
+         inducing points per GP) needs {flash} bytes of flash in f32; give a larger budget"
+    )]
+    FirmwareBudget {
+        /// The budget (bytes).
+        budget: u64,
+        /// Inducing points of the smallest configuration trained.
+        inducing: usize,
+        /// Its smallest `f32` flash over the modes (bytes).
+        flash: usize,
+    },
     /// A file that is not a model of a supported version.
     #[error("{path}: {problem}")]
     ModelFile {

@@ -42,6 +42,7 @@ mod estimate;
 mod evidence;
 pub mod explore;
 mod filter;
+pub mod firmware;
 mod local;
 pub mod metrics;
 mod model;
@@ -64,7 +65,8 @@ pub use model::{
 };
 pub use params::{
     Candidate, CheckedHbnParams, ConfigError, DEFAULT_EVIDENCE_KERNELS, DEFAULT_INDUCING,
-    DEFAULT_LAGS, DEFAULT_MEMORY, HbnParams, KernelChoice, LinearMean, Param, ParamValue, Problem,
-    Selection, SensorInputs, SignalInfo, Signals, UnknownKernel,
+    DEFAULT_LAGS, DEFAULT_MEMORY, FIRMWARE_INDUCING_LADDER, HbnParams, KernelChoice, LinearMean,
+    MIN_FIRMWARE_BUDGET, Param, ParamValue, Problem, Selection, SensorInputs, SignalInfo, Signals,
+    UnknownKernel, parse_bytes,
 };
 pub use tuning::{CandidateRow, FilterTuning, NoiseScales, ValidationReport};

@@ -155,6 +155,11 @@ pub struct HysteresisModel {
     /// Training `(y, x)` pairs sorted by `y` (then `x`), for initialising the filter.
     #[serde(default)]
     init_pairs: Vec<[f64; 2]>,
+    /// Training pairs [`HysteresisModel::initial_state`] averages: [`INIT_NEIGHBOURS`], or fewer
+    /// in the same proportion when a flash budget thinned `init_pairs`
+    /// ([`HbnParams::firmware_budget`]).
+    #[serde(default = "init_neighbours_default")]
+    init_neighbours: usize,
     /// Noise scales per mode and the default mode, learned on held-out data.
     #[serde(default)]
     tuning: FilterTuning,
@@ -168,6 +173,41 @@ pub struct HysteresisModel {
 
 /// Training samples consulted by [`HysteresisModel::initial_state`].
 pub const INIT_NEIGHBOURS: usize = 50;
+
+fn init_neighbours_default() -> usize {
+    INIT_NEIGHBOURS
+}
+
+/// Training pairs the prior of `x_0` keeps under a flash budget of `budget` bytes: an eighth
+/// of the budget at 8 bytes a pair (`f32`), at least 32.
+pub fn init_pairs_for_budget(budget: u64) -> usize {
+    usize::try_from(budget / 64).unwrap_or(usize::MAX).max(32)
+}
+
+/// `pairs` thinned to at most `keep` evenly spaced pairs of the sorted table, and the number
+/// of neighbours scaled by the same factor, so that the prior spans about the same range of
+/// `y` (the rule of `hbn export --init-pairs`).
+fn thin_init_pairs(pairs: Vec<[f64; 2]>, keep: usize) -> (Vec<[f64; 2]>, usize) {
+    let n = pairs.len();
+    if keep >= n || keep == 0 {
+        return (pairs, INIT_NEIGHBOURS);
+    }
+    let picked = (0..keep)
+        .filter_map(|i| pairs.get((2 * i + 1) * n / (2 * keep)))
+        .copied()
+        .collect();
+    (picked, ((INIT_NEIGHBOURS * keep + n / 2) / n).max(1))
+}
+
+/// A lower bound of the `f32` flash of sparse GPs with `m` inducing points and inputs of
+/// `dims` (transition, sensor): per GP, the packed variance factor (`m (m + 1) / 2` reals),
+/// the inducing points' features and the weights, 4 bytes each. The tables hold more (kernel,
+/// settings, the prior of `x_0`), so a rung whose bound exceeds the budget is not trained.
+fn sparse_flash_lower_bound(m: usize, dims: [usize; 2]) -> u64 {
+    dims.iter()
+        .map(|&d| 4 * (m * (m + 1) / 2 + m * d + m) as u64)
+        .sum()
+}
 
 /// The outlier gate every trained model's filter ships with ([`EkfConfig::nis_gate`]): a
 /// measurement whose normalised innovation squared exceeds 25 (5 standard deviations; a
@@ -262,10 +302,91 @@ impl HysteresisModel {
     ) -> Result<Self, ModelError> {
         let t0 = Instant::now();
         let chosen = crate::evidence::choose(trajectories, params)?;
-        let mut model = Self::fit_selected(trajectories, &chosen.params, &chosen.prefit, observe)?;
+        let mut model = match params.firmware_budget {
+            Some(budget) => Self::fit_budgeted(
+                trajectories,
+                &chosen.params,
+                &chosen.prefit,
+                budget,
+                observe,
+            )?,
+            None => Self::fit_selected(trajectories, &chosen.params, &chosen.prefit, observe)?,
+        };
         model.summary.kernel_evidence = chosen.rows;
         model.summary.seconds = t0.elapsed().as_secs_f64();
         Ok(model)
+    }
+
+    /// [`Self::fit_checked`] with a flash budget ([`HbnParams::firmware_budget`]): sparse GPs
+    /// with the most inducing points of [`crate::FIRMWARE_INDUCING_LADDER`] whose `f32` export
+    /// fits `budget` bytes of flash in some mode, trained and tuned as usual (model selection
+    /// among the sparse candidates; no exact ones), largest first, skipping the settings whose
+    /// lower bound already exceeds the budget. The flash of a trained candidate is that of its
+    /// export's tables ([`HysteresisModel::firmware_sizes`]). The default mode becomes the
+    /// held-out best of the modes that fit.
+    fn fit_budgeted(
+        trajectories: &[Sequence<'_>],
+        params: &CheckedHbnParams,
+        prefit: &[Prefit],
+        budget: u64,
+        observe: &mut dyn FnMut(GpRole, &FitProgress),
+    ) -> Result<Self, ModelError> {
+        let sensor_dim = match params.sensor_inputs {
+            crate::SensorInputs::Thesis => 3,
+            crate::SensorInputs::State => 2,
+        };
+        let dims = [params.transition_dim(), sensor_dim];
+        let ladder = crate::FIRMWARE_INDUCING_LADDER;
+        let smallest = ladder[ladder.len() - 1];
+        // The smallest flash of a trained rung that did not fit, for the error.
+        let mut closest: Option<(usize, usize)> = None;
+        for m in ladder {
+            if m != smallest && sparse_flash_lower_bound(m, dims) > budget {
+                continue;
+            }
+            let p = params.with_sparse_only(m);
+            let mut model = Self::fit_selected(trajectories, &p, prefit, observe)?;
+            let sizes = model.firmware_sizes(true)?;
+            let fitting: Vec<Mode> = sizes
+                .iter()
+                .filter(|s| s.flash as u64 <= budget)
+                .map(|s| s.mode)
+                .collect();
+            if fitting.is_empty() {
+                let least = sizes.iter().map(|s| s.flash).min().unwrap_or(usize::MAX);
+                if closest.is_none_or(|(_, f)| least < f) {
+                    closest = Some((m, least));
+                }
+                // Fewer points were used than asked: every smaller rung above them is the
+                // same model.
+                continue;
+            }
+            if !fitting.contains(&model.default_mode()) {
+                let best = model.summary.validation.as_ref().and_then(|v| {
+                    v.rows
+                        .iter()
+                        .filter(|r| fitting.contains(&r.mode))
+                        .min_by(|a, b| {
+                            a.tuned
+                                .calibration
+                                .nlpd
+                                .total_cmp(&b.tuned.calibration.nlpd)
+                        })
+                        .map(|r| r.mode)
+                });
+                let mode = best.unwrap_or(fitting[0]);
+                model.tuning.default_mode = mode;
+                if let Some(v) = model.summary.validation.as_mut() {
+                    v.default_mode = mode;
+                }
+            }
+            return Ok(model);
+        }
+        Err(ModelError::FirmwareBudget {
+            budget,
+            inducing: closest.map_or(smallest, |c| c.0),
+            flash: closest.map_or(0, |c| c.1),
+        })
     }
 
     /// [`Self::fit_checked`] once the kernels are chosen: the primary configuration, or model
@@ -935,6 +1056,10 @@ impl HysteresisModel {
         let mut init_pairs: Vec<[f64; 2]> =
             y_all.iter().zip(&x_all).map(|(&y, &x)| [y, x]).collect();
         init_pairs.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+        let (init_pairs, init_neighbours) = match params.firmware_budget {
+            Some(b) => thin_init_pairs(init_pairs, init_pairs_for_budget(b)),
+            None => (init_pairs, INIT_NEIGHBOURS),
+        };
         let mut model = Self {
             params: (**params).clone(),
             transition,
@@ -945,6 +1070,7 @@ impl HysteresisModel {
             x_stats: SignalStats::of(x_all.iter()),
             y_stats: SignalStats::of(y_all.iter()),
             init_pairs,
+            init_neighbours,
             tuning: FilterTuning::default(),
             play_radii: plays.radii().to_vec(),
             summary: TrainingSummary {
@@ -1018,7 +1144,7 @@ impl HysteresisModel {
         let sx = self.x_stats.span();
         Ok(Some(InitPrior::new(
             &self.init_pairs,
-            INIT_NEIGHBOURS,
+            self.init_neighbours,
             1e-4 * sx * sx,
         )?))
     }
@@ -1605,5 +1731,85 @@ mod sparse_start_tests {
             "{} evaluations: the search went on in the bound's rounding noise",
             report.evaluations
         );
+    }
+}
+
+#[cfg(test)]
+mod budget_tests {
+    use super::*;
+    use crate::params::HbnParams;
+    use hbn_sim::{SimConfig, Simulator, SystemKind};
+
+    fn run(n: usize) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+        let mut robot = Simulator::new(&SimConfig::new(SystemKind::Duhem)).unwrap();
+        let u: Vec<f64> = (0..n)
+            .map(|k| {
+                0.8 * (1.0 - ((k % 150) as f64 / 75.0 - 1.0).abs())
+                    * (1.0 - (k / 150 % 3) as f64 * 0.2)
+            })
+            .collect();
+        let (x, y): (Vec<f64>, Vec<f64>) = u.iter().map(|&v| robot.step(v).unwrap()).unzip();
+        (u, x, y)
+    }
+
+    /// A budget trains sparse GPs, a thinned prior of `x_0` and a default mode whose `f32`
+    /// tables fit; the budget is kept in the model file.
+    #[test]
+    fn a_flash_budget_trains_what_fits() {
+        let (u, x, y) = run(900);
+        let budget = 16 * 1024;
+        let params = HbnParams {
+            n_starts: 1,
+            max_iters: 40,
+            firmware_budget: Some(budget),
+            ..HbnParams::default()
+        };
+        let model = HysteresisModel::fit(&[Sequence::new(&u, &x, &y)], &params).unwrap();
+        assert!(model.transition().is_sparse() && model.sensor().is_sparse());
+        assert!(model.init_pairs.len() <= init_pairs_for_budget(budget as u64));
+        assert!(model.init_neighbours < INIT_NEIGHBOURS);
+        let sizes = model.firmware_sizes(true).unwrap();
+        let default = sizes
+            .iter()
+            .find(|s| s.mode == model.default_mode())
+            .unwrap();
+        assert!(default.flash as u64 <= budget, "{sizes:?}");
+        assert!(default.ram > 0);
+        // The lower bound that skips rungs is below the real size.
+        let dims = [params.transition_dim(), 3];
+        let m = model
+            .transition()
+            .n_support()
+            .max(model.sensor().n_support());
+        assert!(
+            sparse_flash_lower_bound(m, dims) as usize <= default.flash,
+            "{sizes:?}"
+        );
+        let back = HysteresisModel::from_json(&model.to_json().unwrap(), "test").unwrap();
+        assert_eq!(back.params().firmware_budget, Some(budget));
+        assert_eq!(back.init_neighbours, model.init_neighbours);
+        assert_eq!(back.firmware_sizes(true).unwrap(), sizes);
+        // A budget nothing fits: an error that says what the smallest needs.
+        let tiny = HbnParams {
+            firmware_budget: Some(1024),
+            ..params
+        };
+        let e = HysteresisModel::fit(&[Sequence::new(&u, &x, &y)], &tiny).unwrap_err();
+        assert!(
+            matches!(e, ModelError::FirmwareBudget { budget: 1024, .. }),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn thinning_keeps_evenly_spaced_pairs_and_scales_the_neighbours() {
+        let pairs: Vec<[f64; 2]> = (0..1000).map(|i| [i as f64, 0.0]).collect();
+        let (kept, k) = thin_init_pairs(pairs.clone(), 100);
+        assert_eq!(kept.len(), 100);
+        assert_eq!(kept[0][0], 5.0);
+        assert_eq!(k, 5);
+        assert_eq!(thin_init_pairs(pairs, 2000).1, INIT_NEIGHBOURS);
+        assert_eq!(init_pairs_for_budget(16 * 1024), 256);
+        assert_eq!(init_pairs_for_budget(1024), 32);
     }
 }

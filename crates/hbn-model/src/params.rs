@@ -171,6 +171,12 @@ pub struct Signals {
     pub state: SignalInfo,
     /// Sensor output `y` (e.g. strain sensor voltage).
     pub output: SignalInfo,
+    /// The clock the training logs were read on (`log` or `header`), if read from logs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_source: Option<String>,
+    /// The largest gap allowed in the training logs (s), if read from logs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_gap_s: Option<f64>,
 }
 
 impl Default for Signals {
@@ -185,6 +191,8 @@ impl Default for Signals {
             input: s("u"),
             state: s("x"),
             output: s("y"),
+            time_source: None,
+            max_gap_s: None,
         }
     }
 }
@@ -431,8 +439,53 @@ pub struct HbnParams {
     /// the chosen kernels with this list empty.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub kernel_evidence: Vec<KernelChoice>,
+    /// Flash budget of the firmware export, in bytes (`None`: no budget). With a budget,
+    /// training fits what an `f32` export can hold in that many bytes of constant tables:
+    /// sparse GPs with the most inducing points of [`FIRMWARE_INDUCING_LADDER`] whose tables
+    /// fit, no exact candidates, a prior of `x_0` thinned to an eighth of the budget, and a
+    /// default mode among those whose tables fit (docs/firmware.md, "Training for a flash
+    /// budget").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub firmware_budget: Option<u64>,
     /// Signal names, paths and units.
     pub signals: Signals,
+}
+
+/// The inducing settings a training with [`HbnParams::firmware_budget`] tries, largest first.
+pub const FIRMWARE_INDUCING_LADDER: [usize; 7] = [64, 48, 32, 24, 16, 12, 8];
+
+/// The smallest [`HbnParams::firmware_budget`] accepted (bytes).
+pub const MIN_FIRMWARE_BUDGET: u64 = 1024;
+
+/// Parses a size in bytes: a number with an optional unit `B`, `KB`/`K`/`KiB` (1024 bytes)
+/// or `MB`/`M`/`MiB` (1024 KB), case-insensitive, e.g. `16KB`, `1.5MB`, `65536`. Fractions of a
+/// byte are dropped.
+pub fn parse_bytes(text: &str) -> Result<u64, String> {
+    let t = text.trim();
+    let split = t
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(t.len());
+    let (number, unit) = t.split_at(split);
+    let scale: f64 = match unit.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => 1.0,
+        "k" | "kb" | "kib" => 1024.0,
+        "m" | "mb" | "mib" => 1024.0 * 1024.0,
+        _ => {
+            return Err(format!(
+                "cannot read {text:?} as a size: write bytes, or a number with KB or MB (16KB, 1MB)"
+            ));
+        }
+    };
+    let value: f64 = number.parse().map_err(|_| {
+        format!(
+            "cannot read {text:?} as a size: write bytes, or a number with KB or MB (16KB, 1MB)"
+        )
+    })?;
+    let bytes = value * scale;
+    if !(bytes.is_finite() && bytes < 2f64.powi(63)) {
+        return Err(format!("{text:?} is too large a size"));
+    }
+    Ok(bytes as u64)
 }
 
 /// The kernels each GP chooses among by evidence by default ([`HbnParams::kernel_evidence`]).
@@ -560,6 +613,7 @@ impl Default for HbnParams {
                 sensor_inputs: vec![SensorInputs::State],
             },
             kernel_evidence: DEFAULT_EVIDENCE_KERNELS.to_vec(),
+            firmware_budget: None,
             signals: Signals::default(),
         }
     }
@@ -611,11 +665,14 @@ pub enum Param {
     /// [`HbnParams::sensor_inputs`] (`thesis` or `state`, or a list of them: the first is the
     /// primary one, the rest [`Selection::sensor_inputs`]).
     SensorInputs,
+    /// [`HbnParams::firmware_budget`] (bytes, or a size such as `16KB`, [`parse_bytes`]; `none`
+    /// for no budget).
+    FirmwareBudget,
 }
 
 impl Param {
     /// Every parameter, in the order front ends list them.
-    pub const ALL: [Param; 20] = [
+    pub const ALL: [Param; 21] = [
         Param::Rate,
         Param::Kernel,
         Param::TransitionKernel,
@@ -636,6 +693,7 @@ impl Param {
         Param::LinearMean,
         Param::MaxSignalVariance,
         Param::SensorInputs,
+        Param::FirmwareBudget,
     ];
 
     /// The Rust name (the field of [`HbnParams`]; `kernel` for the shorthand).
@@ -661,6 +719,7 @@ impl Param {
             Param::LinearMean => "linear_mean",
             Param::MaxSignalVariance => "max_signal_variance",
             Param::SensorInputs => "sensor_inputs",
+            Param::FirmwareBudget => "firmware_budget",
         }
     }
 }
@@ -781,6 +840,15 @@ impl std::ops::Deref for CheckedHbnParams {
 }
 
 impl CheckedHbnParams {
+    /// These parameters with sparse GPs of `m` inducing points and no other inducing setting
+    /// to choose among (a rung of a flash budget's ladder, [`HbnParams::firmware_budget`]).
+    pub(crate) fn with_sparse_only(&self, m: usize) -> Self {
+        let mut p = self.0.clone();
+        p.n_inducing = Some(m);
+        p.select.inducing.clear();
+        Self(p, false)
+    }
+
     /// The parameters.
     pub fn into_inner(self) -> HbnParams {
         self.0
@@ -1080,6 +1148,9 @@ impl HbnParams {
         positive(Param::NoiseFloor, self.noise_floor)?;
         if let Some(v) = self.max_signal_variance {
             positive(Param::MaxSignalVariance, v)?;
+        }
+        if let Some(b) = self.firmware_budget {
+            at_least(Param::FirmwareBudget, b, MIN_FIRMWARE_BUDGET)?;
         }
         if !(self.blr_window.is_finite() && self.blr_window > 0.0 && self.blr_window <= 0.5) {
             return Err(ConfigError::new(
@@ -1394,6 +1465,23 @@ impl HbnParams {
                 self.max_signal_variance = None;
             }
             (Param::MaxSignalVariance, _) => return wrong("a number, or none"),
+            (Param::FirmwareBudget, ParamValue::Int(v)) => self.firmware_budget = Some(v),
+            (Param::FirmwareBudget, ParamValue::Text(t))
+                if t.trim().eq_ignore_ascii_case("none") =>
+            {
+                self.firmware_budget = None;
+            }
+            (Param::FirmwareBudget, ParamValue::Text(t)) => {
+                self.firmware_budget = Some(parse_bytes(&t).map_err(|_| {
+                    ConfigError::new(
+                        param,
+                        Problem::WrongType {
+                            expected: "bytes, or a size such as 16KB or 1MB",
+                        },
+                    )
+                })?);
+            }
+            (Param::FirmwareBudget, _) => return wrong("bytes, or a size such as 16KB or 1MB"),
             (Param::Rate | Param::NoiseFloor | Param::BlrWindow | Param::Validation, _) => {
                 return wrong("a number");
             }
@@ -1474,6 +1562,7 @@ impl HbnParams {
                 Some(v) => ParamValue::Real(v),
                 None => ParamValue::Text("none".to_owned()),
             },
+            Param::FirmwareBudget => ParamValue::Int(self.firmware_budget?),
             Param::Blr => return None,
         })
     }
@@ -1500,11 +1589,53 @@ fn core_reason(e: hbn_core::CoreError) -> &'static str {
 mod tests {
     use super::*;
 
+    /// Sizes in bytes, KB (1024) and MB (1024 KB), any case, with or without a space.
+    #[test]
+    fn firmware_budget_sizes_parse() {
+        for (text, bytes) in [
+            ("16KB", 16 * 1024),
+            ("16kb", 16 * 1024),
+            ("64 KiB", 64 * 1024),
+            ("1MB", 1024 * 1024),
+            ("1.5M", 1536 * 1024),
+            ("4096", 4096),
+            ("4096B", 4096),
+            (" 8k ", 8192),
+        ] {
+            assert_eq!(parse_bytes(text), Ok(bytes), "{text}");
+        }
+        for bad in ["", "KB", "16 GB", "-1KB", "1e3", "sixteen", "16KB extra"] {
+            assert!(parse_bytes(bad).is_err(), "{bad}");
+        }
+        let mut p = HbnParams::default();
+        assert_eq!(p.get(Param::FirmwareBudget), None);
+        p.set(Param::FirmwareBudget, ParamValue::Text("16KB".into()))
+            .unwrap();
+        assert_eq!(p.firmware_budget, Some(16384));
+        assert_eq!(p.get(Param::FirmwareBudget), Some(ParamValue::Int(16384)));
+        p.set(Param::FirmwareBudget, ParamValue::Int(65536))
+            .unwrap();
+        assert_eq!(p.firmware_budget, Some(65536));
+        p.set(Param::FirmwareBudget, ParamValue::Text("none".into()))
+            .unwrap();
+        assert_eq!(p.firmware_budget, None);
+        let e = p
+            .set(Param::FirmwareBudget, ParamValue::Text("lots".into()))
+            .unwrap_err();
+        assert_eq!(e.param, Param::FirmwareBudget);
+        p.firmware_budget = Some(512);
+        assert_eq!(p.check_ref().unwrap_err().param, Param::FirmwareBudget);
+        // Older parameter files (no field) read as no budget; no budget is not written.
+        let json = serde_json::to_string(&HbnParams::default()).unwrap();
+        assert!(!json.contains("firmware_budget"));
+    }
+
     /// One bad value per checked parameter: the check names that parameter.
     #[test]
     fn every_check_names_its_parameter() {
         type Spoil = fn(&mut HbnParams);
-        let bad: [(Param, Spoil); 20] = [
+        let bad: [(Param, Spoil); 21] = [
+            (Param::FirmwareBudget, |p| p.firmware_budget = Some(100)),
             (Param::Lags, |p| p.lags = vec![0.0]),
             (Param::Lags, |p| p.lags = vec![f64::INFINITY]),
             (Param::Lags, |p| p.lags = vec![1.0; 3]),
