@@ -1093,6 +1093,19 @@ mod tests {
         }
         let table = size_table(&sizes, m.default_mode());
         assert!(table.contains("ekf-blr"), "{table}");
+        // The sizes a flash budget is trained against (hbn_model::firmware) are these.
+        for model in [&m, &model(None)] {
+            for (p, f32) in [(Precision::F32, true), (Precision::F64, false)] {
+                let here = size_report(model, p, None).unwrap();
+                let there = model.firmware_sizes(f32).unwrap();
+                for (a, b) in here.iter().zip(&there) {
+                    assert_eq!(
+                        (a.mode, a.model_bytes, a.work_bytes()),
+                        (b.mode, b.flash, b.ram)
+                    );
+                }
+            }
+        }
         for (format, names) in [
             (Format::Rust, &["hbn_model.rs"][..]),
             (Format::C, &["hbn_model.h", "hbn_model.c"][..]),
