@@ -580,6 +580,11 @@ pub struct TrainArgs {
      files, the mode's name added to the file name: est-ekf.csv, est-ekf-blr.csv, ...\n\
      Terms: docs/glossary.md."
 )]
+    /// Train what fits this much firmware flash (the f32 export's tables), e.g. `16KB`, `64KB`,
+    /// `1MB` or bytes: sparse GPs with the most inducing points (64 down to 8) that fit, a
+    /// thinned initial-state table, and a default mode that fits. docs/firmware.md.
+    #[arg(help_heading = "Model", long, value_parser = hbn_model::parse_bytes, value_name = "SIZE")]
+    pub firmware_budget: Option<u64>,
 pub struct EstimateArgs {
     /// Model file from `hbn train`.
     #[arg(long)]

@@ -48,6 +48,9 @@ pub fn size_text(model: &HysteresisModel, init_pairs: Option<usize>) -> anyhow::
     Ok(s)
 }
 
+/// Flash above which `hbn export` warns that the model is not firmware-sized (1 MB).
+const LARGE_FLASH: usize = 1024 * 1024;
+
 /// Runs `hbn export`.
 pub fn run(ui: &mut Ui<'_>, args: &ExportArgs) -> anyhow::Result<()> {
     let model = load_model(&args.model)?;
@@ -109,13 +112,40 @@ pub fn run(ui: &mut Ui<'_>, args: &ExportArgs) -> anyhow::Result<()> {
         names.join(", ")
     ))?;
     if let Some(s) = this {
+        let kb = |b: usize| b as f64 / 1024.0;
+        let against = match model.params().firmware_budget {
+            Some(budget) => {
+                let fits = s.model_bytes as u64 <= budget;
+                format!(
+                    "; the model's firmware budget is {budget} bytes ({:.1} KB): {}",
+                    budget as f64 / 1024.0,
+                    if fits {
+                        "within it".to_owned()
+                    } else if precision == Precision::F64 {
+                        "the budget is for f32 reals (--precision f32)".to_owned()
+                    } else {
+                        format!("over it by {} bytes", s.model_bytes as u64 - budget)
+                    }
+                )
+            }
+            None => String::new(),
+        };
         ui.line(format!(
-            "model data {} bytes ({:.1} KB), work memory {} bytes ({:.1} KB)",
+            "flash (model data) {} bytes ({:.1} KB), RAM (work memory) {} bytes ({:.1} KB){against}",
             s.model_bytes,
-            s.model_bytes as f64 / 1024.0,
+            kb(s.model_bytes),
             s.work_bytes(),
-            s.work_bytes() as f64 / 1024.0
+            kb(s.work_bytes())
         ))?;
+        if s.model_bytes > LARGE_FLASH {
+            ui.warn(format!(
+                "this export's model data need {:.1} MB of flash, more than most \
+                 microcontrollers have; train a model for a flash budget (hbn train \
+                 --firmware-budget 64KB), or a small one by hand (hbn train --inducing 32, then \
+                 hbn export --mode ekf --precision f32); docs/firmware.md",
+                s.model_bytes as f64 / (1024.0 * 1024.0)
+            ));
+        }
     }
     ui.line("firmware size per mode:")?;
     ui.print(size_text(&model, args.init_pairs)?)

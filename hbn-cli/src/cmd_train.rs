@@ -45,6 +45,7 @@ impl TrainArgs {
             linear_mean: self.linear_mean,
             sensor_inputs,
             max_signal_variance: self.max_signal_variance.0,
+            firmware_budget: self.firmware_budget,
             // A kernel named on the command line is used as named.
             kernel_evidence: if self.kernel.is_empty()
                 && self.transition_kernel.is_none()
@@ -139,6 +140,35 @@ pub fn default_mode_line(model: &HysteresisModel) -> String {
 /// held-out scores, and the warnings; with `verbose`, each GP and the held-out table.
 pub fn summary_text(
     model: &HysteresisModel,
+/// The size of a model trained for a flash budget ([`HbnParams::firmware_budget`]): the
+/// inducing points per GP, and the f32 export's flash and RAM in the default mode against the
+/// budget, with the modes that fit (`None` without a budget).
+pub fn budget_line(model: &HysteresisModel) -> Option<String> {
+    let budget = model.params().firmware_budget?;
+    let kb = |b: u64| b as f64 / 1024.0;
+    let sizes = hbn_export::size_report(model, hbn_export::Precision::F32, None).ok()?;
+    let fit: Vec<String> = sizes
+        .iter()
+        .filter(|s| s.model_bytes as u64 <= budget)
+        .map(|s| s.mode.to_string())
+        .collect();
+    let this = sizes.iter().find(|s| s.mode == model.default_mode())?;
+    Some(format!(
+        "  firmware budget {budget} bytes ({:.1} KB): {} and {} inducing points (transition, \
+         sensor); f32 export in mode {}: flash {} bytes ({:.1} KB), RAM {} bytes ({:.1} KB); \
+         modes that fit: {}\n",
+        kb(budget),
+        model.gp(GpRole::Transition).n_support(),
+        model.gp(GpRole::Sensor).n_support(),
+        this.mode,
+        this.model_bytes,
+        kb(this.model_bytes as u64),
+        this.work_bytes(),
+        kb(this.work_bytes() as u64),
+        fit.join(", ")
+    ))
+}
+
     samples: usize,
     out: &std::path::Path,
     verbose: bool,
@@ -160,6 +190,9 @@ pub fn summary_text(
         text.push_str(&format!("  {} rows per GP\n", s.rows));
         for role in GpRole::ALL {
             let gp = model.gp(role);
+    if let Some(line) = budget_line(model) {
+        text.push_str(&line);
+    }
             let (points, score) = if gp.is_sparse() {
                 ("inducing points", "bound")
             } else {
