@@ -113,6 +113,7 @@ def test_defaults_agree_with_rusts_serialised_defaults():
             else j.get("sensor_inputs", "thesis")
         ),
         "max_signal_variance": j["max_signal_variance"],
+        "firmware_budget": j.get("firmware_budget"),
     }
     assert set(expected) == set(TRAINING)
     fit = inspect.signature(hbn.HysteresisModel.fit).parameters

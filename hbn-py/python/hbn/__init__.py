@@ -794,6 +794,11 @@ _TRAINING_PARAMETERS_DOC = """
     max_signal_variance : float or None
         Largest GP signal variance, as a multiple of the variance each kernel models; ``None``
         for only the ``1e5`` box.
+    firmware_budget : int, str or None
+        Train what fits this much firmware flash (the ``f32`` export's tables): bytes, or a
+        size such as ``"16KB"``, ``"64KB"`` or ``"1MB"``. Sparse GPs with the most inducing
+        points (64 down to 8) that fit, a thinned initial-state table and a default mode that
+        fits (``docs/firmware.md``); ``None``: no budget.
 
     ``None`` keeps a parameter's default, except ``n_inducing=None`` (exact GPs). A bad value
     raises :class:`ConfigError` whose ``keyword`` names it.
@@ -878,6 +883,7 @@ class HysteresisModel:
         linear_mean: str = _P["linear_mean"],
         sensor_inputs: Union[str, Sequence[str]] = _P["sensor_inputs"],
         max_signal_variance: Optional[float] = _P["max_signal_variance"],
+        firmware_budget: Union[int, str, None] = _P["firmware_budget"],
     ) -> HysteresisModel:
         """Learns both GPs from logged trajectories sampled at ``rate_hz`` Hz.
 
@@ -938,6 +944,7 @@ class HysteresisModel:
         linear_mean: str = _P["linear_mean"],
         sensor_inputs: Union[str, Sequence[str]] = _P["sensor_inputs"],
         max_signal_variance: Optional[float] = _P["max_signal_variance"],
+        firmware_budget: Union[int, str, None] = _P["firmware_budget"],
     ) -> HysteresisModel:
         """Trains from MCAP logs exactly like ``hbn train`` (the same Rust function): each log is
         one trajectory; the same logs and parameters give a byte-identical model file.
@@ -1327,6 +1334,7 @@ class Explorer:
         max_signal_variance: Optional[float] = _P["max_signal_variance"],
     ) -> None:
         params = _training_args(locals())
+        firmware_budget: Union[int, str, None] = _P["firmware_budget"],
         self._core = _hbn.ExplorerCore(
             _float(u_min, "u_min"),
             _float(u_max, "u_max"),

@@ -190,6 +190,7 @@ class HysteresisModel:
         linear_mean: str = ...,
         sensor_inputs: Union[str, Sequence[str]] = ...,
         max_signal_variance: Optional[float] = ...,
+        firmware_budget: Union[int, str, None] = ...,
     ) -> HysteresisModel: ...
     @classmethod
     def from_logs(
@@ -222,6 +223,7 @@ class HysteresisModel:
         linear_mean: str = ...,
         sensor_inputs: Union[str, Sequence[str]] = ...,
         max_signal_variance: Optional[float] = ...,
+        firmware_budget: Union[int, str, None] = ...,
     ) -> HysteresisModel: ...
     def estimate(self, u: ArrayLike, y: ArrayLike, mode: Optional[str] = None) -> Estimate: ...
     def estimate_log(
@@ -312,6 +314,7 @@ class Explorer:
         linear_mean: str = ...,
         sensor_inputs: Union[str, Sequence[str]] = ...,
         max_signal_variance: Optional[float] = ...,
+        firmware_budget: Union[int, str, None] = ...,
     ) -> None: ...
     def propose(self) -> float: ...
     def observe(self, u: float, x: float, y: float) -> None: ...
