@@ -202,3 +202,101 @@ fn rates_like_the_training_logs_are_not_warned_about() {
         "{stderr}"
     );
 }
+
+/// The rig of the issue: a camera at 30 Hz with one 0.56 s dropout. Training splits the log at
+/// the dropout (a warning says where) instead of failing; estimation on a log whose sensor
+/// drops out for a second restarts the filter after the gap and says so.
+#[test]
+fn a_camera_dropout_splits_the_log_and_a_sensor_dropout_restarts_the_filter() {
+    let d = tempfile::tempdir().unwrap();
+    let p = |n: &str| d.path().join(n);
+    let mut topics = rig(0.0, 20.0, 30.0);
+    // Drop the frames between 9.00 s and 9.56 s.
+    let camera = &mut topics[1];
+    let keep: Vec<bool> = camera.t_s.iter().map(|&t| !(9.0 < t && t < 9.56)).collect();
+    let mut k = keep.iter();
+    camera.t_s.retain(|_| *k.next().unwrap());
+    let mut k = keep.iter();
+    camera.values.retain(|_| *k.next().unwrap());
+    write_log(&p("train.mcap"), &topics);
+    let (e, stderr) = train(&p("train.mcap"), &p("m.hbn"), &[]);
+    assert!(e.is_none(), "{e:?}");
+    assert!(
+        stderr.contains("/camera.data for 0.5") && stderr.contains("split there into 2 pieces"),
+        "{stderr}"
+    );
+
+    // A run-time log whose strain sensor is silent from 12 s to 13 s.
+    let mut topics = rig(0.0, 20.0, 30.0);
+    let strain = &mut topics[2];
+    let keep: Vec<bool> = strain
+        .t_s
+        .iter()
+        .map(|&t| !(12.0 < t && t < 13.0))
+        .collect();
+    let mut k = keep.iter();
+    strain.t_s.retain(|_| *k.next().unwrap());
+    let mut k = keep.iter();
+    strain.values.retain(|_| *k.next().unwrap());
+    write_log(&p("run.mcap"), &topics);
+    let args = [
+        "hbn",
+        "estimate",
+        "--model",
+        p("m.hbn").to_str().unwrap().to_owned().leak(),
+        "--log",
+        p("run.mcap").to_str().unwrap().to_owned().leak(),
+        "--csv",
+        p("est.csv").to_str().unwrap().to_owned().leak(),
+    ];
+    let (mut stdout, mut stderr) = (Vec::new(), Vec::new());
+    let r = hbn_cli::run_with(args, &mut stdout, &mut stderr);
+    assert!(
+        r.is_ok(),
+        "{:?}",
+        r.err().map(|e| hbn_cli::error_message(&e))
+    );
+    let stderr = String::from_utf8_lossy(&stderr);
+    assert!(
+        stderr.contains("the filter restarted after each"),
+        "{stderr}"
+    );
+    // The CSV has no rows inside the gap, and the first row after it carries `initialised`.
+    let csv = std::fs::read_to_string(p("est.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    let t: Vec<f64> = rows.iter().map(|r| r[0].parse().unwrap()).collect();
+    let after = t.iter().position(|&t| t > 12.5).unwrap();
+    assert!(t[after] > 12.9, "no estimate inside the gap: {}", t[after]);
+    assert!(t[after - 1] < 12.1);
+    assert!(rows[after][9].contains("initialised"), "{:?}", rows[after]);
+    assert!(
+        rows.iter()
+            .all(|r| r[3].parse::<f64>().unwrap().is_finite())
+    );
+
+    // A model trained with --max-gap 2 reads run-time logs with it: the 1 s silence is
+    // interpolated over, no restart.
+    let (e, _) = train(&p("train.mcap"), &p("m2.hbn"), &["--max-gap", "2"]);
+    assert!(e.is_none(), "{e:?}");
+    let args = [
+        "hbn",
+        "estimate",
+        "--model",
+        p("m2.hbn").to_str().unwrap().to_owned().leak(),
+        "--log",
+        p("run.mcap").to_str().unwrap().to_owned().leak(),
+    ];
+    let (mut stdout, mut stderr) = (Vec::new(), Vec::new());
+    let r = hbn_cli::run_with(args, &mut stdout, &mut stderr);
+    assert!(
+        r.is_ok(),
+        "{:?}",
+        r.err().map(|e| hbn_cli::error_message(&e))
+    );
+    let stderr = String::from_utf8_lossy(&stderr);
+    assert!(!stderr.contains("restarted"), "{stderr}");
+}

@@ -448,6 +448,32 @@ impl ReadArgs {
     }
 }
 
+/// Log reading options of the commands that read logs for a model (`estimate`, `eval`): each
+/// defaults to what the model was trained with.
+#[derive(Clone, Debug, Default, Args)]
+pub struct ModelReadArgs {
+    /// Clock to place samples at [default: the model's]
+    #[arg(help_heading = "Data", long, value_enum)]
+    pub time_source: Option<TimeSourceArg>,
+    /// Largest allowed gap between two samples of a signal (seconds); the filter restarts after
+    /// a longer one [default: the model's]
+    #[arg(help_heading = "Data", long, allow_negative_numbers = true)]
+    pub max_gap: Option<f64>,
+    /// Warn when a signal spans less than this fraction of its log.
+    #[arg(help_heading = "Data", long, allow_negative_numbers = true, default_value_t = log_options().min_coverage)]
+    pub min_coverage: f64,
+}
+
+impl ModelReadArgs {
+    /// The library's log options for `model`: these values where given, else the model's.
+    pub fn options(&self, model: &hbn_model::HysteresisModel) -> LogOptions {
+        LogOptions {
+            min_coverage: self.min_coverage,
+            ..hbn_pipeline::model_log_options(model, self.time_source.map(Into::into), self.max_gap)
+        }
+    }
+}
+
 /// `hbn train`.
 #[derive(Clone, Debug, Args)]
 #[command(
@@ -554,6 +580,11 @@ pub struct TrainArgs {
     /// a polynomial. docs/sparse.md.
     #[arg(help_heading = "Model", long, value_parser = parse_cap, default_value_t = Cap(params().max_signal_variance), value_name = "V|none")]
     pub max_signal_variance: Cap,
+    /// Train what fits this much firmware flash (the f32 export's tables), e.g. `16KB`, `64KB`,
+    /// `1MB` or bytes: sparse GPs with the most inducing points (64 down to 8) that fit, a
+    /// thinned initial-state table, and a default mode that fits. docs/firmware.md.
+    #[arg(help_heading = "Model", long, value_parser = hbn_model::parse_bytes, value_name = "SIZE")]
+    pub firmware_budget: Option<u64>,
     /// Log reading options.
     #[command(flatten)]
     pub read: ReadArgs,
@@ -580,11 +611,6 @@ pub struct TrainArgs {
      files, the mode's name added to the file name: est-ekf.csv, est-ekf-blr.csv, ...\n\
      Terms: docs/glossary.md."
 )]
-    /// Train what fits this much firmware flash (the f32 export's tables), e.g. `16KB`, `64KB`,
-    /// `1MB` or bytes: sparse GPs with the most inducing points (64 down to 8) that fit, a
-    /// thinned initial-state table, and a default mode that fits. docs/firmware.md.
-    #[arg(help_heading = "Model", long, value_parser = hbn_model::parse_bytes, value_name = "SIZE")]
-    pub firmware_budget: Option<u64>,
 pub struct EstimateArgs {
     /// Model file from `hbn train`.
     #[arg(long)]
@@ -613,7 +639,7 @@ pub struct EstimateArgs {
     pub json: bool,
     /// Log reading options.
     #[command(flatten)]
-    pub read: ReadArgs,
+    pub read: ModelReadArgs,
 }
 
 /// `hbn eval`.
@@ -654,7 +680,7 @@ pub struct EvalArgs {
     pub json: bool,
     /// Log reading options.
     #[command(flatten)]
-    pub read: ReadArgs,
+    pub read: ModelReadArgs,
 }
 
 /// `hbn inspect`.

@@ -116,7 +116,7 @@ pub fn run(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<Vec<LogEstima
     let modes = args
         .mode
         .map_or_else(|| vec![model.default_mode()], |m| m.modes());
-    let opts = args.read.options(None);
+    let opts = args.read.options(&model);
     let mut render = Renderer::default();
     let result = estimate_log_modes(
         &model,

@@ -176,7 +176,7 @@ pub fn run(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<Evaluation> {
         output: args.output.clone(),
     };
     let modes = args.mode.modes();
-    let opts = args.read.options(None);
+    let opts = args.read.options(&model);
     let mut render = Renderer::default();
     let result = evaluate_log(&model, &args.log, &signals, &modes, opts, &mut |e| {
         render.event(ui, e)

@@ -174,6 +174,36 @@ impl Renderer {
                 file.display(),
                 100.0 * covered_s / log_s
             )),
+            Event::Split {
+                file,
+                gaps,
+                overlap_start_ns,
+                pieces,
+                dropped,
+                max_gap_s,
+            } => {
+                let at: Vec<String> = gaps
+                    .iter()
+                    .map(|g| {
+                        let t = (g.start_ns as f64 - overlap_start_ns as f64) * 1e-9;
+                        format!("{} for {:.3} s at t = {t:.3} s", g.path, g.gap_s)
+                    })
+                    .collect();
+                ui.warn(format!(
+                    "`{}` has {} gap{} longer than --max-gap ({max_gap_s} s): {}; it is split \
+                     there into {pieces} piece{}, each a trajectory of its own{}",
+                    file.display(),
+                    gaps.len(),
+                    if gaps.len() == 1 { "" } else { "s" },
+                    at.join(", "),
+                    if pieces == 1 { "" } else { "s" },
+                    if dropped > 0 {
+                        format!(" ({dropped} too short to use left out)")
+                    } else {
+                        String::new()
+                    }
+                ))
+            }
             Event::LogsRead { .. } => {
                 if let Some(msg) = self.when_logs_read.take() {
                     ui.notice(msg);

@@ -310,16 +310,17 @@ fn bad_samples_fail_cleanly() {
         ],
         &["back in time", "--time-source log"],
     );
-    // A 2 s gap in the state.
+    // A 3.4 s gap in the state of a 4 s log: a gap splits a log, but neither piece (0.3 s on
+    // each side) is long enough to train on, so the gap is the error.
     let msgs: Vec<_> = regular(400, |_, k| format!("{}", k as f64 / 400.0))
         .into_iter()
-        .filter(|(t, time, _)| !(t == "/state" && *time > 1_500_000_000 && *time < 3_500_000_000))
+        .filter(|(t, time, _)| !(t == "/state" && *time > 1_300_000_000 && *time < 4_700_000_000))
         .collect();
     write_custom(&dir.join("gap.mcap"), &msgs);
     assert_fails(
         dir,
         &["train", "--log", "gap.mcap", "--out", "model.hbn"],
-        &["/state.data", "gap.mcap", "gap of 2.000 s", "--max-gap"],
+        &["/state.data", "gap.mcap", "gap of 3.4", "--max-gap"],
     );
 }
 

@@ -705,6 +705,7 @@ fn signals_from(d: Option<&Bound<'_, PyDict>>) -> PyResult<Signals> {
         input: signal_info(d.get_item("u")?, def.input, "u")?,
         state: signal_info(d.get_item("x")?, def.state, "x")?,
         output: signal_info(d.get_item("y")?, def.output, "y")?,
+        ..Signals::default()
     })
 }
 
@@ -1085,7 +1086,11 @@ impl HysteresisModelCore {
         max_gap_s: Option<f64>,
     ) -> PyResult<(Arr<'py>, Bound<'py, PyDict>)> {
         let mode = parse_mode(py, mode, self.inner.default_mode())?;
-        let opts = log_options(py, None, time_source, max_gap_s)?;
+        let time_source = time_source
+            .map(|t| hbn_pipeline::parse_time_source(t).map_err(|e| raise(py, e)))
+            .transpose()?;
+        let opts = hbn_pipeline::model_log_options(&self.inner, time_source, max_gap_s);
+        opts.check().map_err(|e| raise(py, e))?;
         let signals = SignalChoice {
             input: input
                 .map(|t| parse_path(py, LogOption::Input, t))

@@ -33,7 +33,9 @@ pub use read::{
     RawSignal, ReadOptions, ReadProgress, TimeSource, TopicInfo, UnknownTimeSource, list_topics,
     read_signals, read_signals_observed,
 };
-pub use resample::{Aligned, ResampleOptions, native_rate_hz, resample};
+pub use resample::{
+    Aligned, ResampleOptions, SignalGap, native_rate_hz, resample, split_at_gaps, window,
+};
 pub use write::{
     Encoding, STAMPED_SCALAR_NAME, ScalarTopic, stamped_scalar_cdr, stamped_scalar_jsonschema,
     stamped_scalar_ros2msg, write_atomic, write_json_log, write_scalar_log,

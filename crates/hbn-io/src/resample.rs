@@ -49,6 +49,77 @@ fn secs(ns: i128) -> f64 {
     ns as f64 * 1e-9
 }
 
+/// A gap longer than the largest allowed: where a log splits ([`split_at_gaps`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SignalGap {
+    /// The signal with the gap.
+    pub path: String,
+    /// The last sample before the gap (ns, on the signals' clock).
+    pub start_ns: u64,
+    /// Its length (s).
+    pub gap_s: f64,
+}
+
+/// The windows of the signals' overlap that no gap longer than `max_gap_s` crosses, in time
+/// order (`[start_ns, end_ns]` each), and the gaps between them. A log with no such gap is one
+/// window, the whole overlap; signals that do not overlap give none.
+pub fn split_at_gaps(signals: &[RawSignal], max_gap_s: f64) -> (Vec<(u64, u64)>, Vec<SignalGap>) {
+    let start = signals.iter().filter_map(|s| s.t_ns.first().copied()).max();
+    let end = signals.iter().filter_map(|s| s.t_ns.last().copied()).min();
+    let (Some(start), Some(end)) = (start, end) else {
+        return (Vec::new(), Vec::new());
+    };
+    if end <= start {
+        return (Vec::new(), Vec::new());
+    }
+    let max_gap_ns = max_gap_s * 1e9;
+    let mut gaps: Vec<SignalGap> = Vec::new();
+    let mut cuts: Vec<(u64, u64)> = Vec::new();
+    for s in signals {
+        for w in s.t_ns.windows(2) {
+            let (a, b) = (w[0], w[1]);
+            if b > start && a < end && (b - a) as f64 > max_gap_ns {
+                cuts.push((a.max(start), b.min(end)));
+                gaps.push(SignalGap {
+                    path: s.path.to_string(),
+                    start_ns: a,
+                    gap_s: secs(i128::from(b - a)),
+                });
+            }
+        }
+    }
+    cuts.sort_unstable();
+    gaps.sort_by_key(|g| g.start_ns);
+    let mut windows = Vec::new();
+    let mut from = start;
+    for (a, b) in cuts {
+        if a > from {
+            windows.push((from, a));
+        }
+        from = from.max(b);
+    }
+    if end > from {
+        windows.push((from, end));
+    }
+    (windows, gaps)
+}
+
+/// The samples of `signal` at times in `[start_ns, end_ns]`.
+pub fn window(signal: &RawSignal, start_ns: u64, end_ns: u64) -> RawSignal {
+    let (t_ns, value) = signal
+        .t_ns
+        .iter()
+        .zip(&signal.value)
+        .filter(|(t, _)| (start_ns..=end_ns).contains(*t))
+        .map(|(t, v)| (*t, *v))
+        .unzip();
+    RawSignal {
+        path: signal.path.clone(),
+        t_ns,
+        value,
+    }
+}
+
 /// Resamples `signals` onto one uniform grid.
 ///
 /// The grid covers the overlap of all signals' time spans (from the latest first sample to the

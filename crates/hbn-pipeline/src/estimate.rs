@@ -10,7 +10,7 @@ use hbn_model::{Estimate, HysteresisModel};
 use serde_json::{Value, json};
 
 use crate::error::{LogOption, PipelineError};
-use crate::log::{LogData, LogOptions, Observer, load_log, parse_signal};
+use crate::log::{LogData, LogOptions, Observer, join_pieces, load_log, parse_signal};
 use crate::train::{DEFAULT_INPUT, DEFAULT_OUTPUT, DEFAULT_STATE};
 
 /// Topic of the estimate in an output MCAP.
@@ -68,6 +68,9 @@ pub struct LogEstimate {
     /// The rate each signal of `log` was recorded at in the training logs (Hz), as the model
     /// records it; `None` where it does not.
     pub trained_rates: Vec<Option<f64>>,
+    /// Grid times (s) where the filter restarted after a gap longer than the largest allowed
+    /// (each such sample carries the flag `initialised`).
+    pub restarts: Vec<f64>,
 }
 
 /// Share of samples flagged [`hbn_core::Flags::EXTRAPOLATION`] above which an estimate
@@ -107,6 +110,11 @@ pub enum EstimateWarning {
         times: usize,
         /// Samples in all.
         total: usize,
+    },
+    /// The log has gaps longer than the largest allowed: the filter restarted after each.
+    Restarted {
+        /// Grid times (s) of the restarts.
+        at_s: Vec<f64>,
     },
     /// A signal is recorded at another rate than in the training logs (or, where the model
     /// does not record those, than the model's rate): the log is resampled differently from
@@ -150,6 +158,17 @@ impl std::fmt::Display for EstimateWarning {
                  training logs, or train with data that cover these inputs and states",
                 if *times == 1 { "" } else { "s" },
                 hbn_core::LOST_AFTER
+            ),
+            EstimateWarning::Restarted { at_s } => write!(
+                f,
+                "the log has {} gap{} longer than the largest gap allowed (--max-gap): the \
+                 filter restarted after each (flag `initialised`), at t = {}",
+                at_s.len(),
+                if at_s.len() == 1 { "" } else { "s" },
+                at_s.iter()
+                    .map(|t| format!("{t:.3} s"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ),
             EstimateWarning::RateMismatch {
                 path,
@@ -209,6 +228,11 @@ impl LogEstimate {
         let times = count(hbn_core::Flags::RELOCALISED);
         if times > 0 {
             out.push(EstimateWarning::Lost { times, total });
+        }
+        if !self.restarts.is_empty() {
+            out.push(EstimateWarning::Restarted {
+                at_s: self.restarts.clone(),
+            });
         }
         // A signal recorded at another rate than in the training logs (or, for a model that does
         // not record those rates, than the model's grid).
@@ -309,17 +333,20 @@ pub fn estimate_log_modes(
         return Err(PipelineError::NoModes);
     }
     let which = [LogOption::Input, LogOption::Output];
-    let log = read_at_model_rate(model, file, signals, &which, log_options, observe)?;
+    let pieces = read_pieces_at_model_rate(model, file, signals, &which, log_options, observe)?;
+    let log = join_pieces(&pieces.pieces).ok_or(PipelineError::NoModes)?;
+    let restarts = restart_times(&pieces.pieces, &log);
     let s = model.signals();
     let trained_rates = vec![s.input.native_rate_hz, s.output.native_rate_hz];
     let mut out = Vec::with_capacity(modes.len());
     for &mode in modes {
-        let estimate = model.estimate(log.column(0), log.column(1), mode)?;
+        let estimate = estimate_pieces(model, &pieces.pieces, mode)?;
         out.push(LogEstimate {
             log: log.clone(),
             estimate,
             mode,
             trained_rates: trained_rates.clone(),
+            restarts: restarts.clone(),
         });
     }
     let mut written: Vec<PathBuf> = Vec::new();
@@ -367,6 +394,79 @@ pub fn read_at_model_rate(
         .map(|&w| signals.resolve(model, w))
         .collect::<Result<Vec<_>, _>>()?;
     load_log(file, &paths, Some(model.rate_hz()), &opts, observe)
+}
+
+/// [`read_at_model_rate`] split at the gaps longer than the largest allowed
+/// ([`crate::load_log_pieces`]): every piece of at least 2 grid samples.
+pub fn read_pieces_at_model_rate(
+    model: &HysteresisModel,
+    file: &Path,
+    signals: &SignalChoice,
+    which: &[LogOption],
+    log_options: LogOptions,
+    observe: &mut Observer<'_>,
+) -> Result<crate::LogPieces, PipelineError> {
+    let opts = log_options.check()?;
+    if let Some(r) = opts.rate_hz
+        && r != model.rate_hz()
+    {
+        return Err(crate::error::OptionError {
+            option: LogOption::Rate,
+            problem: hbn_model::Problem::Invalid {
+                reason: "a model estimates at the rate it was trained at; leave the rate unset",
+            },
+        }
+        .into());
+    }
+    let paths = which
+        .iter()
+        .map(|&w| signals.resolve(model, w))
+        .collect::<Result<Vec<_>, _>>()?;
+    crate::load_log_pieces(file, &paths, Some(model.rate_hz()), &opts, 2, observe)
+}
+
+/// The filter over each piece of a log (columns 0 and 1: `u`, `y`), restarted at each piece,
+/// the estimates one after the other.
+pub(crate) fn estimate_pieces(
+    model: &HysteresisModel,
+    pieces: &[LogData],
+    mode: Mode,
+) -> Result<Estimate, PipelineError> {
+    let mut all = Estimate::default();
+    for piece in pieces {
+        let e = model.estimate(piece.column(0), piece.column(1), mode)?;
+        for (to, from) in [
+            (&mut all.x, e.x),
+            (&mut all.x_std, e.x_std),
+            (&mut all.y_pred, e.y_pred),
+            (&mut all.innovation, e.innovation),
+            (&mut all.nis, e.nis),
+            (&mut all.q_x, e.q_x),
+            (&mut all.r, e.r),
+            (&mut all.obs_min, e.obs_min),
+            (&mut all.obs_max, e.obs_max),
+            (&mut all.obs_x, e.obs_x),
+        ] {
+            to.extend(from);
+        }
+        all.flags.extend(e.flags);
+    }
+    Ok(all)
+}
+
+/// The grid times of `joined` ([`join_pieces`]) where pieces after the first begin.
+pub(crate) fn restart_times(pieces: &[LogData], joined: &LogData) -> Vec<f64> {
+    let mut k = 0;
+    let mut out = Vec::new();
+    for (i, piece) in pieces.iter().enumerate() {
+        if i > 0
+            && let Some(&t) = joined.aligned.t_s.get(k)
+        {
+            out.push(t);
+        }
+        k += piece.len();
+    }
+    out
 }
 
 impl LogEstimate {
@@ -500,6 +600,7 @@ mod tests {
             },
             mode: Mode::Ekf,
             trained_rates: Vec::new(),
+            restarts: Vec::new(),
         }
     }
 

@@ -9,7 +9,8 @@ use hbn_model::{Estimate, HysteresisModel};
 use serde_json::{Map, Value, json};
 
 use crate::error::{LogOption, PipelineError};
-use crate::estimate::{SignalChoice, read_at_model_rate};
+use crate::estimate::{SignalChoice, estimate_pieces, read_pieces_at_model_rate};
+use crate::log::join_pieces;
 use crate::log::{LogData, LogOptions, Observer};
 
 /// A method scored by [`evaluate_log`].
@@ -105,12 +106,23 @@ pub fn evaluate_log(
     observe: &mut Observer<'_>,
 ) -> Result<Evaluation, PipelineError> {
     let which = [LogOption::Input, LogOption::State, LogOption::Output];
-    let log = read_at_model_rate(model, file, signals, &which, log_options, observe)?;
-    let (u, x_ref, y) = (log.column(0), log.column(1), log.column(2));
+    let split = read_pieces_at_model_rate(model, file, signals, &which, log_options, observe)?;
+    let log = join_pieces(&split.pieces).ok_or(PipelineError::NoModes)?;
+    // The filter reads u and y (columns 0 and 2); each piece between long gaps restarts it.
+    let filter_pieces: Vec<LogData> = split
+        .pieces
+        .iter()
+        .map(|p| {
+            let mut q = p.clone();
+            q.aligned.columns = vec![p.column(0).to_vec(), p.column(2).to_vec()];
+            q
+        })
+        .collect();
+    let (u, x_ref) = (log.column(0), log.column(1));
     let mut scores = Vec::new();
     let mut estimates = Vec::new();
     for &mode in modes {
-        let est = model.estimate(u, y, mode)?;
+        let est = estimate_pieces(model, &filter_pieces, mode)?;
         scores.push(Score {
             method: Method::Filter(mode),
             rmse: rmse(&est.x, x_ref),
@@ -119,7 +131,10 @@ pub fn evaluate_log(
         });
         estimates.push((mode, est));
     }
-    let open_loop = model.simulate_open_loop(u)?;
+    let mut open_loop = Vec::with_capacity(u.len());
+    for piece in &split.pieces {
+        open_loop.extend(model.simulate_open_loop(piece.column(0))?);
+    }
     scores.push(Score {
         method: Method::OpenLoop,
         rmse: rmse(&open_loop, x_ref),

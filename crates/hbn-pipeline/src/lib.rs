@@ -37,15 +37,16 @@ pub use error::{LogOption, OptionError, PipelineError, Setting};
 pub use estimate::{
     CSV_HEADER, ESTIMATE_SCHEMA, ESTIMATE_TOPIC, EXTRAPOLATION_WARNING, EstimateWarning,
     LogEstimate, OUTLIER_WARNING, Outputs, SignalChoice, estimate_log, estimate_log_modes,
-    estimate_schema, file_for_mode, read_at_model_rate,
+    estimate_schema, file_for_mode, read_at_model_rate, read_pieces_at_model_rate,
 };
 pub use eval::{Evaluation, Method, Score, evaluate_log};
 pub use log::{
     CheckedLogOptions, DEFAULT_MIN_COVERAGE, DEFAULT_MIN_STATE_SAMPLES, Event, LogData, LogOptions,
-    Observer, RATE_NOTICE_TOLERANCE, load_log, parse_signal, parse_time_source, round_rate,
+    LogPieces, Observer, RATE_NOTICE_TOLERANCE, join_pieces, load_log, load_log_pieces,
+    model_log_options, parse_signal, parse_time_source, round_rate,
 };
 pub use sim::{START_NS, SimLog, log_times, sequences, simulate_log};
 pub use train::{
-    DEFAULT_INPUT, DEFAULT_OUTPUT, DEFAULT_STATE, MIN_LOG_SAMPLES, TrainSignals, Trained,
-    train_from_logs,
+    DEFAULT_INPUT, DEFAULT_OUTPUT, DEFAULT_STATE, MIN_LOG_SAMPLES, MIN_PIECE_SAMPLES, TrainSignals,
+    Trained, train_from_logs,
 };

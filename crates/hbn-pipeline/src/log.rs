@@ -94,6 +94,24 @@ impl LogOptions {
     }
 }
 
+/// The log options to read a log for `model`: `time_source` and `max_gap_s` where given, else
+/// those the model was trained with (else the defaults), at the model's rate.
+pub fn model_log_options(
+    model: &hbn_model::HysteresisModel,
+    time_source: Option<TimeSource>,
+    max_gap_s: Option<f64>,
+) -> LogOptions {
+    let d = LogOptions::default();
+    let s = model.signals();
+    LogOptions {
+        time_source: time_source
+            .or_else(|| s.time_source.as_deref().and_then(|t| t.parse().ok()))
+            .unwrap_or(d.time_source),
+        max_gap_s: max_gap_s.or(s.max_gap_s).unwrap_or(d.max_gap_s),
+        ..d
+    }
+}
+
 /// Parses a time source name (`log`, `header`), naming the option in the error.
 pub fn parse_time_source(text: &str) -> Result<TimeSource, OptionError> {
     text.parse().map_err(|_| OptionError {
@@ -157,6 +175,21 @@ pub enum Event<'a> {
         covered_s: f64,
         /// How long the log's samples span, all signals together (s).
         log_s: f64,
+    },
+    /// A log was split at gaps longer than [`LogOptions::max_gap_s`] ([`load_log_pieces`]).
+    Split {
+        /// The log.
+        file: &'a Path,
+        /// The gaps.
+        gaps: &'a [hbn_io::SignalGap],
+        /// Where the signals' common span starts (ns): the gaps' times are given from there.
+        overlap_start_ns: u64,
+        /// Pieces kept.
+        pieces: usize,
+        /// Pieces left out (too short).
+        dropped: usize,
+        /// The largest gap allowed (s).
+        max_gap_s: f64,
     },
     /// Every log was read and passed its checks; training starts.
     LogsRead {
@@ -251,7 +284,8 @@ impl LogData {
 /// Reads `paths` from `file` in one pass and resamples them to `rate_hz`, or (when `None`) to
 /// the native rate of the first path rounded to 0.1 Hz (reported as [`Event::NativeRate`]). A
 /// signal whose native rate differs from the grid's by more than 1% is reported as
-/// [`Event::Resampling`].
+/// [`Event::Resampling`]. A gap longer than [`LogOptions::max_gap_s`] is an error
+/// ([`load_log_pieces`] splits the log there instead).
 pub fn load_log(
     file: &Path,
     paths: &[SignalPath],
@@ -259,6 +293,86 @@ pub fn load_log(
     opts: &CheckedLogOptions,
     observe: &mut Observer<'_>,
 ) -> Result<LogData, PipelineError> {
+    let (raw, native, rate) = read_raw(file, paths, rate_hz, opts, observe)?;
+    align(file, paths, &raw, native, rate, opts)
+}
+
+/// A log split at its gaps ([`load_log_pieces`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LogPieces {
+    /// The pieces long enough to use, in time order, each on its own grid.
+    pub pieces: Vec<LogData>,
+    /// The gaps longer than [`LogOptions::max_gap_s`] the log was split at.
+    pub gaps: Vec<hbn_io::SignalGap>,
+    /// Pieces left out: shorter than asked for.
+    pub dropped: usize,
+}
+
+/// [`load_log`] that splits the log where a signal has a gap longer than
+/// [`LogOptions::max_gap_s`], instead of failing: each piece between such gaps gets its own
+/// grid (an own trajectory for training, a restart of the filter for estimation). Pieces
+/// between gaps with fewer than `min_samples` grid samples are left out and counted (a log
+/// without such gaps is one piece, however short). A split is reported as
+/// [`Event::Split`]. A log whose pieces are all too short is the gap's error.
+pub fn load_log_pieces(
+    file: &Path,
+    paths: &[SignalPath],
+    rate_hz: Option<f64>,
+    opts: &CheckedLogOptions,
+    min_samples: usize,
+    observe: &mut Observer<'_>,
+) -> Result<LogPieces, PipelineError> {
+    let (raw, native, rate) = read_raw(file, paths, rate_hz, opts, observe)?;
+    let (windows, gaps) = hbn_io::split_at_gaps(&raw, opts.max_gap_s);
+    if gaps.is_empty() {
+        return Ok(LogPieces {
+            pieces: vec![align(file, paths, &raw, native, rate, opts)?],
+            gaps,
+            dropped: 0,
+        });
+    }
+    let mut pieces = Vec::new();
+    let mut dropped = 0;
+    for (start, end) in windows {
+        let sliced: Vec<hbn_io::RawSignal> =
+            raw.iter().map(|s| hbn_io::window(s, start, end)).collect();
+        match align(file, paths, &sliced, native.clone(), rate, opts) {
+            Ok(piece) if piece.len() >= min_samples.max(2) => pieces.push(piece),
+            _ => dropped += 1,
+        }
+    }
+    if pieces.is_empty() {
+        // Nothing usable between the gaps: the first gap is the error.
+        align(file, paths, &raw, native, rate, opts)?;
+    }
+    let overlap_start = raw
+        .iter()
+        .filter_map(|s| s.t_ns.first().copied())
+        .max()
+        .unwrap_or(0);
+    observe(Event::Split {
+        file,
+        gaps: &gaps,
+        overlap_start_ns: overlap_start,
+        pieces: pieces.len(),
+        dropped,
+        max_gap_s: opts.max_gap_s,
+    });
+    Ok(LogPieces {
+        pieces,
+        gaps,
+        dropped,
+    })
+}
+
+/// The raw signals, their native rates and the grid rate (reporting coverage and rates).
+fn read_raw(
+    file: &Path,
+    paths: &[SignalPath],
+    rate_hz: Option<f64>,
+    opts: &CheckedLogOptions,
+    observe: &mut Observer<'_>,
+) -> Result<(Vec<hbn_io::RawSignal>, Vec<Option<f64>>, f64), PipelineError> {
     let read_err = |source| PipelineError::Read {
         file: file.to_owned(),
         source,
@@ -325,14 +439,29 @@ pub fn load_log(
             });
         }
     }
+    Ok((raw, native, rate))
+}
+
+/// `raw` on one grid at `rate`.
+fn align(
+    file: &Path,
+    paths: &[SignalPath],
+    raw: &[hbn_io::RawSignal],
+    native: Vec<Option<f64>>,
+    rate: f64,
+    opts: &CheckedLogOptions,
+) -> Result<LogData, PipelineError> {
     let aligned = hbn_io::resample(
-        &raw,
+        raw,
         &ResampleOptions {
             rate_hz: rate,
             max_gap_s: opts.max_gap_s,
         },
     )
-    .map_err(read_err)?;
+    .map_err(|source| PipelineError::Read {
+        file: file.to_owned(),
+        source,
+    })?;
     // The overlap of all signals' spans, where the grid lies.
     let overlap_start = raw
         .iter()
@@ -362,4 +491,34 @@ pub fn load_log(
         samples_recorded,
         aligned,
     })
+}
+
+/// Pieces of one log as one [`LogData`]: columns and grid times one after the other, the grid
+/// times (seconds since the first piece's start) jumping over the gaps. `None` without pieces.
+pub fn join_pieces(pieces: &[LogData]) -> Option<LogData> {
+    let first = pieces.first()?;
+    let mut joined = first.clone();
+    for piece in pieces.iter().skip(1) {
+        let offset_s = piece.aligned.t0_ns.saturating_sub(first.aligned.t0_ns) as f64 * 1e-9;
+        joined
+            .aligned
+            .t_s
+            .extend(piece.aligned.t_s.iter().map(|t| t + offset_s));
+        for (c, more) in joined
+            .aligned
+            .columns
+            .iter_mut()
+            .zip(&piece.aligned.columns)
+        {
+            c.extend_from_slice(more);
+        }
+        for (n, more) in joined
+            .samples_in_grid
+            .iter_mut()
+            .zip(&piece.samples_in_grid)
+        {
+            *n += more;
+        }
+    }
+    Some(joined)
 }

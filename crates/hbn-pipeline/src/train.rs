@@ -7,7 +7,7 @@ use hbn_io::SignalPath;
 use hbn_model::{HbnParams, HysteresisModel, Problem, Sequence};
 
 use crate::error::{LogOption, OptionError, PipelineError};
-use crate::log::{Event, LogData, LogOptions, Observer, load_log};
+use crate::log::{Event, LogData, LogOptions, Observer, load_log_pieces};
 
 /// Default message path of the input `u` (what `hbn simulate` writes).
 pub const DEFAULT_INPUT: &str = "/input.data";
@@ -18,6 +18,11 @@ pub const DEFAULT_OUTPUT: &str = "/sensor.data";
 
 /// Fewest grid samples a training log must have.
 pub const MIN_LOG_SAMPLES: usize = 10;
+
+/// Fewest grid samples a piece between two gaps of a log needs to be trained on (each piece is
+/// a trajectory of its own, with its own held-out blocks: [`hbn_model::tuning::MIN_TUNING_SAMPLES`]
+/// is the shortest block tuning scores). Shorter pieces are left out and counted.
+pub const MIN_PIECE_SAMPLES: usize = hbn_model::tuning::MIN_TUNING_SAMPLES;
 
 /// Where the three signals are in the logs (Foxglove message paths).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -95,9 +100,11 @@ pub fn train_from_logs(
     let mut rate = opts.rate_hz;
     let mut data = Vec::with_capacity(logs.len());
     for file in logs {
-        let log = load_log(file, &paths, rate, &opts, observe)?;
-        rate = Some(log.rate_hz());
-        data.push(log);
+        let split = load_log_pieces(file, &paths, rate, &opts, MIN_PIECE_SAMPLES, observe)?;
+        for piece in split.pieces {
+            rate = Some(piece.rate_hz());
+            data.push(piece);
+        }
     }
     // The state is what the model learns from: refuse to train on a sliver of it.
     let state_samples: usize = data
@@ -153,6 +160,9 @@ pub fn train_from_logs(
             .first()
             .and_then(|d| d.native_rates.get(i).copied().flatten());
     }
+    // How the logs were read, so that estimation reads its logs the same way by default.
+    described.time_source = Some(opts.time_source.name().to_owned());
+    described.max_gap_s = Some(opts.max_gap_s);
     let params = match rate {
         Some(r) => params.with_rate(r)?,
         None => params,

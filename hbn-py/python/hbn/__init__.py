@@ -1009,14 +1009,16 @@ class HysteresisModel:
         output: Optional[str] = None,
         csv: Optional[PathLike] = None,
         mcap: Optional[PathLike] = None,
-        time_source: str = _L["time_source"],
-        max_gap_s: float = _L["max_gap_s"],
+        time_source: Optional[str] = None,
+        max_gap_s: Optional[float] = None,
     ) -> Estimate:
         """Estimates the state over an MCAP log exactly like ``hbn estimate``: reads ``u`` and
         ``y`` (the model's message paths unless ``input`` / ``output`` are given) at the model's
         rate, runs the filter (``mode``: as in :meth:`estimate`), and writes the estimate to
         ``csv`` and/or ``mcap`` when given (the CLI's formats, atomically). ``time_source`` and
-        ``max_gap_s`` as in :meth:`from_logs`. Returns an :class:`Estimate` with ``t`` set.
+        ``max_gap_s`` as in :meth:`from_logs` (``None``: those the model was trained with); after
+        a gap longer than ``max_gap_s`` the filter restarts (flag ``initialised``). Returns an
+        :class:`Estimate` with ``t`` set.
         """
         t, fields = self._core.estimate_log(
             _fspath(path),
@@ -1025,8 +1027,8 @@ class HysteresisModel:
             _opt_str(output),
             None if csv is None else _fspath(csv),
             None if mcap is None else _fspath(mcap),
-            str(time_source),
-            _float(max_gap_s, "max_gap_s"),
+            _opt_str(time_source),
+            _opt_float(max_gap_s, "max_gap_s"),
         )
         return Estimate(fields, self._mode_name(mode), t)
 
@@ -1332,9 +1334,9 @@ class Explorer:
         linear_mean: str = _P["linear_mean"],
         sensor_inputs: Union[str, Sequence[str]] = _P["sensor_inputs"],
         max_signal_variance: Optional[float] = _P["max_signal_variance"],
+        firmware_budget: Union[int, str, None] = _P["firmware_budget"],
     ) -> None:
         params = _training_args(locals())
-        firmware_budget: Union[int, str, None] = _P["firmware_budget"],
         self._core = _hbn.ExplorerCore(
             _float(u_min, "u_min"),
             _float(u_max, "u_max"),

@@ -234,8 +234,8 @@ class HysteresisModel:
         output: Optional[str] = None,
         csv: Optional[PathLike] = None,
         mcap: Optional[PathLike] = None,
-        time_source: str = ...,
-        max_gap_s: float = ...,
+        time_source: Optional[str] = ...,
+        max_gap_s: Optional[float] = ...,
     ) -> Estimate: ...
     def filter(self, mode: Optional[str] = None) -> Filter: ...
     def simulate_open_loop(self, u: ArrayLike) -> FloatArray: ...
