@@ -1713,15 +1713,19 @@ mod tests {
         assert!(matches!(e.problem, Problem::Unknown { .. }));
         let e = p.set(Param::Seed, ParamValue::Real(1.5)).unwrap_err();
         assert_eq!(e.param, Param::Seed);
-        // Every parameter but the BLR settings and the kernels (chosen by evidence at
-        // training) reads back what the defaults hold.
+        // Every parameter but the BLR settings, the kernels (chosen by evidence at training)
+        // and the firmware budget (none by default) reads back what the defaults hold.
         let d = HbnParams::default();
         for param in Param::ALL {
             let Some(v) = d.get(param) else {
                 assert!(
                     matches!(
                         param,
-                        Param::Blr | Param::Kernel | Param::TransitionKernel | Param::SensorKernel
+                        Param::Blr
+                            | Param::Kernel
+                            | Param::TransitionKernel
+                            | Param::SensorKernel
+                            | Param::FirmwareBudget
                     ),
                     "{param}"
                 );
