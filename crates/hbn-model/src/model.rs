@@ -1766,7 +1766,7 @@ mod budget_tests {
         };
         let model = HysteresisModel::fit(&[Sequence::new(&u, &x, &y)], &params).unwrap();
         assert!(model.transition().is_sparse() && model.sensor().is_sparse());
-        assert!(model.init_pairs.len() <= init_pairs_for_budget(budget as u64));
+        assert!(model.init_pairs.len() <= init_pairs_for_budget(budget));
         assert!(model.init_neighbours < INIT_NEIGHBOURS);
         let sizes = model.firmware_sizes(true).unwrap();
         let default = sizes
