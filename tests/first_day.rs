@@ -278,8 +278,9 @@ fn a_camera_dropout_splits_the_log_and_a_sensor_dropout_restarts_the_filter() {
             .all(|r| r[3].parse::<f64>().unwrap().is_finite())
     );
 
-    // A model trained with --max-gap 2 reads run-time logs with it: the 1 s silence is
-    // interpolated over, no restart.
+    // A model trained with --max-gap 2 reads run-time logs with it: the 1 s silence is a
+    // dropout, not a gap. The filter predicts through it: rows inside it, `y` NaN there (what
+    // the filter read), flagged `measurement_invalid`, and no restart.
     let (e, _) = train(&p("train.mcap"), &p("m2.hbn"), &["--max-gap", "2"]);
     assert!(e.is_none(), "{e:?}");
     let args = [
@@ -289,6 +290,8 @@ fn a_camera_dropout_splits_the_log_and_a_sensor_dropout_restarts_the_filter() {
         p("m2.hbn").to_str().unwrap().to_owned().leak(),
         "--log",
         p("run.mcap").to_str().unwrap().to_owned().leak(),
+        "--csv",
+        p("est2.csv").to_str().unwrap().to_owned().leak(),
     ];
     let (mut stdout, mut stderr) = (Vec::new(), Vec::new());
     let r = hbn_cli::run_with(args, &mut stdout, &mut stderr);
@@ -299,4 +302,24 @@ fn a_camera_dropout_splits_the_log_and_a_sensor_dropout_restarts_the_filter() {
     );
     let stderr = String::from_utf8_lossy(&stderr);
     assert!(!stderr.contains("restarted"), "{stderr}");
+    let csv = std::fs::read_to_string(p("est2.csv")).unwrap();
+    let inside: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|r| {
+            let t: f64 = r[0].parse().unwrap();
+            12.1 < t && t < 12.9
+        })
+        .collect();
+    assert!(
+        inside.len() > 70,
+        "{} rows inside the dropout",
+        inside.len()
+    );
+    for r in &inside {
+        assert_eq!(r[2], "NaN", "{r:?}");
+        assert!(r[9].contains("measurement_invalid"), "{r:?}");
+        assert!(r[3].parse::<f64>().unwrap().is_finite(), "{r:?}");
+    }
 }

@@ -34,7 +34,8 @@ pub use read::{
     read_signals, read_signals_observed,
 };
 pub use resample::{
-    Aligned, ResampleOptions, SignalGap, native_rate_hz, resample, split_at_gaps, window,
+    Aligned, ResampleOptions, SignalGap, dropouts_on_grid, native_rate_hz, resample, split_at_gaps,
+    window,
 };
 pub use write::{
     Encoding, STAMPED_SCALAR_NAME, ScalarTopic, stamped_scalar_cdr, stamped_scalar_jsonschema,

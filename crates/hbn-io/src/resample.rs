@@ -104,6 +104,32 @@ pub fn split_at_gaps(signals: &[RawSignal], max_gap_s: f64) -> (Vec<(u64, u64)>,
     (windows, gaps)
 }
 
+/// For each grid point of `aligned`, whether it lies inside an interval between two
+/// consecutive samples of `signal` longer than `factor` times the signal's median interval: a
+/// dropout shorter than the largest gap allowed, over which the grid value is interpolated,
+/// not measured.
+pub fn dropouts_on_grid(signal: &RawSignal, aligned: &Aligned, factor: f64) -> Vec<bool> {
+    let Some(rate) = native_rate_hz(signal) else {
+        return vec![false; aligned.t_s.len()];
+    };
+    let limit_ns = factor * 1e9 / rate;
+    aligned
+        .t_s
+        .iter()
+        .map(|t| {
+            let at = aligned.t0_ns as f64 + t * 1e9;
+            let k = signal.t_ns.partition_point(|&s| (s as f64) <= at);
+            match (
+                k.checked_sub(1).and_then(|i| signal.t_ns.get(i)),
+                signal.t_ns.get(k),
+            ) {
+                (Some(&a), Some(&b)) => (b - a) as f64 > limit_ns,
+                _ => false,
+            }
+        })
+        .collect()
+}
+
 /// The samples of `signal` at times in `[start_ns, end_ns]`.
 pub fn window(signal: &RawSignal, start_ns: u64, end_ns: u64) -> RawSignal {
     let (t_ns, value) = signal

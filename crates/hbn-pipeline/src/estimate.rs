@@ -340,7 +340,7 @@ pub fn estimate_log_modes(
     let trained_rates = vec![s.input.native_rate_hz, s.output.native_rate_hz];
     let mut out = Vec::with_capacity(modes.len());
     for &mode in modes {
-        let estimate = estimate_pieces(model, &pieces.pieces, mode)?;
+        let estimate = estimate_pieces(model, &pieces.pieces, 0, 1, mode)?;
         out.push(LogEstimate {
             log: log.clone(),
             estimate,
@@ -425,16 +425,27 @@ pub fn read_pieces_at_model_rate(
     crate::load_log_pieces(file, &paths, Some(model.rate_hz()), &opts, 2, observe)
 }
 
-/// The filter over each piece of a log (columns 0 and 1: `u`, `y`), restarted at each piece,
-/// the estimates one after the other.
+/// The filter over each piece of a log (`u` and `y` in columns `u_col` and `y_col`), restarted
+/// at each piece, the estimates one after the other. Sensor values inside a dropout
+/// ([`LogData::dropouts`]) are not fed to the filter (NaN: it predicts through them).
 pub(crate) fn estimate_pieces(
     model: &HysteresisModel,
     pieces: &[LogData],
+    u_col: usize,
+    y_col: usize,
     mode: Mode,
 ) -> Result<Estimate, PipelineError> {
     let mut all = Estimate::default();
     for piece in pieces {
-        let e = model.estimate(piece.column(0), piece.column(1), mode)?;
+        let mut y = piece.column(y_col).to_vec();
+        if let Some(mask) = piece.dropouts.get(y_col) {
+            for (v, &dropped) in y.iter_mut().zip(mask) {
+                if dropped {
+                    *v = f64::NAN;
+                }
+            }
+        }
+        let e = model.estimate(piece.column(u_col), &y, mode)?;
         for (to, from) in [
             (&mut all.x, e.x),
             (&mut all.x_std, e.x_std),
@@ -470,7 +481,8 @@ pub(crate) fn restart_times(pieces: &[LogData], joined: &LogData) -> Vec<f64> {
 }
 
 impl LogEstimate {
-    /// The estimate as CSV text ([`CSV_HEADER`]), with the `u` and `y` it was computed from.
+    /// The estimate as CSV text ([`CSV_HEADER`]), with the `u` and `y` it was computed from
+    /// (`y` is `NaN` inside a sensor dropout, where the filter predicted without it).
     /// Numbers are written with Rust's `{}` (the shortest decimal that parses back to the same
     /// `f64`), so `u`, `y` fed from this file to an `f64` export reproduce `x` bit for bit.
     pub fn csv_text(&self) -> String {
@@ -480,7 +492,17 @@ impl LogEstimate {
         s.push_str(CSV_HEADER);
         s.push('\n');
         let mut names = String::new();
-        let (u, y) = (self.log.column(0), self.log.column(1));
+        // The y the filter read: NaN inside a sensor dropout ([`LogData::dropouts`]).
+        let u = self.log.column(0);
+        let mut y = self.log.column(1).to_vec();
+        if let Some(mask) = self.log.dropouts.get(1) {
+            for (v, &dropped) in y.iter_mut().zip(mask) {
+                if dropped {
+                    *v = f64::NAN;
+                }
+            }
+        }
+        let y = y.as_slice();
         for (k, t) in self.log.aligned.t_s.iter().enumerate() {
             let g = |v: &[f64]| v.get(k).copied().unwrap_or(f64::NAN);
             let flags = est.flags.get(k).copied().unwrap_or(0);
@@ -586,6 +608,7 @@ mod tests {
                 native_rates: Vec::new(),
                 samples_in_grid: Vec::new(),
                 samples_recorded: Vec::new(),
+                dropouts: Vec::new(),
                 aligned: hbn_io::Aligned {
                     rate_hz: 100.0,
                     t0_ns: 0,

@@ -108,21 +108,12 @@ pub fn evaluate_log(
     let which = [LogOption::Input, LogOption::State, LogOption::Output];
     let split = read_pieces_at_model_rate(model, file, signals, &which, log_options, observe)?;
     let log = join_pieces(&split.pieces).ok_or(PipelineError::NoModes)?;
-    // The filter reads u and y (columns 0 and 2); each piece between long gaps restarts it.
-    let filter_pieces: Vec<LogData> = split
-        .pieces
-        .iter()
-        .map(|p| {
-            let mut q = p.clone();
-            q.aligned.columns = vec![p.column(0).to_vec(), p.column(2).to_vec()];
-            q
-        })
-        .collect();
     let (u, x_ref) = (log.column(0), log.column(1));
     let mut scores = Vec::new();
     let mut estimates = Vec::new();
     for &mode in modes {
-        let est = estimate_pieces(model, &filter_pieces, mode)?;
+        // The filter reads u and y (columns 0 and 2); each piece between long gaps restarts it.
+        let est = estimate_pieces(model, &split.pieces, 0, 2, mode)?;
         scores.push(Score {
             method: Method::Filter(mode),
             rmse: rmse(&est.x, x_ref),

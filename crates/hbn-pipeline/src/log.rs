@@ -30,6 +30,11 @@ pub struct LogOptions {
     pub min_state_samples: usize,
 }
 
+/// An interval between two samples of a signal longer than this many times its median
+/// interval is a dropout ([`LogData::dropouts`]): one missing sample (twice the interval) is
+/// interpolated over as measured, two or more are not.
+pub const DROPOUT_FACTOR: f64 = 2.5;
+
 /// Default [`LogOptions::min_coverage`]: a signal that spans less than half of its log.
 pub const DEFAULT_MIN_COVERAGE: f64 = 0.5;
 
@@ -241,6 +246,11 @@ pub struct LogData {
     pub samples_in_grid: Vec<usize>,
     /// Samples of each signal in the log, as recorded.
     pub samples_recorded: Vec<usize>,
+    /// Per signal, the grid points inside a dropout of it (more than [`DROPOUT_FACTOR`] times
+    /// its median interval without a sample, but no longer than the largest gap allowed): there
+    /// its value is interpolated, not measured. Estimation does not feed such sensor values to
+    /// the filter, which predicts through the dropout.
+    pub dropouts: Vec<Vec<bool>>,
     /// The aligned samples.
     pub aligned: Aligned,
 }
@@ -483,12 +493,17 @@ fn align(
         })
         .collect();
     let samples_recorded = raw.iter().map(|s| s.t_ns.len()).collect();
+    let dropouts = raw
+        .iter()
+        .map(|s| hbn_io::dropouts_on_grid(s, &aligned, DROPOUT_FACTOR))
+        .collect();
     Ok(LogData {
         file: file.to_owned(),
         paths: paths.to_vec(),
         native_rates: native,
         samples_in_grid,
         samples_recorded,
+        dropouts,
         aligned,
     })
 }
