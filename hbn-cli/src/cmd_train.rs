@@ -73,7 +73,17 @@ pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<HysteresisModel>
         ..args.read.options(args.rate)
     };
     let params = args.params();
-    let candidates = params.candidates();
+    // With a flash budget every candidate is sparse, at the largest inducing setting that fits
+    // (shown as the ladder's first).
+    let budget = params.firmware_budget.map(|_| HbnParams {
+        n_inducing: Some(hbn_model::FIRMWARE_INDUCING_LADDER[0]),
+        select: Selection {
+            inducing: Vec::new(),
+            ..params.select.clone()
+        },
+        ..params.clone()
+    });
+    let candidates = budget.as_ref().unwrap_or(&params).candidates();
     let mut render = Renderer::default();
     if candidates.len() > 1 {
         // With the kernels chosen by evidence first, the candidates' kernels are not known yet.
@@ -88,8 +98,20 @@ pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<HysteresisModel>
              lowest held-out NLPD, if at least as accurate held out as the first, becomes the model",
             candidates.len(),
             names.join(", "),
-            if evidence { ", each GP's kernel chosen by evidence first" } else { "" }
+            if evidence {
+                ", each GP's kernel chosen by evidence first"
+            } else {
+                ""
+            }
         ));
+        if budget.is_some()
+            && let Some(note) = render.when_logs_read.as_mut()
+        {
+            note.push_str(
+                "; for the firmware budget, m is the most inducing points (64 down to 8) whose \
+                 f32 export fits",
+            );
+        }
     }
     let trained = train_from_logs(&args.logs, &signals, opts, params, &mut |e| {
         render.event(ui, e)
@@ -136,10 +158,6 @@ pub fn default_mode_line(model: &HysteresisModel) -> String {
     }
 }
 
-/// The training summary: what was trained, how long it took, the default mode and its
-/// held-out scores, and the warnings; with `verbose`, each GP and the held-out table.
-pub fn summary_text(
-    model: &HysteresisModel,
 /// The size of a model trained for a flash budget ([`HbnParams::firmware_budget`]): the
 /// inducing points per GP, and the f32 export's flash and RAM in the default mode against the
 /// budget, with the modes that fit (`None` without a budget).
@@ -169,6 +187,10 @@ pub fn budget_line(model: &HysteresisModel) -> Option<String> {
     ))
 }
 
+/// The training summary: what was trained, how long it took, the default mode and its
+/// held-out scores, and the warnings; with `verbose`, each GP and the held-out table.
+pub fn summary_text(
+    model: &HysteresisModel,
     samples: usize,
     out: &std::path::Path,
     verbose: bool,
@@ -186,13 +208,13 @@ pub fn budget_line(model: &HysteresisModel) -> Option<String> {
         default_mode_line(model),
     );
     text.push_str(&report::evidence_line(model, verbose));
+    if let Some(line) = budget_line(model) {
+        text.push_str(&line);
+    }
     if verbose {
         text.push_str(&format!("  {} rows per GP\n", s.rows));
         for role in GpRole::ALL {
             let gp = model.gp(role);
-    if let Some(line) = budget_line(model) {
-        text.push_str(&line);
-    }
             let (points, score) = if gp.is_sparse() {
                 ("inducing points", "bound")
             } else {
