@@ -109,7 +109,7 @@ fn a_16kb_budget_exports_f32_tables_within_16kb() {
         + 4 * define(&header, "HBN_MODEL_REALS_LEN");
     assert!(flash <= 16 * 1024, "flash {flash} bytes over 16 KB");
     assert!(
-        text.contains(&format!("flash (model data) {flash} bytes")),
+        text.contains(&format!("model data {flash} bytes")),
         "{text}"
     );
     assert!(

@@ -131,7 +131,7 @@ pub fn run(ui: &mut Ui<'_>, args: &ExportArgs) -> anyhow::Result<()> {
             None => String::new(),
         };
         ui.line(format!(
-            "flash (model data) {} bytes ({:.1} KB), RAM (work memory) {} bytes ({:.1} KB){against}",
+            "model data {} bytes ({:.1} KB) of flash, work memory {} bytes ({:.1} KB) of RAM{against}",
             s.model_bytes,
             kb(s.model_bytes),
             s.work_bytes(),
