@@ -76,9 +76,9 @@ pub fn run(ui: &mut Ui<'_>, args: &ExportArgs) -> anyhow::Result<()> {
         )
     })?;
     let names: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
-    if precision == Precision::F32
-        && !(model.transition().is_sparse() && model.sensor().is_sparse())
-    {
+    let exact_f32 = precision == Precision::F32
+        && !(model.transition().is_sparse() && model.sensor().is_sparse());
+    if exact_f32 {
         ui.warn(
             "the tables of an exact GP hold its packed Cholesky factor, n (n + 1) / 2 reals per \
              GP (about 1 MB in f32 at the default 500 support points, see docs/firmware.md): for \
@@ -137,7 +137,8 @@ pub fn run(ui: &mut Ui<'_>, args: &ExportArgs) -> anyhow::Result<()> {
             s.work_bytes(),
             kb(s.work_bytes())
         ))?;
-        if s.model_bytes > LARGE_FLASH {
+        // An exact model's f32 export has had its own warning above.
+        if s.model_bytes > LARGE_FLASH && !exact_f32 {
             ui.warn(format!(
                 "this export's model data need {:.1} MB of flash, more than most \
                  microcontrollers have; train a model for a flash budget (hbn train \
