@@ -41,9 +41,9 @@ pub use estimate::{
 };
 pub use eval::{Evaluation, Method, Score, evaluate_log};
 pub use log::{
-    CheckedLogOptions, DEFAULT_MIN_COVERAGE, DEFAULT_MIN_STATE_SAMPLES, Event, LogData, LogOptions,
-    LogPieces, Observer, RATE_NOTICE_TOLERANCE, join_pieces, load_log, load_log_pieces,
-    model_log_options, parse_signal, parse_time_source, round_rate,
+    CheckedLogOptions, DEFAULT_MIN_COVERAGE, DEFAULT_MIN_STATE_SAMPLES, DROPOUT_FACTOR, Event,
+    LogData, LogOptions, LogPieces, Observer, RATE_NOTICE_TOLERANCE, join_pieces, load_log,
+    load_log_pieces, model_log_options, parse_signal, parse_time_source, round_rate,
 };
 pub use sim::{START_NS, SimLog, log_times, sequences, simulate_log};
 pub use train::{
