@@ -303,7 +303,11 @@ pub fn load_log(
     opts: &CheckedLogOptions,
     observe: &mut Observer<'_>,
 ) -> Result<LogData, PipelineError> {
-    let (raw, native, rate) = read_raw(file, paths, rate_hz, opts, observe)?;
+    let RawLog {
+        signals: raw,
+        native,
+        rate_hz: rate,
+    } = read_raw(file, paths, rate_hz, opts, observe)?;
     align(file, paths, &raw, native, rate, opts)
 }
 
@@ -332,7 +336,11 @@ pub fn load_log_pieces(
     min_samples: usize,
     observe: &mut Observer<'_>,
 ) -> Result<LogPieces, PipelineError> {
-    let (raw, native, rate) = read_raw(file, paths, rate_hz, opts, observe)?;
+    let RawLog {
+        signals: raw,
+        native,
+        rate_hz: rate,
+    } = read_raw(file, paths, rate_hz, opts, observe)?;
     let (windows, gaps) = hbn_io::split_at_gaps(&raw, opts.max_gap_s);
     if gaps.is_empty() {
         return Ok(LogPieces {
@@ -375,6 +383,16 @@ pub fn load_log_pieces(
     })
 }
 
+/// A log's signals as recorded, before they are put on a grid.
+struct RawLog {
+    /// The signals, in the order of the paths.
+    signals: Vec<hbn_io::RawSignal>,
+    /// Each signal's native rate (Hz), if it has one.
+    native: Vec<Option<f64>>,
+    /// The grid rate (Hz): given, or the first signal's native rate.
+    rate_hz: f64,
+}
+
 /// The raw signals, their native rates and the grid rate (reporting coverage and rates).
 fn read_raw(
     file: &Path,
@@ -382,7 +400,7 @@ fn read_raw(
     rate_hz: Option<f64>,
     opts: &CheckedLogOptions,
     observe: &mut Observer<'_>,
-) -> Result<(Vec<hbn_io::RawSignal>, Vec<Option<f64>>, f64), PipelineError> {
+) -> Result<RawLog, PipelineError> {
     let read_err = |source| PipelineError::Read {
         file: file.to_owned(),
         source,
@@ -449,7 +467,11 @@ fn read_raw(
             });
         }
     }
-    Ok((raw, native, rate))
+    Ok(RawLog {
+        signals: raw,
+        native,
+        rate_hz: rate,
+    })
 }
 
 /// `raw` on one grid at `rate`.
