@@ -13,6 +13,8 @@ Methods (see ``docs/baselines.md``):
   numpy EKF (``gp_ekf.py``);
 * ``lstm``: a causal 2-layer LSTM ``(u, y) -> x`` in torch (``lstm.py``; skipped with a notice
   when torch is not installed);
+* ``narx``: a NARX network, scikit-learn's ``MLPRegressor`` on standardised windows of the last
+  ``W`` samples of ``u`` and ``y`` (``narx.py``; ``W`` and the width chosen on held-out data);
 * ``floor`` (simulated logs only: ``--simulate`` and ``--grid``, where it is on by default):
   ``hbn.oracle_estimate``, the exact posterior of the state given ``u`` and ``y`` so far, the true
   past states and the simulator itself. No causal estimator has a lower expected squared error,
@@ -20,7 +22,7 @@ Methods (see ``docs/baselines.md``):
 
 Every method is trained on the training logs only and scored on the test log by the same
 code (``common.score``): RMSE, nRMSE, 1- and 2-sigma coverage, mean NEES, NLPD (``null`` for
-the LSTM, which has no standard deviation), training and estimation seconds.
+the LSTM and NARX, which have no standard deviation), training and estimation seconds.
 
 Usage::
 
@@ -66,9 +68,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import common  # noqa: E402
 import gp_ekf  # noqa: E402
 import lstm  # noqa: E402
+import narx  # noqa: E402
 
 #: Every method that trains on the logs, in report order (the default of ``--train``/``--test``).
-METHODS: Tuple[str, ...] = ("hbn", "hbn-ekf", "hbn-ekf-blr", "hbn-open-loop", "sk-gp-ekf", "lstm")
+METHODS: Tuple[str, ...] = ("hbn", "hbn-ekf", "hbn-ekf-blr", "hbn-open-loop", "sk-gp-ekf", "lstm", "narx")
 #: The floor under causal estimation (``hbn.oracle_estimate``): needs the simulator of the logs.
 FLOOR = "floor"
 #: Every method, in report order; the default of ``--simulate`` and ``--grid``.
@@ -79,7 +82,7 @@ HBN_METHODS: Tuple[str, ...] = ("hbn", "hbn-ekf", "hbn-ekf-blr")
 #: alone (no sensor; the floor a filter must beat, thesis Sec. 5).
 HBN_FIT_METHODS: Tuple[str, ...] = HBN_METHODS + ("hbn-open-loop",)
 #: The baselines (what hbn is compared with in the ratio).
-BASELINES: Tuple[str, ...] = ("sk-gp-ekf", "lstm")
+BASELINES: Tuple[str, ...] = ("sk-gp-ekf", "lstm", "narx")
 #: Metric keys of one method's result.
 METRICS: Tuple[str, ...] = (
     "rmse",
@@ -288,6 +291,7 @@ def evaluate(
     methods: Sequence[str] = METHODS,
     gp_rows: int = gp_ekf.GP_ROWS,
     lstm_config: Optional[lstm.LstmConfig] = None,
+    narx_config: Optional[narx.NarxConfig] = None,
     log: Any = None,
     hbn_params: Optional[Mapping[str, Any]] = None,
     simulated: Optional[Tuple[str, float]] = None,
@@ -349,6 +353,12 @@ def evaluate(
             except Exception as e:
                 raw["lstm"] = {"error": f"{type(e).__name__}: {e}"}
                 note(f"lstm failed: {e}")
+    if "narx" in methods:
+        try:
+            raw["narx"] = narx.run(train, test, seed=seed, config=narx_config)
+        except Exception as e:
+            raw["narx"] = {"error": f"{type(e).__name__}: {e}"}
+            note(f"narx failed: {e}")
     if FLOOR in methods and simulated is not None:
         try:
             raw[FLOOR] = run_floor(test, *simulated)
@@ -470,8 +480,8 @@ def markdown_tables(rows: Sequence[Mapping[str, Any]]) -> str:
         return format(m[key], fmt)
 
     out = [
-        "| system | gain | runs | nRMSE hbn (default mode) | nRMSE hbn EKF | nRMSE hbn EKF+BLR | nRMSE hbn open loop | nRMSE sklearn GP-EKF | nRMSE LSTM | hbn / best baseline | hbn EKF / best baseline | hbn EKF+BLR / best baseline | nRMSE floor | hbn / floor |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| system | gain | runs | nRMSE hbn (default mode) | nRMSE hbn EKF | nRMSE hbn EKF+BLR | nRMSE hbn open loop | nRMSE sklearn GP-EKF | nRMSE LSTM | nRMSE NARX | hbn / best baseline | hbn EKF / best baseline | hbn EKF+BLR / best baseline | nRMSE floor | hbn / floor |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         ms = r["methods"]
@@ -513,6 +523,7 @@ def grid(
     methods: Sequence[str] = ALL_METHODS,
     gp_rows: int = gp_ekf.GP_ROWS,
     lstm_config: Optional[lstm.LstmConfig] = None,
+    narx_config: Optional[narx.NarxConfig] = None,
     keep_logs: bool = False,
     log: Any = None,
     hbn_params: Optional[Mapping[str, Any]] = None,
@@ -539,7 +550,7 @@ def grid(
                 with tempfile.TemporaryDirectory(prefix="hbn-baselines-") as tmp:
                     wd = out_dir / "logs" / f"{system}-g{gain:g}-s{seed}" if keep_logs else Path(tmp)
                     train, test = simulate_logs(system, gain, seed, wd, steps=steps)
-                    rep = evaluate(train, test, seed=seed, methods=methods, gp_rows=gp_rows, lstm_config=lstm_config, log=log, hbn_params=hbn_params, simulated=(system, float(gain)))
+                    rep = evaluate(train, test, seed=seed, methods=methods, gp_rows=gp_rows, lstm_config=lstm_config, narx_config=narx_config, log=log, hbn_params=hbn_params, simulated=(system, float(gain)))
                 if not keep_logs:
                     _forget_tmp(rep)
                 doc["runs"].append({"system": system, "gain": float(gain), "seed": seed, "report": rep})

@@ -22,6 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import common  # noqa: E402
 import gp_ekf  # noqa: E402
 import lstm  # noqa: E402
+import narx  # noqa: E402
 import run  # noqa: E402
 
 # ------------------------------------------------------------------------------------------------
@@ -285,6 +286,44 @@ def test_lstm_validation_is_the_tail_of_each_training_log() -> None:
 
 
 # ------------------------------------------------------------------------------------------------
+# NARX
+# ------------------------------------------------------------------------------------------------
+
+TINY_NARX = narx.NarxConfig(windows=(2, 6), widths=(4, 8), max_iter=100)
+
+
+def test_narx_is_causal_deterministic_and_beats_a_trivial_predictor() -> None:
+    *train, test = _toy_logs(200, 2)
+    a = narx.run(train, test, seed=3, config=TINY_NARX)
+    b = narx.run(train, test, seed=3, config=TINY_NARX)
+    assert np.array_equal(a["x"], b["x"]) and a["x_std"] is None
+    assert len(a["holdout_mse"]) == 4 and a["window"] in (2, 6) and a["width"] in (4, 8)
+    # The chosen candidate is the one with the lowest held-out MSE.
+    assert a["holdout_mse"][f"W={a['window']},width={a['width']}"] == min(a["holdout_mse"].values())
+    k0 = 120
+    u2, y2 = test.u.copy(), test.y.copy()
+    u2[k0:] += 3.0
+    y2[k0:] -= 5.0
+    c = narx.run(train, common.Log(u2, test.x, y2, test.rate), seed=3, config=TINY_NARX)
+    assert np.array_equal(a["x"][:k0], c["x"][:k0])  # the future does not change the past
+    assert not np.allclose(a["x"][k0:], c["x"][k0:])
+    # Better than the trivial predictor: the training mean of x.
+    mean_x = np.concatenate([lg.x for lg in train]).mean()
+    trivial = common.rmse(np.full_like(test.x, mean_x), test.x)
+    assert common.rmse(a["x"], test.x) < 0.5 * trivial
+
+
+def test_narx_windows_are_causal_and_padded_with_the_first_sample() -> None:
+    lg = _log([1, 2, 3, 4], [0, 0, 0, 0], [10, 20, 30, 40])
+    sc = narx._Scaler([lg])
+    f = sc.windows(lg, 3)
+    zu = (np.array([1, 2, 3, 4.0]) - 2.5) / np.std([1, 2, 3, 4.0])
+    assert f.shape == (4, 6)
+    assert f[0, :3] == pytest.approx([zu[0]] * 3) and f[3, :3] == pytest.approx(zu[1:])
+    assert f[2, 3:] == pytest.approx(zu[:3])  # y is a multiple of u here: same standardised values
+
+
+# ------------------------------------------------------------------------------------------------
 # The runner, end to end on logs written by the hbn CLI
 # ------------------------------------------------------------------------------------------------
 
@@ -358,6 +397,10 @@ def test_runner_end_to_end_on_simulated_logs(
         assert lstm.SKIP_NOTICE in rep["notices"]
         assert lstm.SKIP_NOTICE in printed.err
     assert "sk-gp-ekf" in printed.out
+    nx = ms["narx"]
+    assert nx["coverage_1sigma"] is None and nx["mean_nees"] is None and nx["nlpd"] is None
+    assert 0.0 < nx["nrmse"] < 0.5 and nx["window"] in narx.NarxConfig().windows
+    assert "narx" in printed.out
 
 
 def test_runner_skips_the_lstm_with_a_notice_without_torch(
