@@ -18,9 +18,10 @@ with.
   training input repeated 10 times, a fresh test input), nRMSE per mode and noise gain, with the
   calibration of the default mode;
 * hbn with its default settings against the baselines of ``benches/baselines`` (the
-  scikit-learn GP-EKF; the LSTM when torch is installed, otherwise left out with a note) and the
-  floor under causal estimation (``hbn.oracle_estimate``), on the same simulated MCAP logs
-  (``benches/baselines/run.py --grid``), as ratios, and the calibration of each.
+  scikit-learn GP-EKF, the NARX network; the LSTM when torch is installed, otherwise left out
+  with a note) and the floor under causal estimation (``hbn.oracle_estimate``), on the same
+  simulated MCAP logs (``benches/baselines/run.py --grid``), as ratios, and the calibration of
+  each.
 
 ``docs/performance.md``:
 
@@ -411,7 +412,7 @@ def grid_methods() -> Tuple[List[str], List[str]]:
     """The grid's methods and the notes about left-out ones."""
     import lstm
 
-    methods = ["hbn", "hbn-ekf", "hbn-ekf-blr", "hbn-open-loop", "sk-gp-ekf", "floor"]
+    methods = ["hbn", "hbn-ekf", "hbn-ekf-blr", "hbn-open-loop", "sk-gp-ekf", "narx", "floor"]
     notes = []
     if lstm.available():
         methods.insert(5, "lstm")
@@ -448,20 +449,20 @@ def grid_section(doc: Mapping[str, Any], plan: Plan, notes: Sequence[str]) -> Li
         "and the true past states; no causal estimator has a lower expected error. Without noise",
         "(gain 0) the floor is 0: the simulator and the input determine the state.",
         "",
-        "- **hbn / better baseline**: hbn's mean nRMSE over the better of the baselines' (below 1:",
+        "- **hbn / best baseline**: hbn's mean nRMSE over the best of the baselines' (below 1:",
         "  hbn is more accurate);",
-        "- **excess over the floor**: `(hbn - floor) / (baseline - floor)`, the share of the better",
+        "- **excess over the floor**: `(hbn - floor) / (baseline - floor)`, the share of the best",
         "  baseline's error above the floor that hbn still has (0: hbn reaches the floor).",
         "",
         f"Simulators {systems}; noise gains {gains}; "
         + (f"seed {seeds}." if len(plan.grid_seeds) == 1 else f"seeds {seeds}; each cell is the mean over the seeds."),
         "",
-        "| system | noise gain | runs | nRMSE hbn | scikit-learn GP-EKF | LSTM | floor | hbn / better baseline | excess over the floor |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| system | noise gain | runs | nRMSE hbn | scikit-learn GP-EKF | LSTM | NARX | floor | hbn / best baseline | excess over the floor |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     ratios, excess = [], []
     for r in rows:
-        h, base = nr(r, "hbn"), [nr(r, b) for b in ("sk-gp-ekf", "lstm")]
+        h, base = nr(r, "hbn"), [nr(r, b) for b in runner.BASELINES]
         base = [b for b in base if b is not None]
         best = min(base) if base else None
         fl = nr(r, "floor")
@@ -473,13 +474,13 @@ def grid_section(doc: Mapping[str, Any], plan: Plan, notes: Sequence[str]) -> Li
             excess.append(ex)
         lines.append(
             f"| {r['system']} | {gain_text(r['gain'])} | {r['runs']} | {fmt(h)} | {fmt(nr(r, 'sk-gp-ekf'))} "
-            f"| {fmt(nr(r, 'lstm'))} | {fmt(fl)} | {fmt(ratio, '.2f')} | {fmt(ex, '.2f')} |"
+            f"| {fmt(nr(r, 'lstm'))} | {fmt(nr(r, 'narx'))} | {fmt(fl)} | {fmt(ratio, '.2f')} | {fmt(ex, '.2f')} |"
         )
     g = geomean(ratios)
     lines += [""]
     if g is not None:
         lines.append(
-            f"Over the {len(ratios)} cells, hbn / better baseline has geometric mean **{g:.2f}**; hbn is "
+            f"Over the {len(ratios)} cells, hbn / best baseline has geometric mean **{g:.2f}**; hbn is "
             f"more accurate in {sum(x < 1 for x in ratios)} of them"
             + (f", and its excess over the floor has median {statistics.median(excess):.2f}." if excess else ".")
         )
@@ -524,7 +525,7 @@ def grid_section(doc: Mapping[str, Any], plan: Plan, notes: Sequence[str]) -> Li
         "How well each estimate's standard deviation describes its error on the test logs of the",
         "grid above: the fraction of samples within 2 standard deviations (0.954 for a Gaussian",
         "error of exactly that size) and the mean NEES (1 when the variance is right; above 1, the",
-        "estimate is overconfident). The LSTM gives no standard deviation.",
+        "estimate is overconfident). The LSTM and NARX give no standard deviation.",
         "",
         "| system | noise gain | 2-sigma hbn | 2-sigma scikit-learn GP-EKF | 2-sigma floor | NEES hbn | NEES scikit-learn GP-EKF | NEES floor |",
         "|---|---|---|---|---|---|---|---|",

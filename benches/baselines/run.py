@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""hbn against the two baselines a researcher would otherwise use, on the SAME MCAP logs.
+"""hbn against the baselines a researcher would otherwise use, on the SAME MCAP logs.
 
 Methods (see ``docs/baselines.md``):
 
