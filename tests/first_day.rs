@@ -117,6 +117,28 @@ fn train(log: &Path, out: &Path, extra: &[&str]) -> (Option<String>, String) {
     )
 }
 
+/// `hbn estimate --model model --log log --csv csv`, which must succeed: its stderr.
+fn estimate(model: &Path, log: &Path, csv: &Path) -> String {
+    let args = [
+        "hbn",
+        "estimate",
+        "--model",
+        model.to_str().unwrap(),
+        "--log",
+        log.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ];
+    let (mut stdout, mut stderr) = (Vec::new(), Vec::new());
+    let r = hbn_cli::run_with(args, &mut stdout, &mut stderr);
+    assert!(
+        r.is_ok(),
+        "{:?}",
+        r.err().map(|e| hbn_cli::error_message(&e))
+    );
+    String::from_utf8_lossy(&stderr).into_owned()
+}
+
 #[test]
 fn a_camera_that_stops_after_three_frames_is_refused_and_writes_no_model() {
     let d = tempfile::tempdir().unwrap();
@@ -169,32 +191,11 @@ fn rates_like_the_training_logs_are_not_warned_about() {
     write_log(&p("train.mcap"), &rig_with_strain(0.0, 20.0, 30.0, 50.0));
     let (e, _) = train(&p("train.mcap"), &p("m.hbn"), &[]);
     assert!(e.is_none(), "{e:?}");
-    let (model, csv) = (p("m.hbn"), p("est.csv"));
-    let estimate = |log: &Path| {
-        let args = [
-            "hbn",
-            "estimate",
-            "--model",
-            model.to_str().unwrap(),
-            "--log",
-            log.to_str().unwrap(),
-            "--csv",
-            csv.to_str().unwrap(),
-        ];
-        let (mut stdout, mut stderr) = (Vec::new(), Vec::new());
-        let r = hbn_cli::run_with(args, &mut stdout, &mut stderr);
-        assert!(
-            r.is_ok(),
-            "{:?}",
-            r.err().map(|e| hbn_cli::error_message(&e))
-        );
-        String::from_utf8_lossy(&stderr).into_owned()
-    };
     write_log(&p("run.mcap"), &rig_with_strain(0.0, 20.0, 30.0, 50.0));
-    let stderr = estimate(&p("run.mcap"));
+    let stderr = estimate(&p("m.hbn"), &p("run.mcap"), &p("est.csv"));
     assert!(!stderr.contains("recorded at"), "{stderr}");
     write_log(&p("other.mcap"), &rig_with_strain(0.0, 20.0, 30.0, 25.0));
-    let stderr = estimate(&p("other.mcap"));
+    let stderr = estimate(&p("m.hbn"), &p("other.mcap"), &p("est.csv"));
     assert!(
         stderr.contains(
             "/strain.data is recorded at 25.0 Hz here but at 50.0 Hz in the training logs"
@@ -239,24 +240,7 @@ fn a_camera_dropout_splits_the_log_and_a_sensor_dropout_restarts_the_filter() {
     let mut k = keep.iter();
     strain.values.retain(|_| *k.next().unwrap());
     write_log(&p("run.mcap"), &topics);
-    let args = [
-        "hbn",
-        "estimate",
-        "--model",
-        p("m.hbn").to_str().unwrap().to_owned().leak(),
-        "--log",
-        p("run.mcap").to_str().unwrap().to_owned().leak(),
-        "--csv",
-        p("est.csv").to_str().unwrap().to_owned().leak(),
-    ];
-    let (mut stdout, mut stderr) = (Vec::new(), Vec::new());
-    let r = hbn_cli::run_with(args, &mut stdout, &mut stderr);
-    assert!(
-        r.is_ok(),
-        "{:?}",
-        r.err().map(|e| hbn_cli::error_message(&e))
-    );
-    let stderr = String::from_utf8_lossy(&stderr);
+    let stderr = estimate(&p("m.hbn"), &p("run.mcap"), &p("est.csv"));
     assert!(
         stderr.contains("the filter restarted after each"),
         "{stderr}"
@@ -283,24 +267,7 @@ fn a_camera_dropout_splits_the_log_and_a_sensor_dropout_restarts_the_filter() {
     // the filter read), flagged `measurement_invalid`, and no restart.
     let (e, _) = train(&p("train.mcap"), &p("m2.hbn"), &["--max-gap", "2"]);
     assert!(e.is_none(), "{e:?}");
-    let args = [
-        "hbn",
-        "estimate",
-        "--model",
-        p("m2.hbn").to_str().unwrap().to_owned().leak(),
-        "--log",
-        p("run.mcap").to_str().unwrap().to_owned().leak(),
-        "--csv",
-        p("est2.csv").to_str().unwrap().to_owned().leak(),
-    ];
-    let (mut stdout, mut stderr) = (Vec::new(), Vec::new());
-    let r = hbn_cli::run_with(args, &mut stdout, &mut stderr);
-    assert!(
-        r.is_ok(),
-        "{:?}",
-        r.err().map(|e| hbn_cli::error_message(&e))
-    );
-    let stderr = String::from_utf8_lossy(&stderr);
+    let stderr = estimate(&p("m2.hbn"), &p("run.mcap"), &p("est2.csv"));
     assert!(!stderr.contains("restarted"), "{stderr}");
     let csv = std::fs::read_to_string(p("est2.csv")).unwrap();
     let inside: Vec<Vec<&str>> = csv

@@ -377,22 +377,7 @@ pub fn read_at_model_rate(
     log_options: LogOptions,
     observe: &mut Observer<'_>,
 ) -> Result<LogData, PipelineError> {
-    let opts = log_options.check()?;
-    if let Some(r) = opts.rate_hz
-        && r != model.rate_hz()
-    {
-        return Err(crate::error::OptionError {
-            option: LogOption::Rate,
-            problem: hbn_model::Problem::Invalid {
-                reason: "a model estimates at the rate it was trained at; leave the rate unset",
-            },
-        }
-        .into());
-    }
-    let paths = which
-        .iter()
-        .map(|&w| signals.resolve(model, w))
-        .collect::<Result<Vec<_>, _>>()?;
+    let (paths, opts) = model_read(model, signals, which, log_options)?;
     load_log(file, &paths, Some(model.rate_hz()), &opts, observe)
 }
 
@@ -406,6 +391,18 @@ pub fn read_pieces_at_model_rate(
     log_options: LogOptions,
     observe: &mut Observer<'_>,
 ) -> Result<crate::LogPieces, PipelineError> {
+    let (paths, opts) = model_read(model, signals, which, log_options)?;
+    crate::load_log_pieces(file, &paths, Some(model.rate_hz()), &opts, 2, observe)
+}
+
+/// The paths of `which` for `model` and the checked options, whose rate must be unset or the
+/// model's: a model estimates only on its own grid.
+fn model_read(
+    model: &HysteresisModel,
+    signals: &SignalChoice,
+    which: &[LogOption],
+    log_options: LogOptions,
+) -> Result<(Vec<SignalPath>, crate::CheckedLogOptions), PipelineError> {
     let opts = log_options.check()?;
     if let Some(r) = opts.rate_hz
         && r != model.rate_hz()
@@ -422,7 +419,7 @@ pub fn read_pieces_at_model_rate(
         .iter()
         .map(|&w| signals.resolve(model, w))
         .collect::<Result<Vec<_>, _>>()?;
-    crate::load_log_pieces(file, &paths, Some(model.rate_hz()), &opts, 2, observe)
+    Ok((paths, opts))
 }
 
 /// The filter over each piece of a log (`u` and `y` in columns `u_col` and `y_col`), restarted
