@@ -20,7 +20,10 @@
 //! quadratic forms (`hbn_gp`'s `fold_sparse_variance` says how `R` is formed without one).
 
 use crate::CoreError;
-use crate::kernel::{Kernel, MAX_DIM, Profile, at, profiles, profiles_and_slopes};
+use crate::kernel::{
+    FEATURE_JACOBIAN_LEN, Kernel, MAX_DENSE_DIM, MAX_DIM, Profile, at, profiles,
+    profiles_and_slopes,
+};
 
 /// Which outputs of [`GpView::predict`] to compute. The mean is always computed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -466,7 +469,7 @@ impl<'a> GpView<'a> {
         let spec = *self.kernel.spec();
         let g_star = spec.direction_of(x_raw);
         let mut u_star = [0.0; MAX_DIM];
-        let mut du_dz = [0.0; MAX_DIM * MAX_DIM];
+        let mut du_dz = [0.0; FEATURE_JACOBIAN_LEN];
         self.kernel
             .features(z.get(..d).unwrap_or(&z), &mut u_star, &mut du_dz);
 
@@ -734,12 +737,19 @@ fn lower_packed_transpose_times_inline(t_packed: &[f64], v: &[f64], out: &mut [f
 /// `grad_raw_j = out_scale * sum_r g_u[r] du_r/dz_j / in_scale_j`.
 fn chain_to_raw(
     g_u: &[f64; MAX_DIM],
-    du_dz: &[f64; MAX_DIM * MAX_DIM],
+    du_dz: &[f64; FEATURE_JACOBIAN_LEN],
     d: usize,
     out_scale: f64,
     in_scale: &[f64],
     out: &mut [f64; MAX_DIM],
 ) {
+    if d > MAX_DENSE_DIM {
+        // A diagonal Jacobian ([`Kernel::features`]).
+        for (((o, s), g), j) in out.iter_mut().zip(in_scale).zip(g_u).zip(du_dz).take(d) {
+            *o = out_scale * (g * j) / s;
+        }
+        return;
+    }
     for (j, (o, s)) in out.iter_mut().zip(in_scale).take(d).enumerate() {
         let mut acc = 0.0;
         for (r, g) in g_u.iter().take(d).enumerate() {
@@ -783,7 +793,9 @@ impl Accum<'_> {
             5 => self.run::<5, GRAD>(kvec, cvec, grad_u),
             6 => self.run::<6, GRAD>(kvec, cvec, grad_u),
             7 => self.run::<7, GRAD>(kvec, cvec, grad_u),
-            _ => self.run::<8, GRAD>(kvec, cvec, grad_u),
+            8 => self.run::<8, GRAD>(kvec, cvec, grad_u),
+            // Wider inputs (vector models) share one pass over `d` of `MAX_DIM` slots.
+            _ => self.run_wide::<GRAD>(d, kvec, cvec, grad_u),
         }
     }
 
@@ -793,6 +805,31 @@ impl Accum<'_> {
     #[inline(always)]
     fn run<const D: usize, const GRAD: bool>(
         &self,
+        kvec: &mut [f64],
+        cvec: Option<&mut [f64]>,
+        grad_u: &mut [f64; MAX_DIM],
+    ) -> f64 {
+        self.run_width::<D, GRAD>(D, kvec, cvec, grad_u)
+    }
+
+    /// [`Accum::run`] for `d` (9..=[`MAX_DIM`]) inputs: one compiled pass for every width.
+    #[inline(never)]
+    fn run_wide<const GRAD: bool>(
+        &self,
+        d: usize,
+        kvec: &mut [f64],
+        cvec: Option<&mut [f64]>,
+        grad_u: &mut [f64; MAX_DIM],
+    ) -> f64 {
+        self.run_width::<MAX_DIM, GRAD>(d.max(1).min(MAX_DIM), kvec, cvec, grad_u)
+    }
+
+    /// The pass over rows of `width` features, with arrays of `D >= width` slots (`D ==
+    /// width` for the passes compiled per dimension).
+    #[inline(always)]
+    fn run_width<const D: usize, const GRAD: bool>(
+        &self,
+        width: usize,
         kvec: &mut [f64],
         mut cvec: Option<&mut [f64]>,
         grad_u: &mut [f64; MAX_DIM],
@@ -810,14 +847,14 @@ impl Accum<'_> {
         while first < n {
             let last = n.min(first + BLOCK);
             let (Some(rows), Some(k_out), Some(alpha)) = (
-                self.features.get(first * D..last * D),
+                self.features.get(first * width..last * width),
                 kvec.get_mut(first..last),
                 self.alpha.get(first..last),
             ) else {
                 break;
             };
             let mut r2 = [0.0; BLOCK];
-            for (r2_i, row) in r2.iter_mut().zip(rows.chunks_exact(D)) {
+            for (r2_i, row) in r2.iter_mut().zip(rows.chunks_exact(width)) {
                 let mut acc = 0.0;
                 for (r, u) in row.iter().zip(&us) {
                     let dj = r - u;
@@ -867,7 +904,9 @@ impl Accum<'_> {
             }
             if GRAD {
                 // dk/du* = c dr2/du* = -2 c (u_i - u*): the mean's gradient weights.
-                for ((row, (k_j, c_j)), a_j) in rows.chunks_exact(D).zip(k.iter().zip(&c)).zip(&a) {
+                for ((row, (k_j, c_j)), a_j) in
+                    rows.chunks_exact(width).zip(k.iter().zip(&c)).zip(&a)
+                {
                     mean += k_j * a_j;
                     let w = -2.0 * c_j * a_j;
                     for ((g, r), u) in gsum.iter_mut().zip(row).zip(&us) {
@@ -1148,7 +1187,7 @@ mod tests {
             let mut feats = [0.0; 18];
             for i in 0..6 {
                 let mut u = [0.0; MAX_DIM];
-                let mut jac = [0.0; MAX_DIM * MAX_DIM];
+                let mut jac = [0.0; FEATURE_JACOBIAN_LEN];
                 k.features(&std(&self.x[i]), &mut u, &mut jac);
                 feats[i * 3..i * 3 + 3].copy_from_slice(&u[..3]);
             }
@@ -1543,6 +1582,108 @@ mod tests {
         }
     }
 
+    /// A GP wider than the passes compiled per dimension (a vector model's transition) predicts
+    /// the dense formulae' mean and variance, and its gradients agree with finite differences.
+    #[test]
+    fn a_wide_gp_matches_the_dense_formulae_and_finite_differences() {
+        const D: usize = 14;
+        const N: usize = 9;
+        for profile in [Profile::SquaredExponential, Profile::Matern52] {
+            let spec = KernelSpec {
+                profile,
+                ..KernelSpec::se_ard(D)
+            };
+            let theta: [f64; D + 1] = core::array::from_fn(|i| 0.3 * libm::sin(1.7 * i as f64));
+            let k = Kernel::new(spec, &theta, &[]).unwrap();
+            let xs: [[f64; D]; N] = core::array::from_fn(|i| {
+                core::array::from_fn(|j| libm::sin(0.9 * i as f64 + 0.4 * j as f64))
+            });
+            let y: [f64; N] = core::array::from_fn(|i| libm::cos(0.7 * i as f64));
+            let noise = 0.05;
+            let mut kk = [[0.0; N]; N];
+            for i in 0..N {
+                for j in 0..N {
+                    kk[i][j] = k.eval(&xs[i], 0.0, &xs[j], 0.0);
+                }
+                kk[i][i] += noise;
+            }
+            // Cholesky, packed.
+            let mut l = [[0.0; N]; N];
+            for i in 0..N {
+                for j in 0..=i {
+                    let mut acc = kk[i][j];
+                    for m in 0..j {
+                        acc -= l[i][m] * l[j][m];
+                    }
+                    l[i][j] = if i == j { acc.sqrt() } else { acc / l[j][j] };
+                }
+            }
+            let mut packed = [0.0; N * (N + 1) / 2];
+            for i in 0..N {
+                for j in 0..=i {
+                    packed[i * (i + 1) / 2 + j] = l[i][j];
+                }
+            }
+            let alpha = spd_solve(&kk, &y);
+            let mut feats = [0.0; N * D];
+            for i in 0..N {
+                let mut u = [0.0; MAX_DIM];
+                let mut jac = [0.0; FEATURE_JACOBIAN_LEN];
+                k.features(&xs[i], &mut u, &mut jac);
+                feats[i * D..i * D + D].copy_from_slice(&u[..D]);
+            }
+            let (mean0, scale1) = ([0.0; D], [1.0; D]);
+            let gp = GpView::new(GpParts {
+                kernel: k,
+                input_mean: &mean0,
+                input_scale: &scale1,
+                output_mean: 0.0,
+                output_scale: 1.0,
+                linear: &[],
+                features: &feats,
+                directions: &[],
+                alpha: &alpha,
+                alpha_lo: &[],
+                variance: Variance::Exact {
+                    chol_packed: &packed,
+                },
+                noise_var: noise,
+            })
+            .unwrap();
+            let mut scratch = [0.0; 4 * N];
+            let x0: [f64; D] = core::array::from_fn(|j| 0.2 * libm::cos(1.1 * j as f64));
+            let p = gp.predict(&x0, Want::ALL, &mut scratch).unwrap();
+            let kstar: [f64; N] = core::array::from_fn(|i| k.eval(&x0, 0.0, &xs[i], 0.0));
+            let mean: f64 = kstar.iter().zip(&alpha).map(|(a, b)| a * b).sum();
+            let v = spd_solve(&kk, &kstar);
+            let var =
+                k.eval(&x0, 0.0, &x0, 0.0) - kstar.iter().zip(&v).map(|(a, b)| a * b).sum::<f64>();
+            assert!((p.mean - mean).abs() < 1e-12, "{profile:?}");
+            assert!((p.variance - var).abs() < 1e-12, "{profile:?}");
+            for j in 0..D {
+                let h = 1e-6;
+                let (mut a, mut b) = (x0, x0);
+                a[j] += h;
+                b[j] -= h;
+                let pa = gp.predict(&a, Want::ALL, &mut scratch).unwrap();
+                let pb = gp.predict(&b, Want::ALL, &mut scratch).unwrap();
+                let fd_m = (pa.mean - pb.mean) / (2.0 * h);
+                let fd_v = (pa.variance - pb.variance) / (2.0 * h);
+                assert!(
+                    (fd_m - p.grad_mean[j]).abs() < 1e-7 * (1.0 + fd_m.abs()),
+                    "{profile:?} j={j}"
+                );
+                assert!(
+                    (fd_v - p.grad_variance[j]).abs() < 1e-7 * (1.0 + fd_v.abs()),
+                    "{profile:?} j={j}"
+                );
+            }
+            // Without gradients the mean is bit-identical.
+            let q = gp.predict(&x0, Want::default(), &mut scratch).unwrap();
+            assert_eq!(q.mean.to_bits(), p.mean.to_bits());
+        }
+    }
+
     /// A linear prior mean adds `w . (x - input_mean)` to the mean and `w` to its gradient,
     /// and leaves the variance alone; a slope count other than 0 or `d` is refused.
     #[test]
@@ -1709,7 +1850,7 @@ mod tests {
             let mut feats = [0.0; 9];
             for i in 0..3 {
                 let mut u = [0.0; MAX_DIM];
-                let mut jac = [0.0; MAX_DIM * MAX_DIM];
+                let mut jac = [0.0; FEATURE_JACOBIAN_LEN];
                 k.features(&std(&zx[i]), &mut u, &mut jac);
                 feats[i * 3..i * 3 + 3].copy_from_slice(&u[..3]);
             }

@@ -28,10 +28,36 @@
 
 use crate::CoreError;
 
-/// Largest number of GP inputs the allocation-free code supports.
-pub const MAX_DIM: usize = 8;
+/// Largest number of GP inputs the allocation-free code supports (a vector model's transition
+/// reads `2 dx + 2 du` values plus the memory of every input).
+pub const MAX_DIM: usize = 32;
+/// Largest number of inputs of a kernel whose features mix or warp its inputs (tanh warping or
+/// the Mahalanobis metric): their feature Jacobian is a dense `d x d` matrix. Kernels with a
+/// diagonal metric and no warping take up to [`MAX_DIM`] inputs.
+pub const MAX_DENSE_DIM: usize = 8;
+/// Length of the feature-Jacobian buffer of [`Kernel::features`] (see
+/// [`feature_jacobian_entry`] for its layout).
+pub const FEATURE_JACOBIAN_LEN: usize = MAX_DENSE_DIM * MAX_DENSE_DIM;
 /// Largest number of tanh units per input in the warping.
 pub const MAX_WARP_UNITS: usize = 4;
+
+/// Entry `du_r / dx_c` of a feature Jacobian written by [`Kernel::features`] for a kernel of
+/// `d` inputs: row-major `d x d` up to [`MAX_DENSE_DIM`] inputs, diagonal above.
+#[inline]
+pub fn feature_jacobian_entry(
+    du_dx: &[f64; FEATURE_JACOBIAN_LEN],
+    d: usize,
+    r: usize,
+    c: usize,
+) -> f64 {
+    if d <= MAX_DENSE_DIM {
+        at(du_dx, r * d + c)
+    } else if r == c {
+        at(du_dx, r)
+    } else {
+        0.0
+    }
+}
 
 const SQRT5: f64 = 2.236_067_977_499_79;
 
@@ -91,7 +117,12 @@ impl KernelSpec {
     /// Checks the structure once, before anything uses it.
     pub fn validate(&self) -> Result<(), CoreError> {
         if self.dim == 0 || self.dim > MAX_DIM {
-            return Err(CoreError::InvalidSpec("dim must be in 1..=MAX_DIM (8)"));
+            return Err(CoreError::InvalidSpec("dim must be in 1..=MAX_DIM (32)"));
+        }
+        if (self.warp_units > 0 || self.metric == Metric::Mahalanobis) && self.dim > MAX_DENSE_DIM {
+            return Err(CoreError::InvalidSpec(
+                "a warped or Mahalanobis kernel takes at most MAX_DENSE_DIM (8) inputs",
+            ));
         }
         if self.warp_units > MAX_WARP_UNITS {
             return Err(CoreError::InvalidSpec(
@@ -375,9 +406,9 @@ pub struct Prepared {
     /// `phi(x)` (equal to `x` without warping).
     pub p: [f64; MAX_DIM],
     /// `d phi_j / d a_ji`.
-    pub dp_da: [[f64; MAX_WARP_UNITS]; MAX_DIM],
+    pub dp_da: [[f64; MAX_WARP_UNITS]; MAX_DENSE_DIM],
     /// `d phi_j / d ln b_ji`.
-    pub dp_db: [[f64; MAX_WARP_UNITS]; MAX_DIM],
+    pub dp_db: [[f64; MAX_WARP_UNITS]; MAX_DENSE_DIM],
     /// `d phi_j / d x_j`.
     pub dp_dx: [f64; MAX_DIM],
     /// Direction sign `g` of this point.
@@ -456,11 +487,17 @@ impl<'a> Kernel<'a> {
         let m = self.spec.warp_units;
         let mut out = Prepared {
             p: [0.0; MAX_DIM],
-            dp_da: [[0.0; MAX_WARP_UNITS]; MAX_DIM],
-            dp_db: [[0.0; MAX_WARP_UNITS]; MAX_DIM],
+            dp_da: [[0.0; MAX_WARP_UNITS]; MAX_DENSE_DIM],
+            dp_db: [[0.0; MAX_WARP_UNITS]; MAX_DENSE_DIM],
             dp_dx: [1.0; MAX_DIM],
             g,
         };
+        if m == 0 {
+            for (p_out, &x) in out.p.iter_mut().zip(x_std).take(d) {
+                *p_out = x;
+            }
+            return out;
+        }
         let rows = out
             .p
             .iter_mut()
@@ -554,16 +591,33 @@ impl<'a> Kernel<'a> {
     }
 
     /// Feature vector `u = L phi(x)` of a standardised input, so that `r2 = |u - u'|^2`,
-    /// and the input Jacobian of the features, row-major `d x d` (`du_r / dx_c`).
+    /// and the input Jacobian of the features `du_r / dx_c`, laid out as
+    /// [`feature_jacobian_entry`] reads it: row-major `d x d` for `d <= MAX_DENSE_DIM`, its
+    /// diagonal above (where [`KernelSpec::validate`] allows only diagonal metrics without
+    /// warping).
     pub fn features(
         &self,
         x_std: &[f64],
         u: &mut [f64; MAX_DIM],
-        du_dx: &mut [f64; MAX_DIM * MAX_DIM],
+        du_dx: &mut [f64; FEATURE_JACOBIAN_LEN],
     ) {
+        let d = self.spec.dim;
+        if d > MAX_DENSE_DIM {
+            // Diagonal metric, no warping: `u_j = s_j x_j`.
+            for (((uj, jac), x), s) in u
+                .iter_mut()
+                .zip(du_dx.iter_mut())
+                .zip(x_std)
+                .zip(&self.metric_scale)
+                .take(d)
+            {
+                *uj = x * s;
+                *jac = *s;
+            }
+            return;
+        }
         let prep = self.prepare(x_std, 0.0);
         self.apply_metric(&prep.p, u);
-        let d = self.spec.dim;
         // du/dx = L diag(phi'(x)): column c of L scaled by phi'_c.
         for (c, &dp) in prep.dp_dx.iter().take(d).enumerate() {
             let mut e = [0.0; MAX_DIM];
@@ -870,7 +924,7 @@ mod tests {
             let x1 = [0.3, -0.7, 1.1];
             let x2 = [-0.2, 0.4, 0.9];
             let (mut u1, mut u2) = ([0.0; MAX_DIM], [0.0; MAX_DIM]);
-            let mut jac = [0.0; MAX_DIM * MAX_DIM];
+            let mut jac = [0.0; FEATURE_JACOBIAN_LEN];
             k.features(&x1, &mut u1, &mut jac);
             k.features(&x2, &mut u2, &mut jac);
             let r2: f64 = (0..3).map(|j| (u1[j] - u2[j]).powi(2)).sum();
@@ -885,7 +939,7 @@ mod tests {
                 a[c] += h;
                 b[c] -= h;
                 let (mut ua, mut ub) = ([0.0; MAX_DIM], [0.0; MAX_DIM]);
-                let mut tmp = [0.0; MAX_DIM * MAX_DIM];
+                let mut tmp = [0.0; FEATURE_JACOBIAN_LEN];
                 k.features(&a, &mut ua, &mut tmp);
                 k.features(&b, &mut ub, &mut tmp);
                 for r in 0..3 {
@@ -899,7 +953,34 @@ mod tests {
     #[test]
     fn invalid_specs_are_rejected() {
         assert!(KernelSpec::se_ard(0).validate().is_err());
-        assert!(KernelSpec::se_ard(9).validate().is_err());
+        assert!(KernelSpec::se_ard(MAX_DIM).validate().is_ok());
+        assert!(KernelSpec::se_ard(MAX_DIM + 1).validate().is_err());
+        // Warped and Mahalanobis kernels have dense feature Jacobians: at most 8 inputs.
+        let wide = KernelSpec::se_ard(MAX_DENSE_DIM + 1);
+        assert!(
+            KernelSpec {
+                warp_units: 1,
+                ..wide
+            }
+            .validate()
+            .is_err()
+        );
+        assert!(
+            KernelSpec {
+                metric: Metric::Mahalanobis,
+                ..wide
+            }
+            .validate()
+            .is_err()
+        );
+        assert!(
+            KernelSpec {
+                warp_units: 1,
+                ..KernelSpec::se_ard(MAX_DENSE_DIM)
+            }
+            .validate()
+            .is_ok()
+        );
         assert!(
             KernelSpec {
                 direction: Some([0, 0]),

@@ -184,7 +184,7 @@ impl<'a> Likelihood<'a> {
         let d = self.data.spec.dim;
         let mut out = Vec::with_capacity(self.data.y.len() * d);
         let mut u = [0.0; hbn_core::MAX_DIM];
-        let mut jac = [0.0; hbn_core::MAX_DIM * hbn_core::MAX_DIM];
+        let mut jac = [0.0; hbn_core::kernel::FEATURE_JACOBIAN_LEN];
         for row in self.data.x.chunks_exact(d) {
             kernel.features(row, &mut u, &mut jac);
             out.extend_from_slice(&u[..d]);

@@ -340,7 +340,7 @@ impl<'a> SparseBound<'a> {
         let sf2 = kernel.signal_variance();
         let mut uz = vec![0.0; m * d];
         let mut u = [0.0; MAX_DIM];
-        let mut jac = [0.0; MAX_DIM * MAX_DIM];
+        let mut jac = [0.0; hbn_core::kernel::FEATURE_JACOBIAN_LEN];
         for a in 0..m {
             kernel.features(&z[a * d..a * d + d], &mut u, &mut jac);
             uz[a * d..a * d + d].copy_from_slice(&u[..d]);
@@ -742,11 +742,18 @@ impl<'a> SparseBound<'a> {
         if want_z {
             // Features to inputs: dF/dz_c = sum_r dF/du_r du_r/dz_c.
             let mut u = [0.0; MAX_DIM];
-            let mut jac = [0.0; MAX_DIM * MAX_DIM];
+            let mut jac = [0.0; hbn_core::kernel::FEATURE_JACOBIAN_LEN];
             for a in 0..m {
                 kernel.features(&z[a * d..a * d + d], &mut u, &mut jac);
                 for c in 0..d {
-                    grad.push((0..d).map(|r| grad_uz[a * d + r] * jac[r * d + c]).sum());
+                    grad.push(
+                        (0..d)
+                            .map(|r| {
+                                grad_uz[a * d + r]
+                                    * hbn_core::kernel::feature_jacobian_entry(&jac, d, r, c)
+                            })
+                            .sum(),
+                    );
                 }
             }
         }
@@ -990,7 +997,7 @@ pub fn greedy_variance_selection(
     let sf2 = kernel.signal_variance();
     let mut feats = vec![0.0; pool_size * d];
     let mut u = [0.0; MAX_DIM];
-    let mut jac = [0.0; MAX_DIM * MAX_DIM];
+    let mut jac = [0.0; hbn_core::kernel::FEATURE_JACOBIAN_LEN];
     for (i, &row) in pool.iter().enumerate() {
         kernel.features(&x_std[row * d..row * d + d], &mut u, &mut jac);
         feats[i * d..i * d + d].copy_from_slice(&u[..d]);
@@ -1236,7 +1243,7 @@ pub(crate) fn fit_sparse(
     let kernel = Kernel::new(spec, &theta, &whiten)?;
     let mut features = Vec::with_capacity(m * d);
     let mut u = [0.0; MAX_DIM];
-    let mut jac = [0.0; MAX_DIM * MAX_DIM];
+    let mut jac = [0.0; hbn_core::kernel::FEATURE_JACOBIAN_LEN];
     for row in z_final.chunks_exact(d) {
         kernel.features(row, &mut u, &mut jac);
         features.extend_from_slice(&u[..d]);

@@ -242,7 +242,7 @@ pub fn fit_observed(
     let kernel = Kernel::new(spec, &theta, &whiten)?;
     let mut features = Vec::with_capacity(n * d);
     let mut u = [0.0; MAX_DIM];
-    let mut jac = [0.0; MAX_DIM * MAX_DIM];
+    let mut jac = [0.0; hbn_core::kernel::FEATURE_JACOBIAN_LEN];
     for row in xs.chunks_exact(d) {
         kernel.features(row, &mut u, &mut jac);
         features.extend_from_slice(&u[..d]);
