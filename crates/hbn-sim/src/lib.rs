@@ -4,7 +4,8 @@
 //! drives a hysteretic actuator `H_a: u -> x` (e.g. finger bend); a soft sensor `H_s: x -> y`
 //! (e.g. strain-sensor voltage), itself mildly hysteretic, of another family, and followed by a
 //! smooth static nonlinearity, reads the state. Everything is deterministic given
-//! `(SimConfig, u)`.
+//! `(SimConfig, u)`. The multi-signal systems ([`MultiKind`], [`simulate_multi`]) have several
+//! inputs, a vector state and several sensors, cross-coupled.
 //!
 //! ## Systems ([`SystemKind`])
 //!
@@ -60,6 +61,53 @@
 //! So `g = 0` gives exactly the clean signals, and with `g = 1` the state disturbance stays
 //! within `+-0.01 * range_x` with variance `(0.02 range_x)^2 / 12`.
 //!
+//! ## Multi-signal systems ([`MultiKind`])
+//!
+//! [`simulate_multi`] runs systems with several inputs `u_c` (chamber valves), a vector state
+//! `x_i` (tip coordinates) and several sensors `y_j`. Every input drives its chamber: a
+//! pneumatic lag (pressure `p_c` follows `u_c`, discretised like `soft-actuator`'s), then the
+//! chamber's own hysteretic bend `b_c = H_c(p_c)`, calibrated to `[0, 1]`. The tip's target is
+//! a mixing of all bends, `m_i = sum_c M[i][c] b_c`, and the tip follows it through a lag
+//! (`tau_tip`); `x_i` is the tip calibrated to `[0, 1]`. Each sensor reads a mixture of the
+//! whole tip, `v_j = sum_i S[j][i] x_i / sum_i S[j][i]`, through its own mildly hysteretic
+//! operator `lin v + k_op H_j(v)` of a family no chamber uses, the affine calibration and the
+//! saturation `tanh(1.5 h) / tanh(1.5)`.
+//!
+//! | name | inputs / states / sensors | chambers: lag `tau`, bend `H_c` | `tau_tip` | sensors `H_j` (before `tanh`) |
+//! |---|---|---|---|---|
+//! | `finger` | 2 / 2 (planar tip: reach, drop) / 3 | 0.08 s, [`BoucWen`] `A = 1, beta = 2.5, gamma = 0.5, k_lin = 1, k_z = -0.5`; 0.12 s, [`PrandtlIshlinskii::default`] | 0.04 s | [`Duhem`] `a = 10, b = 0.5, k_lin = 1`; [`MaxwellSlip`] `k0 = 0.8`, 4 elements `k = 0.2`, `F = 0.004 i`; `0.85 v + 0.15 P(v)`, `P` = [`Preisach`] 40 levels on `[-0.05, 1.05]`, width `0.3 +- 0.1`, centre `0.5 +- 0.35` |
+//! | `arm` | 3 / 3 (spatial tip) / 4 | 0.06 s, [`BoucWen`] `A = 1, beta = 3, gamma = 1, k_lin = 1, k_z = -0.5`; 0.09 s, [`Preisach`] 30 levels on `[0, 1]`, width `0.3 +- 0.15`, centre `0.5 +- 0.3`; 0.12 s, [`Duhem`] `a = 4, b = -0.4, k_lin = 1` | 0.06 s | [`MaxwellSlip`] `k0 = 0.8`, 4 elements `k = 0.2`, `F = 0.004 i`; [`PrandtlIshlinskii`] envelope `2 tanh(v / 2)`, `p0 = 0.3`, radii `0.03, 0.06, 0.09`, weights `0.3`; [`MaxwellSlip`] `k0 = 0.9`, 3 elements `k = 0.3`, `F = 0.003, 0.009, 0.015`; [`PrandtlIshlinskii`] envelope `1.5 tanh(0.7 v)`, `p0 = 0.5`, radii `0.02, 0.05`, weights `0.25` |
+//!
+//! Every chamber's loop lags its pressure (counter-clockwise), so the chambers' loops add up
+//! in the tip instead of cancelling.
+//!
+//! The mixing matrices are [`FINGER_STATE_MIX`], [`FINGER_SENSOR_MIX`], [`ARM_STATE_MIX`] and
+//! [`ARM_SENSOR_MIX`] (their docs give the geometry behind each weight and sign). Every state
+//! component depends on every input and every sensor on every state component: tip component
+//! `i` takes chamber `i` with weight 1 and every other chamber with a weight of magnitude
+//! between 1/3 and 1/2; each sensor's smallest weight is at least a third of its largest.
+//!
+//! **Calibration** is quasi-static (every lag follows its target exactly), one stage at a
+//! time: from the virgin state, all inputs together run the cycle `0 -> 1 -> 0` (steps of
+//! 0.005) twice, and the `[min, max]` of the stage's raw output over the second cycle is
+//! mapped to `[0, 1]`: first each chamber's bend, then each tip component, then each sensor.
+//! That sweep therefore spans exactly `[0, 1]` in every state component and every sensor, and
+//! the nominal ranges ([`MultiKind::nominal_range_x`], [`MultiKind::nominal_range_y`]) are 1. A
+//! simulation starts from the relaxed state: virgin, then one quasi-static cycle, every lag at
+//! rest at `u = 0`. With independent inputs in `[0, 1]` the state stays in about `[0, 1]`; a
+//! sensor with a negative weight can leave it a little (its mixture moves against the sweep).
+//!
+//! **Noise** follows the scalar model with one generator (`seed` xor a salt of its own): at
+//! every sample `k`, first every state component's disturbance in component order, then every
+//! sensor's measurement noise, each `g * 0.02 * range * (uniform() - 0.5)`. The state
+//! disturbance is real motion of the tip and **enters the tip's lag state**: the tip is pushed
+//! by it and relaxes back with `tau_tip`, so a disturbance persists into the following samples
+//! (the recorded `x_i[k]` is the tip after this sample's push; the sensors read it). So with
+//! `g = 1`, `x_i[k]` is within `+-0.01` of what the system would have given at `k` without
+//! this sample's push, but strays further from a noise-free run. `g = 0` gives exactly the
+//! clean signals. Inputs: [`generate_multi_input`] gives independent random ramps, one per
+//! input.
+//!
 //! ## The floor under estimation
 //!
 //! [`oracle_estimate`] gives, for a simulated trajectory, the exact posterior mean of each state
@@ -76,6 +124,7 @@
 #![deny(missing_docs)]
 
 mod input;
+mod multi;
 mod operators;
 mod oracle;
 mod systems;
@@ -83,6 +132,11 @@ mod systems;
 use hbn_core::rng::Rng;
 
 pub use input::{DEFAULT_MAX_INCREMENT, InputKind, generate_input};
+pub use multi::{
+    ARM_ELONGATION_SQ, ARM_SENSOR_MIX, ARM_STATE_MIX, FINGER_SENSOR_MIX, FINGER_STATE_MIX,
+    MultiConfig, MultiKind, MultiSimulator, MultiTrajectory, generate_multi_input, simulate_multi,
+    simulate_multi_random,
+};
 pub use operators::{
     BoucWen, BoucWenParams, Duhem, Envelope, Hysteresis, MaxwellSlip, PlayOperator,
     PrandtlIshlinskii, Preisach, PreisachDensity,
@@ -127,6 +181,50 @@ pub enum SimError {
     /// An input sample outside [`INPUT_RANGE`].
     #[error("input sample {index} = {value} is outside [{lo}, {hi}]")]
     InputOutOfRange {
+        /// Sample index.
+        index: usize,
+        /// Offending value.
+        value: f64,
+        /// Lower admissible bound.
+        lo: f64,
+        /// Upper admissible bound.
+        hi: f64,
+    },
+    /// A multi-signal simulation given a number of input signals other than its system's.
+    #[error("`{system}` takes {expected} input signals, got {got}")]
+    InputCount {
+        /// The system's name.
+        system: &'static str,
+        /// Inputs the system takes.
+        expected: usize,
+        /// Input signals given.
+        got: usize,
+    },
+    /// Input signals of a multi-signal simulation that differ in length.
+    #[error("input signal {input} has {len} samples, input signal 0 has {expected}")]
+    InputLengthMismatch {
+        /// The input signal whose length differs.
+        input: usize,
+        /// Its samples.
+        len: usize,
+        /// Samples of input signal 0.
+        expected: usize,
+    },
+    /// A sample of one input signal of a multi-signal simulation is NaN or infinite.
+    #[error("input signal {input}: sample {index} is not finite ({value})")]
+    NonFiniteMultiInput {
+        /// Input signal.
+        input: usize,
+        /// Sample index.
+        index: usize,
+        /// Offending value.
+        value: f64,
+    },
+    /// A sample of one input signal of a multi-signal simulation outside [`INPUT_RANGE`].
+    #[error("input signal {input}: sample {index} = {value} is outside [{lo}, {hi}]")]
+    MultiInputOutOfRange {
+        /// Input signal.
+        input: usize,
         /// Sample index.
         index: usize,
         /// Offending value.
@@ -301,22 +399,27 @@ impl SimConfig {
 
     /// Checks `noise_gain` (finite, >= 0) and `rate_hz` (finite, > 0).
     pub fn validate(&self) -> Result<(), SimError> {
-        if !(self.noise_gain.is_finite() && self.noise_gain >= 0.0) {
-            return Err(SimError::InvalidParameter {
-                name: "noise_gain",
-                value: self.noise_gain,
-                reason: "must be finite and >= 0",
-            });
-        }
-        if !(self.rate_hz.is_finite() && self.rate_hz > 0.0) {
-            return Err(SimError::InvalidParameter {
-                name: "rate_hz",
-                value: self.rate_hz,
-                reason: "must be finite and > 0",
-            });
-        }
-        Ok(())
+        check_gain_and_rate(self.noise_gain, self.rate_hz)
     }
+}
+
+/// Checks a noise gain (finite, >= 0) and a rate (finite, > 0).
+fn check_gain_and_rate(noise_gain: f64, rate_hz: f64) -> Result<(), SimError> {
+    if !(noise_gain.is_finite() && noise_gain >= 0.0) {
+        return Err(SimError::InvalidParameter {
+            name: "noise_gain",
+            value: noise_gain,
+            reason: "must be finite and >= 0",
+        });
+    }
+    if !(rate_hz.is_finite() && rate_hz > 0.0) {
+        return Err(SimError::InvalidParameter {
+            name: "rate_hz",
+            value: rate_hz,
+            reason: "must be finite and > 0",
+        });
+    }
+    Ok(())
 }
 
 /// A simulated robot driven one sample at a time (for an explorer or controller in the loop):

@@ -8,14 +8,14 @@ use crate::operators::{
 use crate::{SimError, SystemKind};
 
 /// Static sensor nonlinearity `y = tanh(kappa h) / tanh(kappa)` (maps 0 -> 0, 1 -> 1).
-const SENSOR_KAPPA: f64 = 1.5;
+pub(crate) const SENSOR_KAPPA: f64 = 1.5;
 /// Step of the quasi-static calibration sweep `0 -> 1 -> 0`.
-const SWEEP_STEP: f64 = 0.005;
+pub(crate) const SWEEP_STEP: f64 = 0.005;
 /// Number of samples to the peak of the sweep.
-const SWEEP_PEAK: usize = 200;
+pub(crate) const SWEEP_PEAK: usize = 200;
 
 /// The quasi-static calibration / preconditioning cycle `0 -> 1 -> 0` in steps of 0.005.
-fn sweep() -> Vec<f64> {
+pub(crate) fn sweep() -> Vec<f64> {
     (0..=SWEEP_PEAK)
         .chain((0..SWEEP_PEAK).rev())
         .map(|i| i as f64 * SWEEP_STEP)
@@ -23,7 +23,7 @@ fn sweep() -> Vec<f64> {
 }
 
 #[derive(Clone, Debug)]
-enum Op {
+pub(crate) enum Op {
     Pi(PrandtlIshlinskii),
     Ms(MaxwellSlip),
     Bw(BoucWen),
@@ -57,14 +57,14 @@ impl Hysteresis for Op {
 /// sample: `s[k] = s[k-1] + (1 - exp(-dt / tau)) (target[k] - s[k-1])`. In quasi-static mode
 /// (used for calibration) it follows the target exactly.
 #[derive(Clone, Debug)]
-struct Lag {
+pub(crate) struct Lag {
     alpha: f64,
-    quasi_static: bool,
-    s: f64,
+    pub(crate) quasi_static: bool,
+    pub(crate) s: f64,
 }
 
 impl Lag {
-    fn new(tau: f64, dt: f64) -> Self {
+    pub(crate) fn new(tau: f64, dt: f64) -> Self {
         Self {
             alpha: 1.0 - (-dt / tau).exp(),
             quasi_static: false,
@@ -72,7 +72,7 @@ impl Lag {
         }
     }
 
-    fn step(&mut self, target: f64) -> f64 {
+    pub(crate) fn step(&mut self, target: f64) -> f64 {
         if self.quasi_static {
             self.s = target;
         } else {
@@ -85,17 +85,17 @@ impl Lag {
 /// Actuator chain: optional pneumatic lag -> hysteresis -> optional creep, then the affine
 /// calibration `x = (raw - offset) * gain`.
 #[derive(Clone, Debug)]
-struct Actuator {
-    lag: Option<Lag>,
+pub(crate) struct Actuator {
+    pub(crate) lag: Option<Lag>,
     op: Op,
     /// Creep: `x_raw = (1 - kappa) b + c` with `c` lagging `kappa b`.
     creep: Option<(Lag, f64)>,
-    offset: f64,
-    gain: f64,
+    pub(crate) offset: f64,
+    pub(crate) gain: f64,
 }
 
 impl Actuator {
-    fn plain(op: Op) -> Self {
+    pub(crate) fn plain(op: Op) -> Self {
         Self {
             lag: None,
             op,
@@ -105,7 +105,7 @@ impl Actuator {
         }
     }
 
-    fn raw(&mut self, u: f64) -> f64 {
+    pub(crate) fn raw(&mut self, u: f64) -> f64 {
         let p = match &mut self.lag {
             Some(lag) => lag.step(u),
             None => u,
@@ -117,11 +117,11 @@ impl Actuator {
         }
     }
 
-    fn step(&mut self, u: f64) -> f64 {
+    pub(crate) fn step(&mut self, u: f64) -> f64 {
         (self.raw(u) - self.offset) * self.gain
     }
 
-    fn reset(&mut self) {
+    pub(crate) fn reset(&mut self) {
         self.op.reset();
         if let Some(lag) = &mut self.lag {
             lag.s = 0.0;
@@ -131,7 +131,7 @@ impl Actuator {
         }
     }
 
-    fn set_quasi_static(&mut self, on: bool) {
+    pub(crate) fn set_quasi_static(&mut self, on: bool) {
         if let Some(lag) = &mut self.lag {
             lag.quasi_static = on;
         }
@@ -144,18 +144,18 @@ impl Actuator {
 /// Sensor chain: optional standard-linear-solid strain response -> `lin v + k_op H(v)` ->
 /// affine calibration -> `tanh(kappa h) / tanh(kappa)`.
 #[derive(Clone, Debug)]
-struct Sensor {
+pub(crate) struct Sensor {
     /// SLS: `v = x + rho (x - q)`, `q` lagging `x` (the dashpot of the Maxwell arm).
     sls: Option<(Lag, f64)>,
-    lin: f64,
-    k_op: f64,
+    pub(crate) lin: f64,
+    pub(crate) k_op: f64,
     op: Op,
-    offset: f64,
-    gain: f64,
+    pub(crate) offset: f64,
+    pub(crate) gain: f64,
 }
 
 impl Sensor {
-    fn plain(op: Op) -> Self {
+    pub(crate) fn plain(op: Op) -> Self {
         Self {
             sls: None,
             lin: 0.0,
@@ -166,7 +166,7 @@ impl Sensor {
         }
     }
 
-    fn raw(&mut self, x: f64) -> f64 {
+    pub(crate) fn raw(&mut self, x: f64) -> f64 {
         let v = match &mut self.sls {
             Some((q, rho)) => {
                 let qv = q.step(x);
@@ -177,19 +177,19 @@ impl Sensor {
         self.lin * v + self.k_op * self.op.step(v)
     }
 
-    fn step(&mut self, x: f64) -> f64 {
+    pub(crate) fn step(&mut self, x: f64) -> f64 {
         let h = (self.raw(x) - self.offset) * self.gain;
         (SENSOR_KAPPA * h).tanh() / SENSOR_KAPPA.tanh()
     }
 
-    fn reset(&mut self) {
+    pub(crate) fn reset(&mut self) {
         self.op.reset();
         if let Some((q, _)) = &mut self.sls {
             q.s = 0.0;
         }
     }
 
-    fn set_quasi_static(&mut self, on: bool) {
+    pub(crate) fn set_quasi_static(&mut self, on: bool) {
         if let Some((q, _)) = &mut self.sls {
             q.quasi_static = on;
         }
