@@ -113,6 +113,105 @@ fn rotate(
     q.set_column(q_col, &new_q);
 }
 
+/// Eigenvalues and orthonormal eigenvectors (the columns of the returned matrix) of the
+/// symmetric part of the leading `n x n` block of `a` (`n <= A`), by cyclic Jacobi rotations
+/// with at most [`MAX_SWEEPS`] sweeps: `a = Q diag(values) Q^T`. Entries outside the block are
+/// zero in the result. `None` if an entry is not finite, `n > A`, or the sweeps do not
+/// converge to about `1e-12` relative.
+pub fn symmetric_eigen_n<const A: usize>(
+    a: &[[f64; A]; A],
+    n: usize,
+) -> Option<([f64; A], [[f64; A]; A])> {
+    if n > A {
+        return None;
+    }
+    let get = |m: &[[f64; A]; A], i: usize, j: usize| -> f64 {
+        m.get(i).and_then(|r| r.get(j)).copied().unwrap_or(0.0)
+    };
+    let mut w = [[0.0; A]; A];
+    let mut q = [[0.0; A]; A];
+    let mut scale = 0.0f64;
+    for i in 0..n {
+        for j in 0..n {
+            let v = 0.5 * (get(a, i, j) + get(a, j, i));
+            if !v.is_finite() {
+                return None;
+            }
+            scale = scale.max(v.abs());
+            put(&mut w, i, j, v);
+        }
+        put(&mut q, i, i, 1.0);
+    }
+    let off = |w: &[[f64; A]; A]| -> f64 {
+        let mut s = 0.0;
+        for i in 0..n {
+            for j in (i + 1)..n {
+                let v = get(w, i, j);
+                s += v * v;
+            }
+        }
+        s
+    };
+    let diag = |w: &[[f64; A]; A]| -> [f64; A] {
+        let mut d = [0.0; A];
+        for (i, di) in d.iter_mut().enumerate().take(n) {
+            *di = get(w, i, i);
+        }
+        d
+    };
+    if scale == 0.0 {
+        return Some((diag(&w), q));
+    }
+    for _ in 0..MAX_SWEEPS {
+        if off(&w) <= (f64::EPSILON * scale) * (f64::EPSILON * scale) {
+            return Some((diag(&w), q));
+        }
+        for p in 0..n {
+            for r in (p + 1)..n {
+                let apq = get(&w, p, r);
+                if apq == 0.0 {
+                    continue;
+                }
+                let (app, aqq) = (get(&w, p, p), get(&w, r, r));
+                // Golub & Van Loan, Alg. 8.5.1 (symmetric Schur).
+                let tau = (aqq - app) / (2.0 * apq);
+                let t = if tau >= 0.0 {
+                    1.0 / (tau + crate::simd::sqrt(1.0 + tau * tau))
+                } else {
+                    -1.0 / (-tau + crate::simd::sqrt(1.0 + tau * tau))
+                };
+                let c = 1.0 / crate::simd::sqrt(1.0 + t * t);
+                let s = t * c;
+                // W <- J^T W J on rows and columns p, r.
+                for k in 0..n {
+                    let (wkp, wkr) = (get(&w, k, p), get(&w, k, r));
+                    put(&mut w, k, p, c * wkp - s * wkr);
+                    put(&mut w, k, r, s * wkp + c * wkr);
+                }
+                for k in 0..n {
+                    let (wpk, wrk) = (get(&w, p, k), get(&w, r, k));
+                    put(&mut w, p, k, c * wpk - s * wrk);
+                    put(&mut w, r, k, s * wpk + c * wrk);
+                }
+                for k in 0..n {
+                    let (qkp, qkr) = (get(&q, k, p), get(&q, k, r));
+                    put(&mut q, k, p, c * qkp - s * qkr);
+                    put(&mut q, k, r, s * qkp + c * qkr);
+                }
+            }
+        }
+    }
+    (off(&w) <= (1e-12 * scale) * (1e-12 * scale)).then(|| (diag(&w), q))
+}
+
+/// `m[i][j] = v`, ignored out of range.
+#[inline(always)]
+fn put<const A: usize>(m: &mut [[f64; A]; A], i: usize, j: usize, v: f64) {
+    if let Some(x) = m.get_mut(i).and_then(|r| r.get_mut(j)) {
+        *x = v;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

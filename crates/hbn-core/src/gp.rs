@@ -821,7 +821,8 @@ impl Accum<'_> {
         cvec: Option<&mut [f64]>,
         grad_u: &mut [f64; MAX_DIM],
     ) -> f64 {
-        self.run_width::<MAX_DIM, GRAD>(d.max(1).min(MAX_DIM), kvec, cvec, grad_u)
+        // `1 <= MAX_DIM`: the clamp cannot panic.
+        self.run_width::<MAX_DIM, GRAD>(d.clamp(1, MAX_DIM), kvec, cvec, grad_u)
     }
 
     /// The pass over rows of `width` features, with arrays of `D >= width` slots (`D ==
@@ -834,6 +835,7 @@ impl Accum<'_> {
         mut cvec: Option<&mut [f64]>,
         grad_u: &mut [f64; MAX_DIM],
     ) -> f64 {
+        // `width.max(1)` below: a chunk size the optimiser sees is not zero (no panic path).
         let mut us = [0.0; D];
         for (u, s) in us.iter_mut().zip(self.u_star) {
             *u = *s;
@@ -854,7 +856,7 @@ impl Accum<'_> {
                 break;
             };
             let mut r2 = [0.0; BLOCK];
-            for (r2_i, row) in r2.iter_mut().zip(rows.chunks_exact(width)) {
+            for (r2_i, row) in r2.iter_mut().zip(rows.chunks_exact(width.max(1))) {
                 let mut acc = 0.0;
                 for (r, u) in row.iter().zip(&us) {
                     let dj = r - u;
@@ -904,8 +906,10 @@ impl Accum<'_> {
             }
             if GRAD {
                 // dk/du* = c dr2/du* = -2 c (u_i - u*): the mean's gradient weights.
-                for ((row, (k_j, c_j)), a_j) in
-                    rows.chunks_exact(width).zip(k.iter().zip(&c)).zip(&a)
+                for ((row, (k_j, c_j)), a_j) in rows
+                    .chunks_exact(width.max(1))
+                    .zip(k.iter().zip(&c))
+                    .zip(&a)
                 {
                     mean += k_j * a_j;
                     let w = -2.0 * c_j * a_j;

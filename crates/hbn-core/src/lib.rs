@@ -9,7 +9,9 @@
 //!   exact or sparse (inducing points);
 //! - [`ekf`]: the EKF / EKF+BLR step on the augmented HBN state;
 //! - [`blr`]: local Bayesian linear regression with a bounded neighbourhood query;
-//! - [`play`]: play operators and lags, the input's memory for the transition GP.
+//! - [`play`]: play operators and lags, the input's memory for the transition GP;
+//! - [`vector`]: the filter step of a vector model (several inputs, state components and
+//!   sensors).
 //!
 //! The modules `tables` (a trained model as constant tables, which exported firmware reads),
 //! `rng`, `simd` and `eigen` are public for the other crates of the workspace and for the code
@@ -48,6 +50,7 @@ pub mod rng;
 pub mod simd;
 #[doc(hidden)]
 pub mod tables;
+pub mod vector;
 
 #[doc(hidden)]
 pub mod eigen;
@@ -61,3 +64,8 @@ pub use error::CoreError;
 pub use gp::{GpParts, GpView, Prediction, Variance, Want};
 pub use kernel::{Kernel, KernelSpec, MAX_DIM, Metric, Profile};
 pub use play::{MAX_PLAYS, PlayState, Plays, lag_coefficient, transition_input};
+pub use vector::{
+    AugMatrix, Dims, MAX_AUGMENTED, MAX_INPUTS, MAX_SENSORS, MAX_STATES, VectorConfig, VectorEkf,
+    VectorEstimator, VectorInitPrior, VectorState, VectorStepOutput, VectorView,
+    vector_state_information,
+};

@@ -7,12 +7,19 @@
 
 use hbn_core::blr::{LocalRegression, Neighbourhood, Posterior};
 use hbn_core::gp::{GpView, Prediction, Want};
+use hbn_core::vector::{VectorEstimator, VectorStepOutput};
 use hbn_core::{CoreError, Estimator, StepOutput};
 use no_panic::no_panic;
 
 /// The estimator step: `Estimator::step`, the function this crate proves panic-free.
 #[no_panic]
 pub fn step(est: &mut Estimator<'_, '_>, u: f64, y: f64) -> StepOutput {
+    est.step(u, y)
+}
+
+/// The vector estimator step, with slices of any length.
+#[no_panic]
+pub fn vector_step(est: &mut VectorEstimator<'_, '_>, u: &[f64], y: &[f64]) -> VectorStepOutput {
     est.step(u, y)
 }
 

@@ -181,15 +181,67 @@ fn step_links_without_panic_paths_and_stays_finite() {
 /// The widening wrapper links (no panic path) and widens a split range.
 #[test]
 fn widen_links_without_panic_paths() {
-    let layout = [
-        hbn_core::tables::MAGIC,
-        hbn_core::tables::VERSION,
-        1,
-        1,
-        1,
-    ];
+    let layout = [hbn_core::tables::MAGIC, hbn_core::tables::VERSION, 1, 1, 1];
     let mut out = [0.0; 3];
     let wide = hbn_core_nopanic::widen(&layout, &[1.0, 2.0, 0.5], &mut out).unwrap();
     assert_eq!(wide, [1.0, 2.5]);
     assert!(hbn_core_nopanic::widen(&layout, &[1.0], &mut out).is_err());
+}
+
+/// The vector step (2 inputs with one play each, 2 states, 3 sensors: transitions of 10
+/// inputs, wider than the passes compiled per dimension) links without panic paths and stays
+/// finite on garbage.
+#[test]
+fn vector_step_links_without_panic_paths_and_stays_finite() {
+    use hbn_core::vector::{
+        Dims, MAX_SENSORS, MAX_STATES, VectorConfig, VectorEstimator, VectorView,
+    };
+    let dims = Dims::new(2, 2, 3).unwrap();
+    let plays = Plays::new(&[0.1]).unwrap();
+    let t = Gp::new(dims.transition_dim(1));
+    let s = Gp::new(dims.sensor_dim(true));
+    for sparse in [false, true] {
+        let transitions = [t.view(sparse), t.view(sparse)];
+        let sensors = [s.view(sparse), s.view(sparse), s.view(sparse)];
+        let view = VectorView {
+            dims,
+            transitions: &transitions,
+            sensors: &sensors,
+            plays,
+            init: None,
+        };
+        for mode in [Mode::Ekf, Mode::Ukf] {
+            let config = VectorConfig {
+                mode,
+                x_bounds: [(-1.0, 2.0); MAX_STATES],
+                y_bounds: [(-1.0, 2.0); MAX_SENSORS],
+                x0_mean: [0.5; MAX_STATES],
+                x0_var: [0.05; MAX_STATES],
+                qx_model_floor: [0.0; MAX_STATES],
+                r_model_floor: [0.0; MAX_SENSORS],
+                q_floor: 1e-12,
+                r_floor: 1e-12,
+                p_min: 1e-14,
+                p_max: 4.0,
+                jac_max: 20.0,
+                innovation_min: 1e-14,
+                nis_gate: 25.0,
+                q_scale: 1.0,
+                r_scale: 1.0,
+                std_scale: [1.0; MAX_STATES],
+            };
+            let mut scratch = vec![0.0; view.scratch_len()];
+            let mut est = VectorEstimator::new(view, config, &mut scratch).unwrap();
+            let values = [0.3, f64::NAN, f64::INFINITY, -1e300, 0.7];
+            for k in 0..200 {
+                let pick = |i: usize| values[(k * 3 + i) % values.len()];
+                let out = hbn_core_nopanic::vector_step(
+                    &mut est,
+                    &[pick(0), pick(1)][..k % 3],
+                    &[pick(2), pick(3), pick(4)],
+                );
+                assert!(out.x.iter().all(|v| v.is_finite()));
+            }
+        }
+    }
 }
