@@ -45,7 +45,11 @@ pub use log::{
     LogData, LogOptions, LogPieces, Observer, RATE_NOTICE_TOLERANCE, join_pieces, load_log,
     load_log_pieces, model_log_options, parse_signal, parse_time_source, round_rate,
 };
-pub use sim::{START_NS, SimLog, log_times, sequences, simulate_log};
+pub use sim::{
+    MULTI_STATE_TOPIC, MultiSimLog, START_NS, SimLog, log_times, multi_input_path,
+    multi_input_topic, multi_output_path, multi_output_topic, multi_state_field, multi_state_path,
+    sequences, simulate_log, simulate_multi_log,
+};
 pub use train::{
     DEFAULT_INPUT, DEFAULT_OUTPUT, DEFAULT_STATE, MIN_LOG_SAMPLES, MIN_PIECE_SAMPLES, TrainSignals,
     Trained, train_from_logs,
