@@ -48,6 +48,7 @@ pub mod metrics;
 mod model;
 mod params;
 pub mod tuning;
+pub mod vector;
 
 pub use dataset::{Dataset, MIN_SAMPLES, Sequence, Table, build_dataset};
 pub use error::{DataError, ModelError, ModelFileProblem, Signal};
@@ -70,3 +71,6 @@ pub use params::{
     UnknownKernel, parse_bytes,
 };
 pub use tuning::{CandidateRow, FilterTuning, NoiseScales, ValidationReport};
+pub use vector::{
+    SignalNames, VectorEstimate, VectorModel, VectorSequence, VectorSummary, VectorValidationRow,
+};

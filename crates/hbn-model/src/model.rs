@@ -64,7 +64,7 @@ pub struct SignalStats {
 }
 
 impl SignalStats {
-    fn of<'a>(values: impl Iterator<Item = &'a f64> + Clone) -> Self {
+    pub(crate) fn of<'a>(values: impl Iterator<Item = &'a f64> + Clone) -> Self {
         let n = values.clone().count().max(1) as f64;
         let (min, max) = values
             .clone()

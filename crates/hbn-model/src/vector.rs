@@ -1,0 +1,990 @@
+//! The HBN with several inputs, a vector state and several sensors: training, estimation and
+//! the model file. The step is [`hbn_core::vector`]'s; this module learns what it reads.
+//!
+//! - One transition GP per state component on `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}, memory]`
+//!   (every component, every input, the memory operators of each input), one sensor GP per
+//!   sensor on `[x_{k-1}, y^j_{k-1}, x_k]` or on the state only `[x_{k-1}, x_k]`.
+//! - Held out: the last quarter of every trajectory. The GPs are fitted on the first three
+//!   quarters; the filter runs over the held-out quarters and is scored by the NLPD of the
+//!   state summed over its components. On that score each sensor's inputs are chosen, one
+//!   sensor at a time (the thesis' inputs first, then the state only where it scores lower),
+//!   then the mode (EKF or UKF), the scale of the process noise, and each component's
+//!   standard-deviation scale (so that its held-out NEES is one). The GPs are then refitted
+//!   on every sample with the hyperparameters found.
+//! - ARD length scales let each GP ignore the inputs that do not matter; a kernel whose
+//!   features mix inputs (Mahalanobis, warping) takes at most 8 inputs.
+
+use std::path::Path;
+use std::time::Instant;
+
+use hbn_core::vector::{
+    Dims, MAX_SENSORS, MAX_STATES, VectorConfig, VectorEkf, VectorInitPrior, VectorView,
+    vector_state_information,
+};
+use hbn_core::{GpView, Mode, PlayState, Plays};
+use hbn_gp::GaussianProcess;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{DataError, ModelError, ModelFileProblem, Signal};
+use crate::model::{GpRole, OUTLIER_GATE, SignalStats};
+use crate::params::{CheckedHbnParams, HbnParams};
+
+/// The model file's tag.
+pub const VECTOR_MODEL_FORMAT: &str = "hbn-vector-model";
+/// The model file's version.
+pub const VECTOR_MODEL_FORMAT_VERSION: u32 = 1;
+/// Training samples the first-measurement prior averages over.
+const INIT_NEIGHBOURS: usize = 20;
+/// Window (samples) of the observability diagnostic.
+const OBSERVABILITY_WINDOW: usize = 20;
+/// A component's information below this fraction of the best-seen component's (both in
+/// units of the components' spans) counts as unobservable in a window.
+const UNOBSERVABLE_RATIO: f64 = 1e-6;
+/// Process-noise scales tried on the held-out quarters.
+const Q_SCALES: [f64; 3] = [0.25, 1.0, 4.0];
+
+/// One trajectory of a vector system: row-major `(T, d)` arrays (sample `k` of input `a` is
+/// `u[k * du + a]`).
+#[derive(Clone, Copy, Debug)]
+pub struct VectorSequence<'a> {
+    /// Inputs, `T x du`.
+    pub u: &'a [f64],
+    /// States, `T x dx`.
+    pub x: &'a [f64],
+    /// Sensor outputs, `T x dy`.
+    pub y: &'a [f64],
+    /// Sizes.
+    pub dims: Dims,
+}
+
+impl<'a> VectorSequence<'a> {
+    /// A trajectory of `dims`; checked by [`VectorSequence::validate`] when training.
+    pub fn new(u: &'a [f64], x: &'a [f64], y: &'a [f64], dims: Dims) -> Self {
+        Self { u, x, y, dims }
+    }
+
+    /// Samples.
+    pub fn len(&self) -> usize {
+        self.u.len() / self.dims.inputs.max(1)
+    }
+
+    /// Whether it has no samples.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Checks shapes (whole rows, equal lengths, at least [`crate::MIN_SAMPLES`]) and values.
+    pub fn validate(&self, index: usize) -> Result<(), DataError> {
+        let d = self.dims;
+        let t = self.len();
+        if !self.u.len().is_multiple_of(d.inputs)
+            || self.x.len() != t * d.states
+            || self.y.len() != t * d.sensors
+        {
+            return Err(DataError::LengthMismatch {
+                trajectory: index,
+                u: self.u.len() / d.inputs.max(1),
+                x: self.x.len() / d.states.max(1),
+                y: self.y.len() / d.sensors.max(1),
+            });
+        }
+        if t < crate::MIN_SAMPLES {
+            return Err(DataError::TooShort {
+                trajectory: index,
+                len: t,
+                min: crate::MIN_SAMPLES,
+            });
+        }
+        for (signal, values) in [
+            (Signal::Input, self.u),
+            (Signal::State, self.x),
+            (Signal::Output, self.y),
+        ] {
+            if let Some((i, v)) = values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+                return Err(DataError::NonFinite {
+                    trajectory: index,
+                    signal,
+                    index: i,
+                    value: *v,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Samples `from..to` of every signal.
+    fn slice(&self, from: usize, to: usize) -> VectorSequence<'a> {
+        let d = self.dims;
+        VectorSequence {
+            u: &self.u[from * d.inputs..to * d.inputs],
+            x: &self.x[from * d.states..to * d.states],
+            y: &self.y[from * d.sensors..to * d.sensors],
+            dims: d,
+        }
+    }
+}
+
+/// A vector model's estimate of one run: row-major `(T, d)` arrays.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VectorEstimate {
+    /// Sizes.
+    pub dims: Dims,
+    /// Mode run.
+    pub mode: Mode,
+    /// `x_k`, `T x dx`.
+    pub x: Vec<f64>,
+    /// Standard deviation of each component, `T x dx`.
+    pub x_std: Vec<f64>,
+    /// Covariance of `x_k`, `T x dx x dx`.
+    pub x_cov: Vec<f64>,
+    /// Predicted measurement before the update, `T x dy`.
+    pub y_pred: Vec<f64>,
+    /// Innovation of each sensor (0 where it was not updated), `T x dy`.
+    pub innovation: Vec<f64>,
+    /// Normalised innovation squared of each step.
+    pub nis: Vec<f64>,
+    /// Guard flags of each step ([`hbn_core::Flags`]).
+    pub flags: Vec<u32>,
+    /// Per state component, the fraction of windows of [`OBSERVABILITY_WINDOW`] steps in which
+    /// the measurements said (next to) nothing about it (module docs of
+    /// [`hbn_core::vector::vector_state_information`]).
+    pub unobservable: Vec<f64>,
+}
+
+impl VectorEstimate {
+    /// Samples.
+    pub fn len(&self) -> usize {
+        self.nis.len()
+    }
+
+    /// Whether it has no samples.
+    pub fn is_empty(&self) -> bool {
+        self.nis.is_empty()
+    }
+
+    /// Component `i` of the state over time.
+    pub fn component(&self, i: usize) -> Vec<f64> {
+        let dx = self.dims.states;
+        self.x.iter().skip(i).step_by(dx).copied().collect()
+    }
+
+    /// Standard deviation of component `i` over time.
+    pub fn component_std(&self, i: usize) -> Vec<f64> {
+        let dx = self.dims.states;
+        self.x_std.iter().skip(i).step_by(dx).copied().collect()
+    }
+}
+
+/// Held-out scores of one configuration (lower is better).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VectorValidationRow {
+    /// What was tried (e.g. `sensor 1: state only`, `mode ukf`).
+    pub what: String,
+    /// Held-out NLPD of the state, summed over components (per sample).
+    pub nlpd: f64,
+    /// Held-out nRMSE of each component (RMSE over its training range).
+    pub nrmse: Vec<f64>,
+    /// Whether it was kept.
+    pub chosen: bool,
+}
+
+/// What training found and measured.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct VectorSummary {
+    /// Trajectories trained on.
+    pub trajectories: usize,
+    /// Samples trained on.
+    pub samples: usize,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+    /// Every configuration scored on the held-out quarters, in order.
+    pub validation: Vec<VectorValidationRow>,
+    /// Warnings for the user.
+    pub warnings: Vec<String>,
+    /// Per component, the fraction of the first training trajectory's windows in which it
+    /// was unobservable.
+    pub unobservable: Vec<f64>,
+}
+
+/// A trained vector HBN (one GP per state component and per sensor).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VectorModel {
+    params: HbnParams,
+    dims: Dims,
+    /// One per state component.
+    transitions: Vec<GaussianProcess>,
+    /// One per sensor.
+    sensors: Vec<GaussianProcess>,
+    /// Whether sensor `j` reads its own previous output.
+    sensor_reads_output: Vec<bool>,
+    u_stats: Vec<SignalStats>,
+    x_stats: Vec<SignalStats>,
+    y_stats: Vec<SignalStats>,
+    /// First-measurement prior: rows `[y (dy), x (dx)]`.
+    init_rows: Vec<f64>,
+    mode: Mode,
+    q_scale: f64,
+    std_scale: Vec<f64>,
+    play_radii: Vec<f64>,
+    /// Names of the signals (message paths), inputs then states then outputs.
+    signal_names: SignalNames,
+    summary: VectorSummary,
+}
+
+/// The signals a vector model was trained on (message paths, or names given by the caller).
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SignalNames {
+    /// One per input.
+    pub inputs: Vec<String>,
+    /// One per state component.
+    pub states: Vec<String>,
+    /// One per sensor.
+    pub outputs: Vec<String>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct VectorModelFile {
+    format: String,
+    version: u32,
+    model: VectorModel,
+}
+
+/// The GPs fitted on one set of trajectories.
+struct Fitted {
+    transitions: Vec<GaussianProcess>,
+    /// Per sensor: with its own previous output, state only.
+    sensors: Vec<[GaussianProcess; 2]>,
+}
+
+impl VectorModel {
+    /// Trains on `trajectories` with `params` (their kernels, memory radii, subset sizes,
+    /// optimiser settings and seed; the sizes come from the trajectories).
+    pub fn fit(
+        trajectories: &[VectorSequence<'_>],
+        params: &HbnParams,
+    ) -> Result<Self, ModelError> {
+        let checked = params.clone().check()?;
+        Self::fit_checked(trajectories, &checked, SignalNames::default())
+    }
+
+    /// [`VectorModel::fit`] with checked parameters and the signals' names.
+    pub fn fit_checked(
+        trajectories: &[VectorSequence<'_>],
+        params: &CheckedHbnParams,
+        names: SignalNames,
+    ) -> Result<Self, ModelError> {
+        let t0 = Instant::now();
+        let first = trajectories.first().ok_or(DataError::NoTrajectories)?;
+        let dims = first.dims;
+        dims.validate()?;
+        for (i, t) in trajectories.iter().enumerate() {
+            if t.dims != dims {
+                return Err(ModelError::Core(hbn_core::CoreError::InvalidSpec(
+                    "every trajectory must have the same numbers of inputs, states and outputs",
+                )));
+            }
+            t.validate(i)?;
+        }
+        let plays = Plays::with_lags(&params.memory, &[])?;
+        let t_dim = dims.transition_dim(plays.len());
+        if t_dim > hbn_core::MAX_DIM {
+            return Err(ModelError::Core(hbn_core::CoreError::InvalidSpec(
+                "too many transition inputs (2 dx + du (2 + memory) > 32): use fewer memory radii",
+            )));
+        }
+        // Training and held-out parts: the last quarter of each trajectory long enough.
+        let mut train = Vec::new();
+        let mut held = Vec::new();
+        for t in trajectories {
+            let n = t.len();
+            let cut = n - n / 4;
+            if n / 4 >= 20 && cut >= 20 {
+                train.push(t.slice(0, cut));
+                held.push(t.slice(cut, n));
+            } else {
+                train.push(*t);
+            }
+        }
+        let stats = Stats::of(trajectories);
+        let fitted = Self::fit_gps(&train, params, &plays, None)?;
+        let pairs = fitted.sensors.clone();
+        let mut model = Self::assemble(params, dims, &plays, &stats, trajectories, fitted, names);
+        let mut validation = Vec::new();
+        if !held.is_empty() {
+            model.choose_on_held_out(&held, &pairs, &mut validation)?;
+        }
+        // Refit on every sample with the hyperparameters found.
+        let refit = Self::fit_gps(trajectories, params, &plays, Some(&model))?;
+        let choice = model.sensor_reads_output.clone();
+        model.transitions = refit.transitions;
+        model.sensors = refit
+            .sensors
+            .into_iter()
+            .zip(&choice)
+            .map(|(pair, &reads)| {
+                let [with_y, state_only] = pair;
+                if reads { with_y } else { state_only }
+            })
+            .collect();
+        model.summary.trajectories = trajectories.len();
+        model.summary.samples = trajectories.iter().map(|t| t.len()).sum();
+        model.summary.validation = validation;
+        let first_run = model.estimate(first.u, first.y, model.mode)?;
+        model.summary.unobservable = first_run.unobservable.clone();
+        for (i, f) in first_run.unobservable.iter().enumerate() {
+            if *f > 0.05 {
+                model.summary.warnings.push(format!(
+                    "observability: state component {} ({}) is unobservable in {:.0}% of the \
+                     first training log's windows; no sensor distinguishes its values there",
+                    i,
+                    model
+                        .signal_names
+                        .states
+                        .get(i)
+                        .map_or("unnamed", String::as_str),
+                    100.0 * f
+                ));
+            }
+        }
+        model.summary.seconds = t0.elapsed().as_secs_f64();
+        Ok(model)
+    }
+
+    /// Fits every GP on `trajectories`: the transitions and both variants of each sensor.
+    /// With `fixed`, each GP keeps that model's hyperparameters (a refit on more data).
+    fn fit_gps(
+        trajectories: &[VectorSequence<'_>],
+        params: &CheckedHbnParams,
+        plays: &Plays,
+        fixed: Option<&VectorModel>,
+    ) -> Result<Fitted, ModelError> {
+        let dims = trajectories[0].dims;
+        let (t_rows, t_targets) = transition_rows(trajectories, plays);
+        let t_dim = dims.transition_dim(plays.len());
+        let mut transitions = Vec::with_capacity(dims.states);
+        for i in 0..dims.states {
+            let spec = params.transition_kernel.spec(t_dim, [0, 0]);
+            let mut spec = spec;
+            spec.direction = None;
+            spec.validate().map_err(|e| ModelError::Gp {
+                which: GpRole::Transition,
+                source: hbn_gp::GpError::from(e),
+            })?;
+            let mut g = params.gp_params(spec, GpRole::Transition);
+            g.seed = params.seed.wrapping_add(i as u64);
+            if let Some(m) = fixed {
+                g.init = Some(m.transitions[i].hyperparameters());
+                g.optimize = false;
+            }
+            let targets: Vec<f64> = t_targets
+                .iter()
+                .skip(i)
+                .step_by(dims.states)
+                .copied()
+                .collect();
+            let gp = hbn_gp::fit(&g, &t_rows, &targets).map_err(|source| ModelError::Gp {
+                which: GpRole::Transition,
+                source,
+            })?;
+            transitions.push(gp);
+        }
+        let mut sensors = Vec::with_capacity(dims.sensors);
+        for j in 0..dims.sensors {
+            let mut pair = Vec::with_capacity(2);
+            for reads in [true, false] {
+                let (rows, targets) = sensor_rows(trajectories, j, reads);
+                let mut spec = params.sensor_kernel.spec(dims.sensor_dim(reads), [0, 0]);
+                spec.direction = None;
+                let mut g = params.gp_params(spec, GpRole::Sensor);
+                g.seed = params.seed.wrapping_add(100 + j as u64);
+                if let Some(m) = fixed {
+                    // Only the chosen variant is kept; the other is refitted as it was.
+                    if m.sensor_reads_output[j] == reads {
+                        g.init = Some(m.sensors[j].hyperparameters());
+                        g.optimize = false;
+                    } else {
+                        pair.push(None);
+                        continue;
+                    }
+                }
+                let gp = hbn_gp::fit(&g, &rows, &targets).map_err(|source| ModelError::Gp {
+                    which: GpRole::Sensor,
+                    source,
+                })?;
+                pair.push(Some(gp));
+            }
+            let with_y = pair[0].clone();
+            let state_only = pair[1].clone();
+            // A refit fills the variant not chosen with the chosen one (never read).
+            let (a, b) = match (with_y, state_only) {
+                (Some(a), Some(b)) => (a, b),
+                (Some(a), None) => (a.clone(), a),
+                (None, Some(b)) => (b.clone(), b),
+                (None, None) => unreachable_gp()?,
+            };
+            sensors.push([a, b]);
+        }
+        Ok(Fitted {
+            transitions,
+            sensors,
+        })
+    }
+
+    fn assemble(
+        params: &CheckedHbnParams,
+        dims: Dims,
+        plays: &Plays,
+        stats: &Stats,
+        trajectories: &[VectorSequence<'_>],
+        fitted: Fitted,
+        names: SignalNames,
+    ) -> Self {
+        let mut init_rows = Vec::new();
+        for t in trajectories {
+            for k in 0..t.len() {
+                init_rows.extend_from_slice(&t.y[k * dims.sensors..(k + 1) * dims.sensors]);
+                init_rows.extend_from_slice(&t.x[k * dims.states..(k + 1) * dims.states]);
+            }
+        }
+        // Keep the prior's table bounded: every n-th row.
+        let width = dims.sensors + dims.states;
+        let rows = init_rows.len() / width;
+        let keep = 2000;
+        if rows > keep {
+            let step = rows.div_ceil(keep);
+            init_rows = init_rows
+                .chunks_exact(width)
+                .step_by(step)
+                .flatten()
+                .copied()
+                .collect();
+        }
+        Self {
+            params: (**params).clone(),
+            dims,
+            transitions: fitted.transitions,
+            sensors: fitted.sensors.into_iter().map(|[a, _]| a).collect(),
+            sensor_reads_output: vec![true; dims.sensors],
+            u_stats: stats.u.clone(),
+            x_stats: stats.x.clone(),
+            y_stats: stats.y.clone(),
+            init_rows,
+            mode: Mode::Ekf,
+            q_scale: 1.0,
+            std_scale: vec![1.0; dims.states],
+            play_radii: plays.radii().to_vec(),
+            signal_names: names,
+            summary: VectorSummary::default(),
+        }
+    }
+
+    /// Chooses, on the held-out parts: each sensor's inputs (one sensor at a time: its
+    /// state-only GP replaces the thesis' where the score falls), the mode, the process-noise
+    /// scale, then each component's std scale (its held-out NEES made one).
+    fn choose_on_held_out(
+        &mut self,
+        held: &[VectorSequence<'_>],
+        pairs: &[[GaussianProcess; 2]],
+        rows: &mut Vec<VectorValidationRow>,
+    ) -> Result<(), ModelError> {
+        let mut best = self.held_out_score(held)?;
+        rows.push(best.row("sensors read their own previous output".into(), true));
+        for (j, pair) in pairs.iter().enumerate() {
+            let mut candidate = self.clone();
+            candidate.sensors[j] = pair[1].clone();
+            candidate.sensor_reads_output[j] = false;
+            let s = candidate.held_out_score(held)?;
+            let better = s.nlpd < best.nlpd;
+            rows.push(s.row(format!("sensor {j}: state only"), better));
+            if better {
+                *self = candidate;
+                best = s;
+            }
+        }
+        let mut candidate = self.clone();
+        candidate.mode = Mode::Ukf;
+        let s = candidate.held_out_score(held)?;
+        let better = s.nlpd < best.nlpd;
+        rows.push(s.row("mode ukf".into(), better));
+        if better {
+            *self = candidate;
+            best = s;
+        }
+        for q in Q_SCALES.into_iter().filter(|q| *q != 1.0) {
+            let mut candidate = self.clone();
+            candidate.q_scale = q;
+            let s = candidate.held_out_score(held)?;
+            let better = s.nlpd < best.nlpd;
+            rows.push(s.row(format!("process noise x{q}"), better));
+            if better {
+                *self = candidate;
+                best = s;
+            }
+        }
+        self.std_scale = best
+            .nees
+            .iter()
+            .map(|n| {
+                if n.is_finite() && *n > 0.0 {
+                    n.sqrt().clamp(0.2, 5.0)
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        Ok(())
+    }
+
+    /// The filter's held-out score over `held` with this model's settings.
+    fn held_out_score(&self, held: &[VectorSequence<'_>]) -> Result<HeldOut, ModelError> {
+        let dx = self.dims.states;
+        let (mut nlpd, mut count) = (0.0, 0usize);
+        let mut sq = vec![0.0; dx];
+        let mut nees = vec![0.0; dx];
+        for t in held {
+            let e = self.estimate(t.u, t.y, self.mode)?;
+            for k in 0..t.len() {
+                for i in 0..dx {
+                    let err = e.x[k * dx + i] - t.x[k * dx + i];
+                    let sd = e.x_std[k * dx + i].max(1e-300);
+                    let var = sd * sd;
+                    nlpd += 0.5 * (2.0 * std::f64::consts::PI * var).ln() + err * err / (2.0 * var);
+                    sq[i] += err * err;
+                    nees[i] += err * err / var;
+                }
+                count += 1;
+            }
+        }
+        let n = count.max(1) as f64;
+        let nrmse = sq
+            .iter()
+            .zip(&self.x_stats)
+            .map(|(s, st)| (s / n).sqrt() / st.span().max(1e-12))
+            .collect();
+        let nlpd = nlpd / n;
+        Ok(HeldOut {
+            nlpd: if nlpd.is_finite() {
+                nlpd
+            } else {
+                f64::INFINITY
+            },
+            nrmse,
+            nees: nees.iter().map(|v| v / n).collect(),
+        })
+    }
+
+    /// The sizes.
+    pub fn dims(&self) -> Dims {
+        self.dims
+    }
+
+    /// The mode chosen on held-out data.
+    pub fn default_mode(&self) -> Mode {
+        self.mode
+    }
+
+    /// Training parameters.
+    pub fn params(&self) -> &HbnParams {
+        &self.params
+    }
+
+    /// Sample rate (Hz).
+    pub fn rate_hz(&self) -> f64 {
+        self.params.rate_hz
+    }
+
+    /// The signals' names.
+    pub fn signal_names(&self) -> &SignalNames {
+        &self.signal_names
+    }
+
+    /// Sets the signals' names (the paths the logs were read by).
+    pub fn set_signal_names(&mut self, names: SignalNames) {
+        self.signal_names = names;
+    }
+
+    /// What training found.
+    pub fn summary(&self) -> &VectorSummary {
+        &self.summary
+    }
+
+    /// Whether sensor `j` reads its own previous output (else the state only).
+    pub fn sensor_reads_output(&self, j: usize) -> Option<bool> {
+        self.sensor_reads_output.get(j).copied()
+    }
+
+    /// The transition GP of state component `i`.
+    pub fn transition(&self, i: usize) -> Option<&GaussianProcess> {
+        self.transitions.get(i)
+    }
+
+    /// The GP of sensor `j`.
+    pub fn sensor(&self, j: usize) -> Option<&GaussianProcess> {
+        self.sensors.get(j)
+    }
+
+    /// Training statistics of the inputs, states and outputs, per component.
+    pub fn stats(&self) -> (&[SignalStats], &[SignalStats], &[SignalStats]) {
+        (&self.u_stats, &self.x_stats, &self.y_stats)
+    }
+
+    /// The memory operators.
+    pub fn plays(&self) -> Result<Plays, ModelError> {
+        Ok(Plays::with_lags(&self.play_radii, &[])?)
+    }
+
+    /// The filter's settings in `mode`, with the noise and std scales chosen on held-out data.
+    pub fn config(&self, mode: Mode) -> VectorConfig {
+        let mut c = VectorConfig {
+            mode,
+            x_bounds: [(0.0, 1.0); MAX_STATES],
+            y_bounds: [(0.0, 1.0); MAX_SENSORS],
+            x0_mean: [0.0; MAX_STATES],
+            x0_var: [1.0; MAX_STATES],
+            qx_model_floor: [0.0; MAX_STATES],
+            r_model_floor: [0.0; MAX_SENSORS],
+            q_floor: 1e-10 / 1.44,
+            r_floor: 1e-10 / 1.44,
+            p_min: 1e-14,
+            p_max: 4.0,
+            jac_max: 20.0,
+            innovation_min: 1e-14,
+            nis_gate: OUTLIER_GATE,
+            q_scale: self.q_scale,
+            r_scale: 1.0,
+            std_scale: [1.0; MAX_STATES],
+        };
+        for (i, s) in self.x_stats.iter().enumerate().take(MAX_STATES) {
+            let sp = s.span();
+            c.x_bounds[i] = (s.min - 0.1 * sp, s.max + 0.1 * sp);
+            c.x0_mean[i] = s.mean;
+            c.x0_var[i] = s.var.max(1e-12 * sp * sp);
+            c.qx_model_floor[i] = self.transitions[i].loo_error_variance();
+            c.std_scale[i] = self.std_scale.get(i).copied().unwrap_or(1.0);
+        }
+        for (j, s) in self.y_stats.iter().enumerate().take(MAX_SENSORS) {
+            let sp = s.span();
+            c.y_bounds[j] = (s.min - 0.1 * sp, s.max + 0.1 * sp);
+            c.r_model_floor[j] = self.sensors[j].loo_error_variance();
+        }
+        c
+    }
+
+    /// Runs the filter over `u` (`T x du`) and `y` (`T x dy`, non-finite values missing).
+    pub fn estimate(&self, u: &[f64], y: &[f64], mode: Mode) -> Result<VectorEstimate, ModelError> {
+        let d = self.dims;
+        let t = u.len() / d.inputs;
+        if !u.len().is_multiple_of(d.inputs) || y.len() != t * d.sensors {
+            return Err(DataError::InputOutputLength {
+                u: u.len() / d.inputs,
+                y: y.len() / d.sensors,
+            }
+            .into());
+        }
+        let tv: Vec<GpView<'_>> = self
+            .transitions
+            .iter()
+            .map(|g| g.view())
+            .collect::<Result<_, _>>()?;
+        let sv: Vec<GpView<'_>> = self
+            .sensors
+            .iter()
+            .map(|g| g.view())
+            .collect::<Result<_, _>>()?;
+        let y_scale: Vec<f64> = self.y_stats.iter().map(|s| s.span().max(1e-12)).collect();
+        let var_floor: Vec<f64> = self
+            .x_stats
+            .iter()
+            .map(|s| (1e-4 * s.span() * s.span()).max(1e-18))
+            .collect();
+        let init =
+            VectorInitPrior::new(&self.init_rows, d, &y_scale, INIT_NEIGHBOURS, &var_floor).ok();
+        let view = VectorView {
+            dims: d,
+            transitions: &tv,
+            sensors: &sv,
+            plays: self.plays()?,
+            init,
+        };
+        let ekf = VectorEkf::new(view, self.config(mode))?;
+        let mut scratch = vec![0.0; ekf.scratch_len()];
+        let mut state = None;
+        let mut out = VectorEstimate {
+            dims: d,
+            mode,
+            x: Vec::with_capacity(t * d.states),
+            x_std: Vec::with_capacity(t * d.states),
+            x_cov: Vec::with_capacity(t * d.states * d.states),
+            y_pred: Vec::with_capacity(t * d.sensors),
+            innovation: Vec::with_capacity(t * d.sensors),
+            nis: Vec::with_capacity(t),
+            flags: Vec::with_capacity(t),
+            unobservable: vec![0.0; d.states],
+        };
+        let mut jac = Vec::with_capacity(OBSERVABILITY_WINDOW);
+        let mut rs = Vec::with_capacity(OBSERVABILITY_WINDOW);
+        let mut windows = 0usize;
+        let spans: Vec<f64> = self.x_stats.iter().map(|s| s.span().max(1e-12)).collect();
+        for k in 0..t {
+            let o = ekf.step(
+                &mut state,
+                &mut scratch,
+                &u[k * d.inputs..(k + 1) * d.inputs],
+                &y[k * d.sensors..(k + 1) * d.sensors],
+            );
+            out.x.extend_from_slice(&o.x[..d.states]);
+            out.x_std.extend_from_slice(&o.x_std[..d.states]);
+            for row in o.x_cov.iter().take(d.states) {
+                out.x_cov.extend_from_slice(&row[..d.states]);
+            }
+            out.y_pred.extend_from_slice(&o.y_pred[..d.sensors]);
+            out.innovation.extend_from_slice(&o.innovation[..d.sensors]);
+            out.nis.push(o.nis);
+            out.flags.push(o.flags.0);
+            if k > 0 {
+                jac.push(o.jacobian);
+                rs.push(o.r);
+            }
+            if jac.len() == OBSERVABILITY_WINDOW {
+                if let Some(info) = vector_state_information(d, &jac, &rs) {
+                    let scaled: Vec<f64> = (0..d.states)
+                        .map(|i| info[i] * spans[i] * spans[i])
+                        .collect();
+                    let best = scaled.iter().fold(0.0f64, |a, b| a.max(*b));
+                    windows += 1;
+                    for (i, v) in scaled.iter().enumerate() {
+                        if *v <= UNOBSERVABLE_RATIO * best {
+                            out.unobservable[i] += 1.0;
+                        }
+                    }
+                }
+                jac.clear();
+                rs.clear();
+            }
+        }
+        if windows > 0 {
+            for f in &mut out.unobservable {
+                *f /= windows as f64;
+            }
+        }
+        Ok(out)
+    }
+
+    /// The model as JSON text (the model file).
+    pub fn to_json(&self) -> Result<String, ModelError> {
+        serde_json::to_string(&VectorModelFile {
+            format: VECTOR_MODEL_FORMAT.into(),
+            version: VECTOR_MODEL_FORMAT_VERSION,
+            model: self.clone(),
+        })
+        .map_err(|e| ModelError::ModelFile {
+            path: "<memory>".into(),
+            problem: ModelFileProblem::Malformed {
+                detail: e.to_string(),
+            },
+        })
+    }
+
+    /// Parses [`VectorModel::to_json`] output, checking tag, version and consistency.
+    pub fn from_json(text: &str, origin: &str) -> Result<Self, ModelError> {
+        let fail = |problem| ModelError::ModelFile {
+            path: origin.into(),
+            problem,
+        };
+        let value: serde_json::Value =
+            serde_json::from_str(text).map_err(|_| fail(ModelFileProblem::NotJson))?;
+        let tag = value.get("format").and_then(|v| v.as_str()).unwrap_or("");
+        if tag != VECTOR_MODEL_FORMAT {
+            return Err(fail(ModelFileProblem::WrongFormat { tag: tag.into() }));
+        }
+        let version = value.get("version").and_then(|v| v.as_u64()).unwrap_or(0);
+        if version != u64::from(VECTOR_MODEL_FORMAT_VERSION) {
+            return Err(fail(ModelFileProblem::UnsupportedVersion { version }));
+        }
+        let file: VectorModelFile = serde_json::from_value(value).map_err(|e| {
+            fail(ModelFileProblem::Malformed {
+                detail: e.to_string(),
+            })
+        })?;
+        let mut m = file.model;
+        for gp in m.transitions.iter_mut().chain(m.sensors.iter_mut()) {
+            gp.restore_factor().map_err(|e| {
+                fail(ModelFileProblem::Malformed {
+                    detail: format!("a GP's factor cannot be recomputed: {e}"),
+                })
+            })?;
+        }
+        m.check().map_err(|e| match e {
+            ModelError::Core(c) => fail(ModelFileProblem::Inconsistent(c)),
+            other => other,
+        })?;
+        Ok(m)
+    }
+
+    /// Checks the parts agree (sizes, GP dimensions, views).
+    fn check(&self) -> Result<(), ModelError> {
+        let d = self.dims;
+        d.validate()?;
+        let bad = |why| ModelError::Core(hbn_core::CoreError::InvalidSpec(why));
+        if self.transitions.len() != d.states
+            || self.sensors.len() != d.sensors
+            || self.sensor_reads_output.len() != d.sensors
+            || self.u_stats.len() != d.inputs
+            || self.x_stats.len() != d.states
+            || self.y_stats.len() != d.sensors
+            || self.std_scale.len() != d.states
+        {
+            return Err(bad("the model's parts disagree with its sizes"));
+        }
+        let tv: Vec<GpView<'_>> = self
+            .transitions
+            .iter()
+            .map(|g| g.view())
+            .collect::<Result<_, _>>()?;
+        let sv: Vec<GpView<'_>> = self
+            .sensors
+            .iter()
+            .map(|g| g.view())
+            .collect::<Result<_, _>>()?;
+        let view = VectorView {
+            dims: d,
+            transitions: &tv,
+            sensors: &sv,
+            plays: self.plays()?,
+            init: None,
+        };
+        VectorEkf::new(view, self.config(self.mode))?;
+        Ok(())
+    }
+
+    /// Writes the model file atomically.
+    pub fn save(&self, path: &Path) -> Result<(), ModelError> {
+        Ok(hbn_fs::write_atomic(path, self.to_json()?.as_bytes())?)
+    }
+
+    /// Loads a model written by [`VectorModel::save`].
+    pub fn load(path: &Path) -> Result<Self, ModelError> {
+        let bytes = std::fs::read(path).map_err(|source| ModelError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        let text = String::from_utf8(bytes).map_err(|_| ModelError::ModelFile {
+            path: path.display().to_string(),
+            problem: ModelFileProblem::NotJson,
+        })?;
+        Self::from_json(&text, &path.display().to_string())
+    }
+}
+
+fn unreachable_gp() -> Result<(GaussianProcess, GaussianProcess), ModelError> {
+    Err(ModelError::Core(hbn_core::CoreError::InvalidSpec(
+        "a sensor GP could not be fitted",
+    )))
+}
+
+/// A configuration's held-out scores.
+struct HeldOut {
+    nlpd: f64,
+    nrmse: Vec<f64>,
+    nees: Vec<f64>,
+}
+
+impl HeldOut {
+    fn row(&self, what: String, chosen: bool) -> VectorValidationRow {
+        VectorValidationRow {
+            what,
+            nlpd: self.nlpd,
+            nrmse: self.nrmse.clone(),
+            chosen,
+        }
+    }
+}
+
+/// Per-component statistics of all trajectories.
+struct Stats {
+    u: Vec<SignalStats>,
+    x: Vec<SignalStats>,
+    y: Vec<SignalStats>,
+}
+
+impl Stats {
+    fn of(trajectories: &[VectorSequence<'_>]) -> Self {
+        let d = trajectories[0].dims;
+        fn u_of<'s>(t: &'s VectorSequence<'_>) -> &'s [f64] {
+            t.u
+        }
+        fn x_of<'s>(t: &'s VectorSequence<'_>) -> &'s [f64] {
+            t.x
+        }
+        fn y_of<'s>(t: &'s VectorSequence<'_>) -> &'s [f64] {
+            t.y
+        }
+        let col =
+            |pick: for<'s> fn(&'s VectorSequence<'_>) -> &'s [f64], width: usize, c: usize| {
+                let values: Vec<f64> = trajectories
+                    .iter()
+                    .flat_map(|t| pick(t).iter().skip(c).step_by(width).copied())
+                    .collect();
+                SignalStats::of(values.iter())
+            };
+        Self {
+            u: (0..d.inputs).map(|a| col(u_of, d.inputs, a)).collect(),
+            x: (0..d.states).map(|i| col(x_of, d.states, i)).collect(),
+            y: (0..d.sensors).map(|j| col(y_of, d.sensors, j)).collect(),
+        }
+    }
+}
+
+/// Transition rows `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}, memory after u_{k-1}]` (row-major)
+/// and their targets `x_k` (`dx` per row), for `k >= 2` of every trajectory.
+pub fn transition_rows(trajectories: &[VectorSequence<'_>], plays: &Plays) -> (Vec<f64>, Vec<f64>) {
+    let mut rows = Vec::new();
+    let mut targets = Vec::new();
+    let m = plays.len();
+    for t in trajectories {
+        let d = t.dims;
+        let n = t.len();
+        // Memory of each input after every sample.
+        let mut mem: Vec<Vec<PlayState>> = Vec::with_capacity(d.inputs);
+        for a in 0..d.inputs {
+            let ua: Vec<f64> = t.u.iter().skip(a).step_by(d.inputs).copied().collect();
+            let mut out = vec![[0.0; hbn_core::MAX_PLAYS]; n];
+            plays.run(&ua, &mut out);
+            mem.push(out);
+        }
+        for k in 2..n {
+            rows.extend_from_slice(&t.x[(k - 1) * d.states..k * d.states]);
+            rows.extend_from_slice(&t.x[(k - 2) * d.states..(k - 1) * d.states]);
+            rows.extend_from_slice(&t.u[(k - 1) * d.inputs..k * d.inputs]);
+            rows.extend_from_slice(&t.u[(k - 2) * d.inputs..(k - 1) * d.inputs]);
+            for memory in &mem {
+                rows.extend_from_slice(&memory[k - 1][..m]);
+            }
+            targets.extend_from_slice(&t.x[k * d.states..(k + 1) * d.states]);
+        }
+    }
+    (rows, targets)
+}
+
+/// Sensor `j`'s rows `[x_{k-1}, y^j_{k-1}, x_k]` (or `[x_{k-1}, x_k]`) and targets `y^j_k`,
+/// for `k >= 1` of every trajectory.
+pub fn sensor_rows(
+    trajectories: &[VectorSequence<'_>],
+    j: usize,
+    reads_output: bool,
+) -> (Vec<f64>, Vec<f64>) {
+    let mut rows = Vec::new();
+    let mut targets = Vec::new();
+    for t in trajectories {
+        let d = t.dims;
+        for k in 1..t.len() {
+            rows.extend_from_slice(&t.x[(k - 1) * d.states..k * d.states]);
+            if reads_output {
+                rows.push(t.y[(k - 1) * d.sensors + j]);
+            }
+            rows.extend_from_slice(&t.x[k * d.states..(k + 1) * d.states]);
+            targets.push(t.y[k * d.sensors + j]);
+        }
+    }
+    (rows, targets)
+}
