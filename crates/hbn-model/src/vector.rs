@@ -228,6 +228,10 @@ pub struct VectorModel {
     play_radii: Vec<f64>,
     /// Names of the signals (message paths), inputs then states then outputs.
     signal_names: SignalNames,
+    /// How the training logs were read: time source and largest gap (s), so that estimation
+    /// reads its logs the same way.
+    #[serde(default)]
+    read_options: Option<(String, f64)>,
     summary: VectorSummary,
 }
 
@@ -474,6 +478,7 @@ impl VectorModel {
             std_scale: vec![1.0; dims.states],
             play_radii: plays.radii().to_vec(),
             signal_names: names,
+            read_options: None,
             summary: VectorSummary::default(),
         }
     }
@@ -601,6 +606,16 @@ impl VectorModel {
     /// Sets the signals' names (the paths the logs were read by).
     pub fn set_signal_names(&mut self, names: SignalNames) {
         self.signal_names = names;
+    }
+
+    /// Records how the training logs were read (time source name, largest gap in seconds).
+    pub fn set_read_options(&mut self, time_source: &str, max_gap_s: f64) {
+        self.read_options = Some((time_source.to_owned(), max_gap_s));
+    }
+
+    /// How the training logs were read, if they were logs.
+    pub fn read_options(&self) -> Option<(&str, f64)> {
+        self.read_options.as_ref().map(|(t, g)| (t.as_str(), *g))
     }
 
     /// What training found.

@@ -32,6 +32,7 @@ pub mod explore;
 mod log;
 mod sim;
 mod train;
+mod vector;
 
 pub use error::{LogOption, OptionError, PipelineError, Setting};
 pub use estimate::{
@@ -53,4 +54,8 @@ pub use sim::{
 pub use train::{
     DEFAULT_INPUT, DEFAULT_OUTPUT, DEFAULT_STATE, MIN_LOG_SAMPLES, MIN_PIECE_SAMPLES, TrainSignals,
     Trained, train_from_logs,
+};
+pub use vector::{
+    TrainedVector, VectorLogEstimate, VectorSignals, default_signals, estimate_vector_log,
+    model_signals, train_vector_from_logs, vector_csv,
 };

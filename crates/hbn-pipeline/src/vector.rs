@@ -1,0 +1,364 @@
+//! Logs of several inputs, state components and sensors to a vector model, and a vector
+//! model's estimate of a log: the one implementation behind `hbn train` and `hbn estimate`
+//! with repeated `--input`, `--state` and `--output` flags.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use hbn_core::vector::Dims;
+use hbn_core::{Flags, Mode};
+use hbn_io::SignalPath;
+use hbn_model::{HbnParams, Problem, SignalNames, VectorEstimate, VectorModel, VectorSequence};
+
+use crate::error::{LogOption, OptionError, PipelineError};
+use crate::log::{Event, LogData, LogOptions, Observer, load_log, load_log_pieces};
+use crate::train::{DEFAULT_INPUT, DEFAULT_OUTPUT, DEFAULT_STATE, MIN_PIECE_SAMPLES};
+
+/// Where the signals of a vector system are in the logs, in order.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct VectorSignals {
+    /// One path per input.
+    pub inputs: Vec<SignalPath>,
+    /// One path per state component.
+    pub states: Vec<SignalPath>,
+    /// One path per sensor.
+    pub outputs: Vec<SignalPath>,
+}
+
+impl VectorSignals {
+    /// The sizes, checked against the vector model's limits.
+    pub fn dims(&self) -> Result<Dims, PipelineError> {
+        Dims::new(self.inputs.len(), self.states.len(), self.outputs.len()).map_err(|_| {
+            OptionError {
+                option: LogOption::Input,
+                problem: Problem::Invalid {
+                    reason: "a model takes 1 to 4 --input, 1 to 3 --state and 1 to 4 --output \
+                             signals",
+                },
+            }
+            .into()
+        })
+    }
+
+    /// Whether this is one of each (a scalar model's signals).
+    pub fn is_scalar(&self) -> bool {
+        self.inputs.len() == 1 && self.states.len() == 1 && self.outputs.len() == 1
+    }
+
+    /// Every path, inputs then states then outputs.
+    fn all(&self) -> Vec<SignalPath> {
+        self.inputs
+            .iter()
+            .chain(&self.states)
+            .chain(&self.outputs)
+            .cloned()
+            .collect()
+    }
+
+    /// The names a model records.
+    fn names(&self) -> SignalNames {
+        let s = |v: &[SignalPath]| v.iter().map(|p| p.to_string()).collect();
+        SignalNames {
+            inputs: s(&self.inputs),
+            states: s(&self.states),
+            outputs: s(&self.outputs),
+        }
+    }
+}
+
+fn parse(text: &str, option: LogOption) -> Result<SignalPath, PipelineError> {
+    crate::log::parse_signal(option, text)
+}
+
+/// The signals of a log written by `hbn simulate`: `/input.data`, `/state.data` and
+/// `/sensor.data` for a scalar system; for a multi-signal one (no `/input` topic) the topics
+/// `/input0`, `/input1`, ..., `/sensor0`, ... present in the log and the state fields `x0`,
+/// `x1`, ... of `/state` that it can read.
+pub fn default_signals(
+    log: &Path,
+    opts: LogOptions,
+    observe: &mut Observer<'_>,
+) -> Result<VectorSignals, PipelineError> {
+    let topics = hbn_io::list_topics(log).map_err(|source| PipelineError::Read {
+        file: log.to_owned(),
+        source,
+    })?;
+    let has = |t: &str| topics.iter().any(|i| i.topic == t);
+    if has("/input") || !has(&crate::multi_input_topic(0)) {
+        return Ok(VectorSignals {
+            inputs: vec![parse(DEFAULT_INPUT, LogOption::Input)?],
+            states: vec![parse(DEFAULT_STATE, LogOption::State)?],
+            outputs: vec![parse(DEFAULT_OUTPUT, LogOption::Output)?],
+        });
+    }
+    let count = |topic: fn(usize) -> String| (0..8).take_while(|&i| has(&topic(i))).count();
+    let inputs = (0..count(crate::multi_input_topic))
+        .map(|i| parse(&crate::multi_input_path(i), LogOption::Input))
+        .collect::<Result<Vec<_>, _>>()?;
+    let outputs = (0..count(crate::multi_output_topic))
+        .map(|j| parse(&crate::multi_output_path(j), LogOption::Output))
+        .collect::<Result<Vec<_>, _>>()?;
+    // The state's fields: the most of x0, x1, x2 the log has.
+    let checked = opts.check()?;
+    for dx in (1..=hbn_core::vector::MAX_STATES).rev() {
+        let states = (0..dx)
+            .map(|i| parse(&crate::multi_state_path(i), LogOption::State))
+            .collect::<Result<Vec<_>, _>>()?;
+        let probe = vec![inputs.first().cloned(), states.last().cloned()]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>();
+        match load_log(log, &probe, None, &checked, observe) {
+            Ok(_) => {
+                return Ok(VectorSignals {
+                    inputs,
+                    states,
+                    outputs,
+                });
+            }
+            Err(e) if dx == 1 => return Err(e),
+            Err(_) => {}
+        }
+    }
+    Err(PipelineError::NoModes)
+}
+
+/// A vector model trained from logs, with the logs as read.
+#[derive(Clone, Debug)]
+pub struct TrainedVector {
+    /// The model.
+    pub model: VectorModel,
+    /// The logs on their grid (pieces between gaps), one trajectory each.
+    pub logs: Vec<LogData>,
+}
+
+/// Row-major `(T, d)` of columns `first..first + d` of a log.
+fn rows(log: &LogData, first: usize, d: usize) -> Vec<f64> {
+    let t = log.len();
+    let mut out = Vec::with_capacity(t * d);
+    for k in 0..t {
+        for c in first..first + d {
+            out.push(log.column(c).get(k).copied().unwrap_or(f64::NAN));
+        }
+    }
+    out
+}
+
+/// Trains a vector model from MCAP logs, each log (piece between gaps) one trajectory; as
+/// [`crate::train_from_logs`] for a scalar one.
+pub fn train_vector_from_logs(
+    logs: &[PathBuf],
+    signals: &VectorSignals,
+    log_options: LogOptions,
+    params: HbnParams,
+    observe: &mut Observer<'_>,
+) -> Result<TrainedVector, PipelineError> {
+    if logs.is_empty() {
+        return Err(OptionError {
+            option: LogOption::Logs,
+            problem: Problem::TooSmall { value: 0, min: 1 },
+        }
+        .into());
+    }
+    let dims = signals.dims()?;
+    let opts = log_options.check()?;
+    let params = params.check()?;
+    let paths = signals.all();
+    let mut rate = opts.rate_hz;
+    let mut data = Vec::new();
+    for file in logs {
+        let split = load_log_pieces(file, &paths, rate, &opts, MIN_PIECE_SAMPLES, observe)?;
+        for piece in split.pieces {
+            rate = Some(piece.rate_hz());
+            data.push(piece);
+        }
+    }
+    let state_col = dims.inputs;
+    let state_samples: usize = data
+        .iter()
+        .map(|d| d.samples_in_grid.get(state_col).copied().unwrap_or(0))
+        .sum();
+    if state_samples < opts.min_state_samples {
+        return Err(PipelineError::TooFewStateSamples {
+            path: signals
+                .states
+                .first()
+                .map(|p| p.to_string())
+                .unwrap_or_default(),
+            samples: state_samples,
+            logs: data.len(),
+            min: opts.min_state_samples,
+            shortest: None,
+        });
+    }
+    observe(Event::LogsRead {
+        logs: data.len(),
+        samples: data.iter().map(LogData::len).sum(),
+    });
+    let params = match rate {
+        Some(r) => params.with_rate(r)?,
+        None => params,
+    };
+    let arrays: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = data
+        .iter()
+        .map(|d| {
+            (
+                rows(d, 0, dims.inputs),
+                rows(d, dims.inputs, dims.states),
+                rows(d, dims.inputs + dims.states, dims.sensors),
+            )
+        })
+        .collect();
+    let seqs: Vec<VectorSequence<'_>> = arrays
+        .iter()
+        .map(|(u, x, y)| VectorSequence::new(u, x, y, dims))
+        .collect();
+    let mut model = VectorModel::fit_checked(&seqs, &params, signals.names())?;
+    model.set_read_options(opts.time_source.name(), opts.max_gap_s);
+    Ok(TrainedVector { model, logs: data })
+}
+
+/// A vector model's estimate of one log.
+#[derive(Clone, Debug)]
+pub struct VectorLogEstimate {
+    /// The inputs then the outputs at the model's rate.
+    pub log: LogData,
+    /// The estimate.
+    pub estimate: VectorEstimate,
+}
+
+/// The signals to read for `model`: given ones (an empty list keeps the model's), in order.
+pub fn model_signals(
+    model: &VectorModel,
+    inputs: &[SignalPath],
+    outputs: &[SignalPath],
+) -> Result<VectorSignals, PipelineError> {
+    let names = model.signal_names();
+    let pick = |given: &[SignalPath], stored: &[String], option: LogOption, n: usize| {
+        if !given.is_empty() {
+            if given.len() != n {
+                return Err(PipelineError::from(OptionError {
+                    option,
+                    problem: Problem::Invalid {
+                        reason: "give one path per signal of the model, in the model's order \
+                                 (`hbn inspect` lists them), or none to read the model's",
+                    },
+                }));
+            }
+            return Ok(given.to_vec());
+        }
+        stored.iter().map(|s| parse(s, option)).collect()
+    };
+    let d = model.dims();
+    Ok(VectorSignals {
+        inputs: pick(inputs, &names.inputs, LogOption::Input, d.inputs)?,
+        states: names
+            .states
+            .iter()
+            .map(|s| parse(s, LogOption::State))
+            .collect::<Result<_, _>>()?,
+        outputs: pick(outputs, &names.outputs, LogOption::Output, d.sensors)?,
+    })
+}
+
+/// Runs `model` over a log: its inputs and outputs read at the model's rate (a non-finite or
+/// missing sample of a sensor is left out of that step's update).
+pub fn estimate_vector_log(
+    model: &VectorModel,
+    file: &Path,
+    signals: &VectorSignals,
+    mode: Mode,
+    log_options: LogOptions,
+    observe: &mut Observer<'_>,
+) -> Result<VectorLogEstimate, PipelineError> {
+    let d = model.dims();
+    let opts = log_options.check()?;
+    let paths: Vec<SignalPath> = signals
+        .inputs
+        .iter()
+        .chain(&signals.outputs)
+        .cloned()
+        .collect();
+    let log = load_log(file, &paths, Some(model.rate_hz()), &opts, observe)?;
+    let u = rows(&log, 0, d.inputs);
+    let mut y = rows(&log, d.inputs, d.sensors);
+    // Samples inside a sensor's dropout are interpolated, not measured: left out.
+    for (j, drop) in log.dropouts.iter().skip(d.inputs).enumerate() {
+        for (k, dropped) in drop.iter().enumerate() {
+            if *dropped && let Some(v) = y.get_mut(k * d.sensors + j) {
+                *v = f64::NAN;
+            }
+        }
+    }
+    let estimate = model.estimate(&u, &y, mode)?;
+    Ok(VectorLogEstimate { log, estimate })
+}
+
+/// The CSV of a vector estimate: `t`, then per state component `x{i}`, `x{i}_std`; with
+/// `covariance` the off-diagonals `cov_x{i}_x{j}` (`i < j`); per sensor `y{j}_pred`,
+/// `innovation{j}`; then `nis`, `flags`, `flag_names`. Numbers are the shortest text that
+/// reads back to the same `f64`.
+pub fn vector_csv(e: &VectorLogEstimate, covariance: bool) -> String {
+    let d = e.estimate.dims;
+    let mut header = vec!["t".to_owned()];
+    for i in 0..d.states {
+        header.push(format!("x{i}"));
+        header.push(format!("x{i}_std"));
+    }
+    if covariance {
+        for i in 0..d.states {
+            for j in i + 1..d.states {
+                header.push(format!("cov_x{i}_x{j}"));
+            }
+        }
+    }
+    for j in 0..d.sensors {
+        header.push(format!("y{j}_pred"));
+        header.push(format!("innovation{j}"));
+    }
+    header.extend(["nis".into(), "flags".into(), "flag_names".into()]);
+    let mut out = header.join(",");
+    out.push('\n');
+    let t0 = e.log.aligned.t_s.first().copied().unwrap_or(0.0);
+    for k in 0..e.estimate.len() {
+        let t = e.log.aligned.t_s.get(k).copied().unwrap_or(f64::NAN) - t0;
+        let _ = write!(out, "{t}");
+        for i in 0..d.states {
+            let _ = write!(
+                out,
+                ",{},{}",
+                e.estimate.x[k * d.states + i],
+                e.estimate.x_std[k * d.states + i]
+            );
+        }
+        if covariance {
+            for i in 0..d.states {
+                for j in i + 1..d.states {
+                    let _ = write!(
+                        out,
+                        ",{}",
+                        e.estimate.x_cov[k * d.states * d.states + i * d.states + j]
+                    );
+                }
+            }
+        }
+        for j in 0..d.sensors {
+            let _ = write!(
+                out,
+                ",{},{}",
+                e.estimate.y_pred[k * d.sensors + j],
+                e.estimate.innovation[k * d.sensors + j]
+            );
+        }
+        let flags = Flags(e.estimate.flags[k]);
+        let names: Vec<&str> = flags.names().collect();
+        let _ = writeln!(
+            out,
+            ",{},{},{}",
+            e.estimate.nis[k],
+            flags.0,
+            names.join("|")
+        );
+    }
+    out
+}
