@@ -31,9 +31,8 @@
 //! Scales: every component has its own units, so the guards work on the state divided by
 //! the span of its box ([`VectorConfig::x_bounds`], [`VectorConfig::y_bounds`]): the noise
 //! floors, the eigenvalue bounds of the covariance, the Jacobian bound and the smallest
-//! innovation variance are in those units. The local regression (EKF+BLR) is for scalar
-//! models: with ten or more inputs its box neighbourhood is almost always empty
-//! (`docs/vector.md`), and [`VectorEkf::new`] refuses it.
+//! innovation variance are in those units. The local regression (EKF+BLR) runs on scalar
+//! models only: [`VectorEkf::new`] refuses it with a message that says so.
 //!
 //! Every loop runs over the model's sizes, not the maxima, so a small model pays for what it
 //! has. The scalar filter ([`crate::ekf`]) stays the path of scalar models.
