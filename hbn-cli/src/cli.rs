@@ -8,7 +8,7 @@ use hbn_gp::SubsetPolicy;
 use hbn_io::{SignalPath, TimeSource};
 use hbn_model::{HbnParams, KernelChoice, LinearMean, SensorInputs};
 use hbn_pipeline::LogOptions;
-use hbn_sim::{SimConfig, SystemKind};
+use hbn_sim::{MultiKind, SimConfig, SystemKind};
 
 // Every default below is read from the library's parameter types (`HbnParams::default`,
 // `LogOptions::default`, `Mode::default`, `SimConfig::new`); none is written here.
@@ -369,19 +369,78 @@ fn systems_help() -> String {
         .join("\n")
 }
 
+/// A system `hbn simulate` runs: a scalar one (one input, state and sensor) or a
+/// multi-signal one (several inputs, a vector state, several sensors).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SimSystem {
+    /// One input, one state, one sensor.
+    Scalar(SystemKind),
+    /// Several inputs, a vector state, several sensors.
+    Multi(MultiKind),
+}
+
+impl SimSystem {
+    /// The command-line name.
+    pub fn name(self) -> &'static str {
+        match self {
+            SimSystem::Scalar(k) => k.name(),
+            SimSystem::Multi(k) => k.name(),
+        }
+    }
+}
+
+impl std::fmt::Display for SimSystem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+fn parse_sim_system(s: &str) -> Result<SimSystem, String> {
+    if let Ok(k) = s.parse::<SystemKind>() {
+        return Ok(SimSystem::Scalar(k));
+    }
+    if let Ok(k) = s.parse::<MultiKind>() {
+        return Ok(SimSystem::Multi(k));
+    }
+    let valid: Vec<&str> = SystemKind::ALL
+        .iter()
+        .map(|k| k.name())
+        .chain(MultiKind::ALL.iter().map(|k| k.name()))
+        .collect();
+    Err(format!(
+        "unknown system `{s}`; valid systems: {}",
+        valid.join(", ")
+    ))
+}
+
+fn multi_systems_help() -> String {
+    MultiKind::ALL
+        .iter()
+        .map(|k| format!("  {:<15} {}", k.name(), k.description()))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
 /// `hbn simulate`.
 #[derive(Clone, Debug, Args)]
 #[command(after_help = format!(
-    "Systems:\n{}\n\nExample:\n  hbn simulate --system bouc-wen --steps 1000 --seed 1 --noise-gain 1 --out train1.mcap\n  \
-     hbn simulate --system bouc-wen --steps 1000 --seed 2 --input-seed 1 --noise-gain 1 --out train2.mcap\n\n\
+    "Systems:\n{}\n\nMulti-signal systems:\n{}\n\nExample:\n  \
+     hbn simulate --system bouc-wen --steps 1000 --seed 1 --noise-gain 1 --out train1.mcap\n  \
+     hbn simulate --system bouc-wen --steps 1000 --seed 2 --input-seed 1 --noise-gain 1 --out train2.mcap\n  \
+     hbn simulate --system finger --steps 1000 --seed 1 --out finger.mcap\n\n\
      Topics /input, /state and /sensor carry {{header: {{stamp}}, data}}, so the signal paths are\n\
-     /input.data, /state.data and /sensor.data (the defaults of `hbn train`).",
-    systems_help()
+     /input.data, /state.data and /sensor.data (the defaults of `hbn train`).\n\n\
+     A multi-signal system writes one topic per input, /input0, /input1, ..., and per sensor,\n\
+     /sensor0, /sensor1, ... (field data), and one topic /state with a field per state\n\
+     component: the paths are /input0.data, ..., /state.x0, /state.x1, ..., /sensor0.data, ...\n\
+     Every input is its own random ramp (from --input-seed).",
+    systems_help(),
+    multi_systems_help()
 ))]
 pub struct SimulateArgs {
-    /// System to simulate (see the list below).
-    #[arg(long, value_parser = parse_system, default_value = "bouc-wen")]
-    pub system: SystemKind,
+    /// System to simulate: a scalar or a multi-signal system (see the lists below).
+    #[arg(long, value_parser = parse_sim_system, default_value = "bouc-wen")]
+    pub system: SimSystem,
     /// Number of samples.
     #[arg(long, default_value_t = 1000)]
     pub steps: usize,
@@ -488,15 +547,20 @@ pub struct TrainArgs {
     /// Training log (repeat for several trajectories).
     #[arg(help_heading = "Data", long = "log", required = true)]
     pub logs: Vec<PathBuf>,
-    /// Input signal u (Foxglove message path).
-    #[arg(help_heading = "Data", long, default_value = hbn_pipeline::DEFAULT_INPUT, value_parser = parse_path)]
-    pub input: SignalPath,
-    /// State signal x (the reference the model learns).
-    #[arg(help_heading = "Data", long, default_value = hbn_pipeline::DEFAULT_STATE, value_parser = parse_path)]
-    pub state: SignalPath,
-    /// Sensor output signal y.
-    #[arg(help_heading = "Data", long, default_value = hbn_pipeline::DEFAULT_OUTPUT, value_parser = parse_path)]
-    pub output: SignalPath,
+    /// Input signal u; repeat for several inputs, in order (a vector model). Default
+    /// `/input.data`, or in a log of `hbn simulate --system finger|arm` its `/input0.data`,
+    /// `/input1.data`, ...
+    #[arg(help_heading = "Data", long, action = clap::ArgAction::Append, value_parser = parse_path)]
+    pub input: Vec<SignalPath>,
+    /// State signal x (the reference the model learns); repeat for a state of several
+    /// components, in order. Default `/state.data`, or `/state.x0`, `/state.x1`, ... in a
+    /// simulated multi-signal log.
+    #[arg(help_heading = "Data", long, action = clap::ArgAction::Append, value_parser = parse_path)]
+    pub state: Vec<SignalPath>,
+    /// Sensor output signal y; repeat for several sensors, in order. Default `/sensor.data`,
+    /// or `/sensor0.data`, `/sensor1.data`, ... in a simulated multi-signal log.
+    #[arg(help_heading = "Data", long, action = clap::ArgAction::Append, value_parser = parse_path)]
+    pub output: Vec<SignalPath>,
     /// Resampling rate (Hz); default: the input's native rate in the first log.
     #[arg(help_heading = "Data", long, allow_negative_numbers = true)]
     pub rate: Option<f64>,
@@ -622,12 +686,18 @@ pub struct EstimateArgs {
     /// held-out score at training; see `hbn inspect`).
     #[arg(long, value_parser = mode_choice())]
     pub mode: Option<ModeChoice>,
-    /// Input signal (default: the path the model was trained with).
-    #[arg(long, value_parser = parse_path)]
-    pub input: Option<SignalPath>,
-    /// Sensor signal (default: the path the model was trained with).
-    #[arg(long, value_parser = parse_path)]
-    pub output: Option<SignalPath>,
+    /// Input signal (default: the path the model was trained with); repeat for each input of
+    /// a vector model, in the model's order.
+    #[arg(long, action = clap::ArgAction::Append, value_parser = parse_path)]
+    pub input: Vec<SignalPath>,
+    /// Sensor signal (default: the path the model was trained with); repeat for each sensor
+    /// of a vector model, in the model's order.
+    #[arg(long, action = clap::ArgAction::Append, value_parser = parse_path)]
+    pub output: Vec<SignalPath>,
+    /// With a vector model, add the state covariance's off-diagonals to the CSV
+    /// (`cov_x0_x1`, ...).
+    #[arg(long)]
+    pub covariance: bool,
     /// Write the estimate as an MCAP log.
     #[arg(long)]
     pub out: Option<PathBuf>,

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use anyhow::Context;
 use hbn_core::Mode;
-use hbn_model::{Estimate, HysteresisModel};
+use hbn_model::{Estimate, HysteresisModel, VectorModel};
 use hbn_pipeline::{LogEstimate, Outputs, SignalChoice, estimate_log_modes};
 use serde_json::{Value, json};
 
@@ -14,8 +14,99 @@ use crate::cli::EstimateArgs;
 use crate::glossary::{self, Term};
 use crate::report::{self, Renderer};
 
+/// Whether `file` is a vector model's file (its format tag; any other content is left to the
+/// scalar loader, which names the problem).
+pub fn is_vector_model(file: &Path) -> bool {
+    std::fs::read(file)
+        .ok()
+        .and_then(|b| serde_json::from_slice::<Value>(&b).ok())
+        .and_then(|v| v.get("format").and_then(|f| f.as_str().map(str::to_owned)))
+        .is_some_and(|f| f == hbn_model::vector::VECTOR_MODEL_FORMAT)
+}
+
+/// `hbn estimate` with a vector model: the CSV of [`hbn_pipeline::vector_csv`].
+fn run_vector(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<()> {
+    let model = VectorModel::load(&args.model)
+        .with_context(|| format!("cannot load the model `{}`", args.model.display()))?;
+    if args.out.is_some() {
+        anyhow::bail!(
+            "--out (MCAP output) takes scalar models; write a vector model's estimate with --csv"
+        );
+    }
+    let mode = match args.mode {
+        None => model.default_mode(),
+        Some(m) => match m.modes().as_slice() {
+            [one] => *one,
+            _ => anyhow::bail!("--mode all takes scalar models; choose ekf or ukf"),
+        },
+    };
+    let signals = hbn_pipeline::model_signals(&model, &args.input, &args.output)?;
+    let mut opts = hbn_pipeline::LogOptions {
+        min_coverage: args.read.min_coverage,
+        ..hbn_pipeline::LogOptions::default()
+    };
+    if let Some((t, gap)) = model.read_options() {
+        if let Ok(ts) = hbn_pipeline::parse_time_source(t) {
+            opts.time_source = ts;
+        }
+        opts.max_gap_s = gap;
+    }
+    if let Some(ts) = args.read.time_source {
+        opts.time_source = ts.into();
+    }
+    if let Some(gap) = args.read.max_gap {
+        opts.max_gap_s = gap;
+    }
+    let mut render = Renderer::default();
+    let result =
+        hbn_pipeline::estimate_vector_log(&model, &args.log, &signals, mode, opts, &mut |e| {
+            render.event(ui, e)
+        });
+    render.finish();
+    let run = result
+        .map_err(|e| report::error(e, opts.time_source))
+        .with_context(|| format!("estimation on `{}` failed", args.log.display()))?;
+    if let Some(csv) = &args.csv {
+        hbn_fs::write_atomic(
+            csv,
+            hbn_pipeline::vector_csv(&run, args.covariance).as_bytes(),
+        )
+        .with_context(|| format!("cannot write `{}`", csv.display()))?;
+    }
+    let e = &run.estimate;
+    let d = e.dims;
+    let mut text = format!(
+        "estimated {} state components over {} samples of `{}` with {}{}\n",
+        d.states,
+        e.len(),
+        args.log.display(),
+        mode,
+        args.csv
+            .as_ref()
+            .map(|c| format!("; wrote `{}`", c.display()))
+            .unwrap_or_default()
+    );
+    for (i, f) in e.unobservable.iter().enumerate() {
+        if *f > 0.05 {
+            text.push_str(&format!(
+                "  warning: state component {i} is unobservable in {:.0}% of the windows\n",
+                100.0 * f
+            ));
+        }
+    }
+    ui.print(text)?;
+    Ok(())
+}
+
 /// Loads a model, naming the file in errors.
 pub fn load_model(file: &Path) -> anyhow::Result<HysteresisModel> {
+    if is_vector_model(file) {
+        anyhow::bail!(
+            "`{}` is a vector model (several inputs, states or sensors); this command takes \
+             scalar models. A vector model runs with `hbn estimate --csv`",
+            file.display()
+        );
+    }
     HysteresisModel::load(file)
         .with_context(|| format!("cannot load the model `{}`", file.display()))
 }
@@ -103,11 +194,27 @@ pub fn run(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<Vec<LogEstima
             crate::check_output(f, what)?;
         }
     }
+    if is_vector_model(&args.model) {
+        run_vector(ui, args)?;
+        return Ok(Vec::new());
+    }
     let model = load_model(&args.model)?;
+    let one =
+        |v: &[hbn_io::SignalPath], flag: &str| -> anyhow::Result<Option<hbn_io::SignalPath>> {
+            if v.len() > 1 {
+                anyhow::bail!(
+                    "{flag} is given {} times, but `{}` is a scalar model (one input, one sensor); \
+                 give it once",
+                    v.len(),
+                    args.model.display()
+                );
+            }
+            Ok(v.first().cloned())
+        };
     let signals = SignalChoice {
-        input: args.input.clone(),
+        input: one(&args.input, "--input")?,
         state: None,
-        output: args.output.clone(),
+        output: one(&args.output, "--output")?,
     };
     let outputs = Outputs {
         csv: args.csv.clone(),

@@ -2,7 +2,7 @@
 
 use anyhow::Context;
 use hbn_model::{GpRole, HbnParams, HysteresisModel, Selection};
-use hbn_pipeline::{TrainSignals, train_from_logs};
+use hbn_pipeline::{TrainSignals, VectorSignals, train_from_logs, train_vector_from_logs};
 use serde_json::json;
 
 use crate::Ui;
@@ -60,13 +60,119 @@ impl TrainArgs {
     }
 }
 
-/// Trains, saves and summarises; returns the model.
-pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<HysteresisModel> {
+/// The signals to train on: the flags given (a missing kind takes its default), or, with
+/// none, the defaults found in the first log ([`hbn_pipeline::default_signals`]).
+fn signals(args: &TrainArgs) -> anyhow::Result<VectorSignals> {
+    if args.input.is_empty() && args.state.is_empty() && args.output.is_empty() {
+        let first = args
+            .logs
+            .first()
+            .context("give a training log with --log")?;
+        let opts = args.read.options(args.rate);
+        return hbn_pipeline::default_signals(first, opts, &mut |_| {})
+            .map_err(|e| report::error(e, opts.time_source));
+    }
+    let d = TrainSignals::default();
+    let or = |given: &[hbn_io::SignalPath], default: &hbn_io::SignalPath| {
+        if given.is_empty() {
+            vec![default.clone()]
+        } else {
+            given.to_vec()
+        }
+    };
+    Ok(VectorSignals {
+        inputs: or(&args.input, &d.input),
+        states: or(&args.state, &d.state),
+        outputs: or(&args.output, &d.output),
+    })
+}
+
+/// Trains, saves and summarises a scalar model or, with several inputs, state components or
+/// sensors, a vector model.
+pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<()> {
     crate::check_output(&args.out, "model file")?;
+    let all = signals(args)?;
+    if !all.is_scalar() {
+        return run_vector(ui, args, &all);
+    }
+    run_scalar(ui, args, &all).map(|_| ())
+}
+
+/// `hbn train` for a vector model.
+fn run_vector(ui: &mut Ui<'_>, args: &TrainArgs, signals: &VectorSignals) -> anyhow::Result<()> {
+    let opts = hbn_pipeline::LogOptions {
+        min_state_samples: args.min_state_samples,
+        ..args.read.options(args.rate)
+    };
+    let mut render = Renderer::default();
+    let trained = train_vector_from_logs(&args.logs, signals, opts, args.params(), &mut |e| {
+        render.event(ui, e)
+    });
+    render.finish();
+    let trained = trained.map_err(|e| report::error(e, opts.time_source))?;
+    let model = trained.model;
+    model
+        .save(&args.out)
+        .with_context(|| format!("cannot save the model to `{}`", args.out.display()))?;
+    let d = model.dims();
+    let s = model.summary();
+    let mut text = format!(
+        "trained a vector model ({} inputs, {} state components, {} sensors) on {} samples from {} trajectories in {:.1} s at {} Hz; saved to `{}`\n",
+        d.inputs,
+        d.states,
+        d.sensors,
+        s.samples,
+        s.trajectories,
+        s.seconds,
+        model.rate_hz(),
+        args.out.display()
+    );
+    let names = model.signal_names();
+    text.push_str(&format!(
+        "  signals: inputs {}; states {}; outputs {}\n",
+        names.inputs.join(", "),
+        names.states.join(", "),
+        names.outputs.join(", ")
+    ));
+    let sensors: Vec<String> = (0..d.sensors)
+        .map(|j| {
+            let reads = model.sensor_reads_output(j).unwrap_or(true);
+            format!(
+                "{j}: {}",
+                if reads { "thesis inputs" } else { "state only" }
+            )
+        })
+        .collect();
+    text.push_str(&format!(
+        "  chosen on held-out data: mode {}, sensors {}\n",
+        model.default_mode(),
+        sensors.join(", ")
+    ));
+    if let Some(best) = s.validation.iter().rev().find(|r| r.chosen) {
+        let nrmse: Vec<String> = best.nrmse.iter().map(|v| format!("{v:.4}")).collect();
+        text.push_str(&format!(
+            "  held-out nRMSE per state component: {}\n",
+            nrmse.join(", ")
+        ));
+    }
+    for w in &s.warnings {
+        text.push_str(&format!("  warning: {w}\n"));
+    }
+    ui.print(text)?;
+    Ok(())
+}
+
+/// `hbn train` for a scalar model; returns the model.
+fn run_scalar(
+    ui: &mut Ui<'_>,
+    args: &TrainArgs,
+    all: &VectorSignals,
+) -> anyhow::Result<HysteresisModel> {
+    let first = |v: &[hbn_io::SignalPath]| v.first().cloned().context("a signal path is missing");
     let signals = TrainSignals {
-        input: args.input.clone(),
-        state: args.state.clone(),
-        output: args.output.clone(),
+        input: first(&all.inputs)?,
+        state: first(&all.states)?,
+        output: first(&all.outputs)?,
     };
     let opts = hbn_pipeline::LogOptions {
         min_state_samples: args.min_state_samples,

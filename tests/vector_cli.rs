@@ -1,0 +1,161 @@
+//! A vector model through the CLI: `hbn simulate --system finger`, `hbn train` with repeated
+//! `--input`, `--state` and `--output` flags (and with none, finding the simulated log's
+//! signals), `hbn estimate --csv [--covariance]` with the per-component columns, and the
+//! commands that take scalar models refusing a vector one by name.
+
+use std::path::Path;
+
+/// Runs `hbn ARGS` in-process; returns the result and stdout.
+fn hbn(args: &[&str]) -> (hbn_cli::anyhow::Result<()>, String) {
+    let mut out = Vec::new();
+    let mut err = Vec::new();
+    let full: Vec<&str> = std::iter::once("hbn").chain(args.iter().copied()).collect();
+    let r = hbn_cli::run_with(full, &mut out, &mut err);
+    (r, String::from_utf8_lossy(&out).into_owned())
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+#[test]
+fn a_finger_trains_and_estimates_through_the_cli() {
+    let d = tempfile::tempdir().expect("tempdir");
+    let (train, test) = (d.path().join("train.mcap"), d.path().join("test.mcap"));
+    for (file, seed) in [(&train, "1"), (&test, "9")] {
+        let (r, _) = hbn(&[
+            "simulate",
+            "--system",
+            "finger",
+            "--steps",
+            "1200",
+            "--noise-gain",
+            "1",
+            "--seed",
+            seed,
+            "--out",
+            s(file),
+        ]);
+        r.expect("simulate");
+    }
+    let model = d.path().join("finger.json");
+    let (r, out) = hbn(&[
+        "train",
+        "--log",
+        s(&train),
+        "--input",
+        "/input0.data",
+        "--input",
+        "/input1.data",
+        "--state",
+        "/state.x0",
+        "--state",
+        "/state.x1",
+        "--output",
+        "/sensor0.data",
+        "--output",
+        "/sensor1.data",
+        "--output",
+        "/sensor2.data",
+        "--max-points",
+        "200",
+        "--out",
+        s(&model),
+    ]);
+    r.expect("train");
+    assert!(
+        out.contains("2 inputs, 2 state components, 3 sensors"),
+        "{out}"
+    );
+    let csv = d.path().join("est.csv");
+    let (r, out) = hbn(&[
+        "estimate",
+        "--model",
+        s(&model),
+        "--log",
+        s(&test),
+        "--csv",
+        s(&csv),
+        "--covariance",
+    ]);
+    r.expect("estimate");
+    assert!(
+        out.contains("estimated 2 state components over 1200 samples"),
+        "{out}"
+    );
+    let text = std::fs::read_to_string(&csv).expect("csv");
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some(
+            "t,x0,x0_std,x1,x1_std,cov_x0_x1,y0_pred,innovation0,y1_pred,innovation1,\
+             y2_pred,innovation2,nis,flags,flag_names"
+        )
+    );
+    let rows: Vec<Vec<String>> = lines
+        .map(|l| l.split(',').map(str::to_owned).collect())
+        .collect();
+    assert_eq!(rows.len(), 1200);
+    // The estimate follows the simulated state: read it back and score component 0.
+    let truth = hbn_io::read_signals(
+        &test,
+        &[
+            "/state.x0".parse().expect("path"),
+            "/state.x1".parse().expect("path"),
+        ],
+        &hbn_io::ReadOptions::default(),
+    )
+    .expect("read");
+    for (i, sig) in truth.iter().enumerate() {
+        let est: Vec<f64> = rows
+            .iter()
+            .map(|r| r[1 + 2 * i].parse().expect("x"))
+            .collect();
+        let n = est.len().min(sig.value.len());
+        let span = sig.value.iter().cloned().fold(f64::MIN, f64::max)
+            - sig.value.iter().cloned().fold(f64::MAX, f64::min);
+        let rmse = (est[..n]
+            .iter()
+            .zip(&sig.value[..n])
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            / n as f64)
+            .sqrt();
+        assert!(rmse / span < 0.1, "component {i}: nRMSE {}", rmse / span);
+    }
+    // Without flags, training finds the simulated log's signals.
+    let model2 = d.path().join("finger2.json");
+    let (r, out) = hbn(&[
+        "train",
+        "--log",
+        s(&train),
+        "--max-points",
+        "200",
+        "--out",
+        s(&model2),
+    ]);
+    r.expect("train without flags");
+    assert!(
+        out.contains("/input1.data") && out.contains("/state.x1") && out.contains("/sensor2.data"),
+        "{out}"
+    );
+    // Commands that take scalar models name the problem.
+    let (r, _) = hbn(&["inspect", s(&model)]);
+    let e = format!("{:#}", r.expect_err("inspect takes scalar models"));
+    assert!(e.contains("vector model"), "{e}");
+    // A scalar path count that does not match the model's is refused.
+    let (r, _) = hbn(&[
+        "estimate",
+        "--model",
+        s(&model),
+        "--log",
+        s(&test),
+        "--input",
+        "/input0.data",
+        "--csv",
+        s(&d.path().join("x.csv")),
+    ]);
+    let e = format!("{:#}", r.expect_err("one input for two"));
+    assert!(e.contains("one path per signal"), "{e}");
+    assert!(!d.path().join("x.csv").exists());
+}
