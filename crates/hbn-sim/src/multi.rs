@@ -91,10 +91,10 @@ impl MultiKind {
     pub fn description(self) -> &'static str {
         match self {
             MultiKind::Finger => {
-                "soft finger: 2 chambers (lag + Bouc-Wen / Prandtl-Ishlinskii), planar tip, 3 strain sensors; rate-dependent"
+                "soft finger: 2 chamber inputs (lag + Bouc-Wen / Prandtl-Ishlinskii), planar tip (2 states), 3 strain sensors; rate-dependent"
             }
             MultiKind::Arm => {
-                "soft arm segment: 3 chambers (lag + Bouc-Wen / Preisach / Duhem), spatial tip, 4 strain sensors; rate-dependent"
+                "soft arm segment: 3 chamber inputs (lag + Bouc-Wen / Preisach / Duhem), spatial tip (3 states), 4 strain sensors; rate-dependent"
             }
         }
     }
