@@ -49,6 +49,7 @@ mod model;
 mod params;
 pub mod tuning;
 pub mod vector;
+mod vector_filter;
 
 pub use dataset::{Dataset, MIN_SAMPLES, Sequence, Table, build_dataset};
 pub use error::{DataError, ModelError, ModelFileProblem, Signal};
@@ -74,3 +75,4 @@ pub use tuning::{CandidateRow, FilterTuning, NoiseScales, ValidationReport};
 pub use vector::{
     SignalNames, VectorEstimate, VectorModel, VectorSequence, VectorSummary, VectorValidationRow,
 };
+pub use vector_filter::VectorFilter;

@@ -889,6 +889,26 @@ impl VectorModel {
         })?;
         Self::from_json(&text, &path.display().to_string())
     }
+
+    /// The prior of `x_0` from the first measurements over the training rows, as
+    /// [`VectorModel::estimate`] builds it (`None` where it cannot be built: the settings'
+    /// training prior applies). For a streaming filter ([`crate::VectorFilter`]).
+    pub fn init_prior(&self) -> Option<VectorInitPrior<'_>> {
+        let y_scale: Vec<f64> = self.y_stats.iter().map(|s| s.span().max(1e-12)).collect();
+        let var_floor: Vec<f64> = self
+            .x_stats
+            .iter()
+            .map(|s| (1e-4 * s.span() * s.span()).max(1e-18))
+            .collect();
+        VectorInitPrior::new(
+            &self.init_rows,
+            self.dims,
+            &y_scale,
+            INIT_NEIGHBOURS,
+            &var_floor,
+        )
+        .ok()
+    }
 }
 
 fn unreachable_gp() -> Result<(GaussianProcess, GaussianProcess), ModelError> {
