@@ -21,19 +21,23 @@ use std::path::PathBuf;
 use std::str::FromStr;
 use std::sync::Arc;
 
+use hbn_core::vector::{Dims, MAX_INPUTS, MAX_SENSORS, MAX_STATES, VectorStepOutput};
 use hbn_core::{Flags, Mode, Want};
 use hbn_gp::{GaussianProcess, GpError, GpParams, RawHyperparameters, SparseParams};
 use hbn_io::{IoError, SignalPath};
 use hbn_model::explore::{Criterion, ExploreError, ExploreParams, Explorer, Phase, Strategy};
+use hbn_model::vector::VECTOR_MODEL_FORMAT;
 use hbn_model::{
-    Estimate, Filter, FilterOutput, HbnParams, HysteresisModel, KernelChoice, ModelError, Param,
-    ParamValue, Problem, Sequence, SignalInfo, Signals,
+    Estimate, Filter, FilterOutput, HbnParams, HysteresisModel, KernelChoice, ModelError,
+    ModelFileProblem, Param, ParamValue, Problem, SensorInputs, Sequence, SignalInfo, SignalNames,
+    Signals, VectorEstimate, VectorFilter, VectorModel, VectorSequence,
 };
 use hbn_pipeline::{
     LogOption, LogOptions, OptionError, Outputs, PipelineError, SignalChoice, TrainSignals,
+    VectorSignals,
 };
 use hbn_sim::{SimConfig, SimError, Simulator, SystemKind};
-use numpy::{PyArray1, PyReadonlyArray1};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
 use pyo3::exceptions::{
     PyException, PyFileNotFoundError, PyOSError, PyRuntimeError, PyTypeError, PyValueError,
 };
@@ -1318,6 +1322,520 @@ impl FilterStep {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Vector model (several inputs, a vector state, several sensors) and its streaming filter
+// ---------------------------------------------------------------------------------------------
+
+/// The sizes `(inputs, states, sensors)` of a vector model, checked against its limits.
+fn vector_dims(py: Python<'_>, (du, dx, dy): (usize, usize, usize)) -> PyResult<Dims> {
+    Dims::new(du, dx, dy).map_err(|e| {
+        raise(
+            py,
+            Fail::new(
+                Kind::Data,
+                format!(
+                    "a model takes 1 to {MAX_INPUTS} inputs, 1 to {MAX_STATES} state components \
+                     and 1 to {MAX_SENSORS} sensors, got {du}, {dx} and {dy} ({e})"
+                ),
+            ),
+        )
+    })
+}
+
+/// Each sensor's inputs for a vector model, as `hbn train --sensor-inputs` gives them: none
+/// (chosen on held-out data, one sensor at a time) for the default, else the primary value
+/// and the alternatives given (one for every sensor, or one per sensor).
+fn vector_sensor_inputs(p: &HbnParams) -> Vec<SensorInputs> {
+    let d = HbnParams::default();
+    if p.sensor_inputs == d.sensor_inputs && p.select.sensor_inputs == d.select.sensor_inputs {
+        return Vec::new();
+    }
+    std::iter::once(p.sensor_inputs)
+        .chain(p.select.sensor_inputs.iter().copied())
+        .collect()
+}
+
+/// Message paths of one kind of signal.
+fn parse_paths(py: Python<'_>, option: LogOption, texts: &[String]) -> PyResult<Vec<SignalPath>> {
+    texts.iter().map(|t| parse_path(py, option, t)).collect()
+}
+
+/// A row-major `T x d` array (`T x d x d` for `cov`) of a vector estimate as numpy.
+fn shaped<'py>(py: Python<'py>, values: Vec<f64>, shape: &[usize]) -> PyResult<Bound<'py, PyAny>> {
+    Ok(PyArray1::from_vec(py, values).reshape(shape)?.into_any())
+}
+
+fn vector_estimate_dict(py: Python<'_>, est: VectorEstimate) -> PyResult<Bound<'_, PyDict>> {
+    let (t, dx, dy) = (est.len(), est.dims.states, est.dims.sensors);
+    let d = PyDict::new(py);
+    d.set_item("x", shaped(py, est.x, &[t, dx])?)?;
+    d.set_item("x_std", shaped(py, est.x_std, &[t, dx])?)?;
+    d.set_item("x_cov", shaped(py, est.x_cov, &[t, dx, dx])?)?;
+    d.set_item("y_pred", shaped(py, est.y_pred, &[t, dy])?)?;
+    d.set_item("innovation", shaped(py, est.innovation, &[t, dy])?)?;
+    d.set_item("nis", PyArray1::from_vec(py, est.nis))?;
+    d.set_item("flags", PyArray1::from_vec(py, est.flags))?;
+    d.set_item("unobservable", PyArray1::from_vec(py, est.unobservable))?;
+    Ok(d)
+}
+
+/// Native vector HBN model (`hbn_model::VectorModel`). Use `hbn.HysteresisModel` instead.
+#[pyclass(name = "VectorModelCore", module = "hbn._hbn", frozen)]
+pub struct VectorModelCore {
+    inner: Arc<VectorModel>,
+}
+
+impl VectorModelCore {
+    fn wrap(model: VectorModel) -> Self {
+        Self {
+            inner: Arc::new(model),
+        }
+    }
+}
+
+#[pymethods]
+impl VectorModelCore {
+    /// Fits one transition GP per state component and one sensor GP per sensor to
+    /// trajectories: lists of row-major `u` (`T x du`), `x` (`T x dx`) and `y` (`T x dy`)
+    /// arrays, flattened; `dims` is `(du, dx, dy)`; `names` the signals' names
+    /// `(inputs, states, outputs)`; `params` the training keywords.
+    #[staticmethod]
+    #[pyo3(signature = (u, x, y, dims, names, params))]
+    #[allow(clippy::type_complexity)]
+    fn fit(
+        py: Python<'_>,
+        u: Vec<PyReadonlyArray1<'_, f64>>,
+        x: Vec<PyReadonlyArray1<'_, f64>>,
+        y: Vec<PyReadonlyArray1<'_, f64>>,
+        dims: (usize, usize, usize),
+        names: Option<(Vec<String>, Vec<String>, Vec<String>)>,
+        params: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let p = hbn_params(py, params)?;
+        let dims = vector_dims(py, dims)?;
+        if u.len() != x.len() || u.len() != y.len() {
+            return Err(raise(
+                py,
+                Fail::new(
+                    Kind::Data,
+                    format!(
+                        "u, x and y must hold the same number of trajectories (got {}, {}, {})",
+                        u.len(),
+                        x.len(),
+                        y.len()
+                    ),
+                ),
+            ));
+        }
+        let own = |v: &[PyReadonlyArray1<'_, f64>], n: &str| -> PyResult<Vec<Vec<f64>>> {
+            v.iter().map(|a| Ok(slice(a, n)?.to_vec())).collect()
+        };
+        let (u, x, y) = (own(&u, "u")?, own(&x, "x")?, own(&y, "y")?);
+        let names = names
+            .map(|(inputs, states, outputs)| SignalNames {
+                inputs,
+                states,
+                outputs,
+            })
+            .unwrap_or_default();
+        let inner = detached(py, move || {
+            let sensors = vector_sensor_inputs(&p);
+            let checked = p.check().map_err(ModelError::Config)?;
+            let seqs: Vec<VectorSequence<'_>> = (0..u.len())
+                .map(|i| VectorSequence::new(&u[i], &x[i], &y[i], dims))
+                .collect();
+            Ok(VectorModel::fit_with_sensors(
+                &seqs, &checked, names, &sensors,
+            )?)
+        })?;
+        Ok(Self::wrap(inner))
+    }
+
+    /// Trains from MCAP logs exactly like `hbn train` with repeated `--input`, `--state` and
+    /// `--output` flags (`hbn_pipeline::train_vector_from_logs`).
+    #[staticmethod]
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (logs, inputs, states, outputs, rate_hz, time_source, max_gap_s, params, min_coverage=None, min_state_samples=None))]
+    fn from_logs(
+        py: Python<'_>,
+        logs: Vec<PathBuf>,
+        inputs: Vec<String>,
+        states: Vec<String>,
+        outputs: Vec<String>,
+        rate_hz: Option<f64>,
+        time_source: Option<&str>,
+        max_gap_s: Option<f64>,
+        params: Option<&Bound<'_, PyDict>>,
+        min_coverage: Option<f64>,
+        min_state_samples: Option<usize>,
+    ) -> PyResult<Self> {
+        if logs.is_empty() {
+            return Err(raise(
+                py,
+                Fail::config_value("logs", "[]", "give at least one MCAP log"),
+            ));
+        }
+        let p = hbn_params(py, params)?;
+        let opts = log_options_with(
+            py,
+            rate_hz,
+            time_source,
+            max_gap_s,
+            min_coverage,
+            min_state_samples,
+        )?;
+        let signals = VectorSignals {
+            inputs: parse_paths(py, LogOption::Input, &inputs)?,
+            states: parse_paths(py, LogOption::State, &states)?,
+            outputs: parse_paths(py, LogOption::Output, &outputs)?,
+        };
+        let sensors = vector_sensor_inputs(&p);
+        let trained = detached(py, move || {
+            Ok(hbn_pipeline::train_vector_from_logs(
+                &logs,
+                &signals,
+                opts,
+                p,
+                &sensors,
+                &mut |_| {},
+            )?)
+        })?;
+        Ok(Self::wrap(trained.model))
+    }
+
+    /// Runs the filter over row-major `u` (`T x du`) and `y` (`T x dy`, flattened); returns a
+    /// dict of per-sample arrays shaped `(T, d)`.
+    #[pyo3(signature = (u, y, mode))]
+    fn estimate<'py>(
+        &self,
+        py: Python<'py>,
+        u: PyReadonlyArray1<'_, f64>,
+        y: PyReadonlyArray1<'_, f64>,
+        mode: Option<&str>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let mode = parse_mode(py, mode, self.inner.default_mode())?;
+        let (u, y) = (slice(&u, "u")?.to_vec(), slice(&y, "y")?.to_vec());
+        let est = detached(py, || Ok(self.inner.estimate(&u, &y, mode)?))?;
+        vector_estimate_dict(py, est)
+    }
+
+    /// Reads the inputs and outputs from a log at the model's rate (the model's message paths
+    /// unless given, one per signal in order), runs the filter and optionally writes the CSV
+    /// of `hbn estimate --csv`; returns `(t, dict of per-sample arrays)`.
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (path, mode, inputs, outputs, csv, time_source, max_gap_s))]
+    fn estimate_log<'py>(
+        &self,
+        py: Python<'py>,
+        path: PathBuf,
+        mode: Option<&str>,
+        inputs: Vec<String>,
+        outputs: Vec<String>,
+        csv: Option<PathBuf>,
+        time_source: Option<&str>,
+        max_gap_s: Option<f64>,
+    ) -> PyResult<(Arr<'py>, Bound<'py, PyDict>)> {
+        let mode = parse_mode(py, mode, self.inner.default_mode())?;
+        let mut opts = LogOptions::default();
+        if let Some((t, gap)) = self.inner.read_options() {
+            if let Ok(ts) = hbn_pipeline::parse_time_source(t) {
+                opts.time_source = ts;
+            }
+            opts.max_gap_s = gap;
+        }
+        if let Some(t) = time_source {
+            opts.time_source = hbn_pipeline::parse_time_source(t).map_err(|e| raise(py, e))?;
+        }
+        if let Some(g) = max_gap_s {
+            opts.max_gap_s = g;
+        }
+        let inputs = parse_paths(py, LogOption::Input, &inputs)?;
+        let outputs = parse_paths(py, LogOption::Output, &outputs)?;
+        let model = &self.inner;
+        let run = detached(py, move || {
+            let signals = hbn_pipeline::model_signals(model, &inputs, &outputs)?;
+            let run =
+                hbn_pipeline::estimate_vector_log(model, &path, &signals, mode, opts, &mut |_| {})?;
+            if let Some(csv) = &csv {
+                hbn_fs::write_atomic(csv, hbn_pipeline::vector_csv(&run, false).as_bytes())
+                    .map_err(|e| Fail::new(Kind::Io(e.source.kind()), e.to_string()))?;
+            }
+            Ok(run)
+        })?;
+        let t = PyArray1::from_vec(py, run.log.aligned.t_s);
+        Ok((t, vector_estimate_dict(py, run.estimate)?))
+    }
+
+    /// A streaming filter over this model (sharing it, not copying it).
+    #[pyo3(signature = (mode))]
+    fn filter(&self, py: Python<'_>, mode: Option<&str>) -> PyResult<VectorFilterCore> {
+        let mode = parse_mode(py, mode, self.inner.default_mode())?;
+        let inner = VectorFilter::new(self.inner.clone(), mode).map_err(|e| raise(py, e))?;
+        Ok(VectorFilterCore { inner })
+    }
+
+    /// The filter's settings of a mode, as a dict (per-component arrays padded to the limits).
+    #[pyo3(signature = (mode))]
+    fn ekf_config<'py>(&self, py: Python<'py>, mode: Option<&str>) -> PyResult<Bound<'py, PyAny>> {
+        let mode = parse_mode(py, mode, self.inner.default_mode())?;
+        to_py(py, &self.inner.config(mode))
+    }
+    /// `(inputs, states, sensors)`.
+    #[getter]
+    fn dims(&self) -> (usize, usize, usize) {
+        let d = self.inner.dims();
+        (d.inputs, d.states, d.sensors)
+    }
+    /// Sample rate (Hz).
+    #[getter]
+    fn rate_hz(&self) -> f64 {
+        self.inner.rate_hz()
+    }
+    /// The signals' names (message paths) as a dict: `inputs`, `states`, `outputs`.
+    fn signals<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_py(py, self.inner.signal_names())
+    }
+    /// Training parameters as a dict by keyword argument.
+    fn params<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        params_dict(py, self.inner.params(), false)
+    }
+    /// Training summary as a dict (held-out scores, warnings, observability).
+    fn summary<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_py(py, self.inner.summary())
+    }
+    /// The mode estimation uses without `mode=` (chosen on held-out data at training).
+    fn default_mode(&self) -> &'static str {
+        self.inner.default_mode().name()
+    }
+    /// The transition GP of state component `i`.
+    fn transition(&self, py: Python<'_>, i: usize) -> PyResult<GaussianProcessCore> {
+        let gp = self.inner.transition(i).ok_or_else(|| {
+            let n = self.inner.dims().states;
+            raise(
+                py,
+                Fail::config_value(
+                    "i",
+                    &i.to_string(),
+                    format!("the model has {n} state components"),
+                ),
+            )
+        })?;
+        Ok(GaussianProcessCore::wrap(gp.clone()))
+    }
+    /// The GP of sensor `j`.
+    fn sensor(&self, py: Python<'_>, j: usize) -> PyResult<GaussianProcessCore> {
+        let gp = self.inner.sensor(j).ok_or_else(|| {
+            let n = self.inner.dims().sensors;
+            raise(
+                py,
+                Fail::config_value("j", &j.to_string(), format!("the model has {n} sensors")),
+            )
+        })?;
+        Ok(GaussianProcessCore::wrap(gp.clone()))
+    }
+    /// The model as JSON (the format of `save`, shared with the CLI; GIL released).
+    fn to_json(&self, py: Python<'_>) -> PyResult<String> {
+        detached(py, || Ok(self.inner.to_json()?))
+    }
+    /// The bytes of the model file `save` writes (GIL released): what a pickled model holds.
+    fn to_bytes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
+        let inner = &self.inner;
+        let text = detached(py, move || Ok(inner.to_json()?))?;
+        Ok(PyBytes::new(py, text.as_bytes()))
+    }
+    /// Writes the model atomically (the CLI's `hbn train --out` format).
+    fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        detached(py, || Ok(self.inner.save(&path)?))
+    }
+}
+
+/// A scalar or a vector model, whichever the file's format tag names.
+enum AnyModel {
+    Scalar(HysteresisModel),
+    Vector(VectorModel),
+}
+
+impl AnyModel {
+    /// `scalar` is the scalar loader's result; a file tagged as a vector model is read by
+    /// `vector` instead.
+    fn pick(
+        scalar: Result<HysteresisModel, ModelError>,
+        vector: impl FnOnce() -> Result<VectorModel, ModelError>,
+    ) -> Result<Self, ModelError> {
+        match scalar {
+            Ok(m) => Ok(Self::Scalar(m)),
+            Err(ModelError::ModelFile {
+                problem: ModelFileProblem::WrongFormat { tag },
+                ..
+            }) if tag == VECTOR_MODEL_FORMAT => Ok(Self::Vector(vector()?)),
+            Err(e) => Err(e),
+        }
+    }
+
+    fn into_py(self, py: Python<'_>) -> PyResult<Py<PyAny>> {
+        Ok(match self {
+            Self::Scalar(m) => Py::new(py, HysteresisModelCore::wrap(m))?.into_any(),
+            Self::Vector(m) => Py::new(py, VectorModelCore::wrap(m))?.into_any(),
+        })
+    }
+}
+
+/// Loads a model file written by `save` or `hbn train`: a `HysteresisModelCore`, or a
+/// `VectorModelCore` for a file of the format `hbn-vector-model`.
+#[pyfunction]
+fn load_model(py: Python<'_>, path: PathBuf) -> PyResult<Py<PyAny>> {
+    let m = detached(py, move || {
+        Ok(AnyModel::pick(HysteresisModel::load(&path), || {
+            VectorModel::load(&path)
+        })?)
+    })?;
+    m.into_py(py)
+}
+
+/// A model from the bytes of a model file (GIL released), scalar or vector by its format tag;
+/// `origin` names them in errors.
+#[pyfunction]
+fn model_from_bytes(py: Python<'_>, data: Vec<u8>, origin: &str) -> PyResult<Py<PyAny>> {
+    let origin = origin.to_owned();
+    let m = detached(py, move || {
+        let text = String::from_utf8(data).map_err(|_| {
+            Fail::new(
+                Kind::ModelFile,
+                format!("{origin}: not an hbn model file (not UTF-8 text)"),
+            )
+        })?;
+        Ok(AnyModel::pick(
+            HysteresisModel::from_json(&text, &origin),
+            || VectorModel::from_json(&text, &origin),
+        )?)
+    })?;
+    m.into_py(py)
+}
+
+/// Native streaming filter of a vector model (`hbn_model::VectorFilter`). Use `hbn.Filter`
+/// instead.
+#[pyclass(name = "VectorFilterCore", module = "hbn._hbn")]
+pub struct VectorFilterCore {
+    inner: VectorFilter,
+}
+
+#[pymethods]
+impl VectorFilterCore {
+    /// One sample: the inputs `u` (`du` values) and measurements `y` (`dy` values; a NaN
+    /// one is left out of the update, and flagged).
+    fn step(
+        &mut self,
+        u: PyReadonlyArray1<'_, f64>,
+        y: PyReadonlyArray1<'_, f64>,
+    ) -> PyResult<VectorFilterStep> {
+        let out = self.inner.step(slice(&u, "u")?, slice(&y, "y")?);
+        Ok(VectorFilterStep {
+            dims: self.inner.dims(),
+            out,
+        })
+    }
+    /// Forgets the state; the next step initialises again.
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+    /// The estimation mode.
+    #[getter]
+    fn mode(&self) -> &'static str {
+        self.inner.mode().name()
+    }
+    /// Samples since the last (re)initialisation.
+    #[getter]
+    fn steps(&self) -> u64 {
+        self.inner.state().map_or(0, |s| s.steps)
+    }
+    /// `(inputs, states, sensors)`.
+    #[getter]
+    fn dims(&self) -> (usize, usize, usize) {
+        let d = self.inner.dims();
+        (d.inputs, d.states, d.sensors)
+    }
+}
+
+/// The output of one step of a vector model's filter: per state component and per sensor,
+/// tuples.
+#[pyclass(name = "VectorFilterOutput", module = "hbn", frozen)]
+pub struct VectorFilterStep {
+    dims: Dims,
+    out: VectorStepOutput,
+}
+
+#[pymethods]
+impl VectorFilterStep {
+    /// Estimate of each state component.
+    #[getter]
+    fn x<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
+        PyTuple::new(py, &self.out.x[..self.dims.states])
+    }
+    /// Standard deviation of each state component.
+    #[getter]
+    fn x_std<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
+        PyTuple::new(py, &self.out.x_std[..self.dims.states])
+    }
+    /// Covariance of the state, a tuple of `dx` rows.
+    #[getter]
+    fn x_cov<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
+        let dx = self.dims.states;
+        let rows = self.out.x_cov[..dx]
+            .iter()
+            .map(|r| PyTuple::new(py, &r[..dx]))
+            .collect::<PyResult<Vec<_>>>()?;
+        PyTuple::new(py, rows)
+    }
+    /// Predicted measurement of each sensor before the update.
+    #[getter]
+    fn y_pred<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
+        PyTuple::new(py, &self.out.y_pred[..self.dims.sensors])
+    }
+    /// Innovation of each sensor (0 where it was not updated).
+    #[getter]
+    fn innovation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
+        PyTuple::new(py, &self.out.innovation[..self.dims.sensors])
+    }
+    /// Innovation variance of each sensor.
+    #[getter]
+    fn innovation_var<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
+        PyTuple::new(py, &self.out.innovation_var[..self.dims.sensors])
+    }
+    /// Normalised innovation squared of the whole update.
+    #[getter]
+    fn nis(&self) -> f64 {
+        self.out.nis
+    }
+    /// Process noise variance of each transition.
+    #[getter]
+    fn q_x<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
+        PyTuple::new(py, &self.out.q_x[..self.dims.states])
+    }
+    /// Measurement noise variance of each sensor.
+    #[getter]
+    fn r<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
+        PyTuple::new(py, &self.out.r[..self.dims.sensors])
+    }
+    /// Guard flags (bits; see `flag_names()`).
+    #[getter]
+    fn flags(&self) -> u32 {
+        self.out.flags.0
+    }
+    /// Names of the guard flags that fired.
+    fn flag_names(&self) -> Vec<&'static str> {
+        self.out.flags.names().collect()
+    }
+    fn __repr__(&self) -> String {
+        let dx = self.dims.states;
+        format!(
+            "VectorFilterOutput(x={:?}, x_std={:?}, flags={:?})",
+            &self.out.x[..dx],
+            &self.out.x_std[..dx],
+            self.flag_names()
+        )
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
 // Functions
 // ---------------------------------------------------------------------------------------------
 
@@ -1784,9 +2302,14 @@ fn _hbn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<HysteresisModelCore>()?;
     m.add_class::<FilterCore>()?;
     m.add_class::<FilterStep>()?;
+    m.add_class::<VectorModelCore>()?;
+    m.add_class::<VectorFilterCore>()?;
+    m.add_class::<VectorFilterStep>()?;
     m.add_class::<ExplorerCore>()?;
     m.add_class::<SimulatorCore>()?;
     m.add_function(wrap_pyfunction!(default_explore_params, m)?)?;
+    m.add_function(wrap_pyfunction!(load_model, m)?)?;
+    m.add_function(wrap_pyfunction!(model_from_bytes, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(oracle_estimate, m)?)?;
     m.add_function(wrap_pyfunction!(systems, m)?)?;

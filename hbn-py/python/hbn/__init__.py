@@ -22,7 +22,9 @@ Every default in a signature is the library's own, read from the Rust engine whe
 loads (:func:`default_params`, :func:`default_log_options`, :func:`default_gp_params`,
 :func:`default_explore_params`, :func:`default_sim_params`). A keyword is the name of the Rust
 field it sets (``n_starts``, ``max_points``, ``rate_hz``); ``docs/options.md`` lists every option
-with its CLI flag. Today a model is scalar: one input, one state, one sensor.
+with its CLI flag. A model is scalar (one input, one state, one sensor) when trained on 1-D
+arrays, or a vector model (up to 4 inputs, 3 state components and 4 sensors) when trained on
+``(T, d)`` arrays; ``docs/vector.md`` describes the vector model.
 
 Example
 -------
@@ -72,6 +74,7 @@ __all__ = [
     "Estimate",
     "Filter",
     "FilterOutput",
+    "VectorFilterOutput",
     "GaussianProcess",
     "Explorer",
     "Simulator",
@@ -108,6 +111,7 @@ ModelFileError = _hbn.ModelFileError
 ConfigError = _hbn.ConfigError
 TrainingError = _hbn.TrainingError
 FilterOutput = _hbn.FilterOutput
+VectorFilterOutput = _hbn.VectorFilterOutput
 
 #: Names accepted by ``simulate(system=...)``.
 SYSTEMS: Tuple[str, ...] = tuple(_hbn.systems())
@@ -637,6 +641,14 @@ class Estimate:
     Gramian's information on ``x`` alone, the other state components left free), ``mode``, and ``t``
     (seconds from the first grid sample; only for :meth:`HysteresisModel.estimate_log`).
 
+    A scalar model's arrays have shape ``(T,)``, or ``(T, 1)`` for ``x``, ``x_std``, ``y_pred``
+    and ``innovation`` when it was given ``(T, 1)`` arrays. A vector model's have shape
+    ``(T, dx)`` (``x``, ``x_std``), ``(T, dx, dx)`` (``x_cov``, the covariance of the state) and
+    ``(T, dy)`` (``y_pred``, ``innovation``); ``nis`` and ``flags`` are ``(T,)``, and
+    ``unobservable`` gives per state component the fraction of windows of 20 samples in which no
+    sensor saw it. ``x_cov`` and ``unobservable`` are ``None`` for a scalar model; ``q_x``,
+    ``r``, ``obs_min``, ``obs_max`` and ``obs_x`` are ``None`` for a vector model.
+
     Unpacks as ``x, x_std = model.estimate(u, y)``.
 
     >>> import hbn
@@ -662,6 +674,8 @@ class Estimate:
         "obs_min",
         "obs_max",
         "obs_x",
+        "x_cov",
+        "unobservable",
         "mode",
         "t",
     )
@@ -674,12 +688,14 @@ class Estimate:
         self.y_pred: np.ndarray = fields["y_pred"]
         self.innovation: np.ndarray = fields["innovation"]
         self.nis: np.ndarray = fields["nis"]
-        self.q_x: np.ndarray = fields["q_x"]
-        self.r: np.ndarray = fields["r"]
+        self.q_x: Optional[np.ndarray] = fields.get("q_x")
+        self.r: Optional[np.ndarray] = fields.get("r")
         self.flags: np.ndarray = fields["flags"]
-        self.obs_min: np.ndarray = fields["obs_min"]
-        self.obs_max: np.ndarray = fields["obs_max"]
-        self.obs_x: np.ndarray = fields["obs_x"]
+        self.obs_min: Optional[np.ndarray] = fields.get("obs_min")
+        self.obs_max: Optional[np.ndarray] = fields.get("obs_max")
+        self.obs_x: Optional[np.ndarray] = fields.get("obs_x")
+        self.x_cov: Optional[np.ndarray] = fields.get("x_cov")
+        self.unobservable: Optional[np.ndarray] = fields.get("unobservable")
         self.mode: str = mode
         self.t: Optional[np.ndarray] = t
 
@@ -708,16 +724,21 @@ class Estimate:
         return out
 
     def to_dict(self) -> Dict[str, np.ndarray]:
-        """All per-sample arrays by name."""
-        return {k: getattr(self, k) for k in self.__slots__ if k not in ("mode", "t")}
+        """All arrays by name (those the model's kind has)."""
+        return {
+            k: v
+            for k in self.__slots__
+            if k not in ("mode", "t") and (v := getattr(self, k)) is not None
+        }
 
-    def score(self, x_ref: Any) -> Dict[str, float]:
-        """Scores against the true state ``x_ref`` (same length), as ``hbn eval`` reports them:
-        ``rmse``, ``nrmse`` (RMSE over the reference's range), ``coverage_1sigma`` and
+    def score(self, x_ref: Any) -> Dict[str, Any]:
+        """Scores against the true state ``x_ref`` (same shape as ``x``), as ``hbn eval`` reports
+        them: ``rmse``, ``nrmse`` (RMSE over the reference's range), ``coverage_1sigma`` and
         ``coverage_2sigma`` (fraction of samples with ``|x_ref - x| <= k * x_std``; about 0.683
         and 0.954 when the uncertainty is honest), ``mean_nees`` (mean of
         ``((x_ref - x) / x_std)^2``, about 1 when honest), ``nlpd`` (mean negative log predictive
-        density, lower is better) and ``samples`` (those scored: finite, ``x_std > 0``).
+        density, lower is better) and ``samples`` (those scored: finite, ``x_std > 0``). For a
+        ``(T, d)`` estimate each score is an array of ``d``, one per state component.
 
         >>> import hbn
         >>> tr = hbn.simulate("duhem", 300, seed=1)
@@ -727,15 +748,109 @@ class Estimate:
         >>> sorted(s)[:3], s["samples"]
         (['coverage_1sigma', 'coverage_2sigma', 'mean_nees'], 200)
         """
-        return dict(
-            _hbn.score(_vector(self.x, "x"), _vector(self.x_std, "x_std"), _vector(x_ref, "x_ref"))
-        )
+        x = np.asarray(self.x)
+        if x.ndim == 1:
+            return dict(
+                _hbn.score(
+                    _vector(self.x, "x"), _vector(self.x_std, "x_std"), _vector(x_ref, "x_ref")
+                )
+            )
+        ref = np.asarray(x_ref, dtype=np.float64)
+        if ref.ndim == 1 and x.shape[1] == 1:
+            ref = ref.reshape(-1, 1)
+        if ref.shape != x.shape:
+            raise DataError(f"x_ref must have the shape of x, {x.shape}; got {ref.shape}")
+        cols = [
+            _hbn.score(_native(x[:, i]), _native(self.x_std[:, i]), _native(ref[:, i]))
+            for i in range(x.shape[1])
+        ]
+        return {k: np.array([c[k] for c in cols]) for k in cols[0]} if cols else {}
+
+
+def _signal(a: Any, name: str) -> np.ndarray:
+    """One trajectory of a signal: a contiguous float64 array of shape ``(T,)`` or ``(T, d)``."""
+    try:
+        v = _native(a)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{name} must be numeric: {e}") from None
+    if v.ndim == 0:
+        v = v.reshape(1)
+    if v.ndim > 2:
+        raise ValueError(f"{name} must be 1-D (T,) or 2-D (T, d), got shape {v.shape}")
+    return v
 
 
 def _trajectories(a: Any, name: str) -> List[np.ndarray]:
+    """A list of arrays is a list of trajectories; anything else is one trajectory."""
     if isinstance(a, (list, tuple)) and len(a) > 0 and np.ndim(a[0]) >= 1:
-        return [_vector(t, f"{name}[{i}]") for i, t in enumerate(a)]
-    return [_vector(a, name)]
+        return [_signal(t, f"{name}[{i}]") for i, t in enumerate(a)]
+    return [_signal(a, name)]
+
+
+def _widths(us: List[np.ndarray], xs: List[np.ndarray], ys: List[np.ndarray]) -> Optional[Tuple[int, int, int]]:
+    """``None`` for 1-D trajectories, else the widths ``(du, dx, dy)`` of ``(T, d)`` ones
+    (:class:`DataError` unless every array is 1-D or every array is 2-D, with one width per
+    signal)."""
+    arrays = [("u", a) for a in us] + [("x", a) for a in xs] + [("y", a) for a in ys]
+    dims = {a.ndim for _, a in arrays}
+    if dims == {1}:
+        return None
+    if dims != {2}:
+        shapes = ", ".join(f"{n} {a.shape}" for n, a in arrays[:6])
+        raise DataError(
+            "u, x and y must all be 1-D (T,) arrays (a scalar model) or all 2-D (T, d) arrays "
+            f"(a vector model; reshape a single signal with a.reshape(-1, 1)), got {shapes}"
+        )
+    out = []
+    for n, group in (("u", us), ("x", xs), ("y", ys)):
+        widths = {a.shape[1] for a in group}
+        if len(widths) != 1:
+            raise DataError(f"every trajectory of {n} must have the same columns, got {sorted(widths)}")
+        out.append(widths.pop())
+    return (out[0], out[1], out[2])
+
+
+def _names(signals: Optional[Mapping[str, Any]], dims: Tuple[int, int, int]) -> Optional[Tuple[List[str], List[str], List[str]]]:
+    """A vector model's signal names from ``signals={"u": [...], "x": [...], "y": [...]}``."""
+    if signals is None:
+        return None
+    unknown = set(signals) - {"u", "x", "y"}
+    if unknown:
+        raise _config_error("signals", f"unknown keys {sorted(unknown)}; use u, x and y", dict(signals))
+    out = []
+    for key, d in zip(("u", "x", "y"), dims):
+        given = signals.get(key)
+        if given is None:
+            out.append([])
+            continue
+        names = [given] if isinstance(given, str) else list(given)
+        if len(names) != d or not all(isinstance(n, str) for n in names):
+            raise _config_error(
+                "signals", f"{key} takes a list of {d} names or message paths, one per column", dict(signals)
+            )
+        out.append(names)
+    return (out[0], out[1], out[2])
+
+
+def _paths(v: Any, keyword: str) -> List[str]:
+    """``input=`` / ``state=`` / ``output=`` as a list of message paths."""
+    if isinstance(v, (str, os.PathLike)):
+        return [str(v)]
+    try:
+        paths = [str(p) for p in v]
+    except TypeError:
+        raise _config_error(keyword, "must be a message path or a list of them", v) from None
+    if not paths:
+        raise _config_error(keyword, "give at least one message path", v)
+    return paths
+
+
+def _scalar_only(what: str, dims: Tuple[int, int, int]) -> ValueError:
+    du, dx, dy = dims
+    return ValueError(
+        f"{what} takes scalar models (one input, one state, one sensor); this is a vector model "
+        f"of {du} inputs, {dx} state components and {dy} sensors"
+    )
 
 
 
@@ -827,6 +942,15 @@ class HysteresisModel:
     constructors are siblings. A model pickles with its model file inside, so
     ``concurrent.futures``, ``multiprocessing`` and Dask carry it to other processes.
 
+    The same class holds a vector model (:attr:`is_vector`): several inputs, a vector state and
+    several sensors (:attr:`dims`), one transition GP per state component and one sensor GP
+    per sensor (``docs/vector.md``). :meth:`fit` makes one from ``(T, d)`` arrays and
+    :meth:`from_logs` from lists of message paths; :meth:`estimate`, :meth:`estimate_log`,
+    :meth:`filter`, the files and pickling work alike. :meth:`simulate_open_loop`,
+    :meth:`initial_state`, :attr:`tuning`, :attr:`transition`, :attr:`sensor` and the
+    :class:`Explorer` take scalar models only (:attr:`transition_gps` and :attr:`sensor_gps`
+    list a vector model's GPs).
+
     >>> import hbn
     >>> tr = hbn.simulate("maxwell-slip", 500, seed=1, noise_gain=1.0)
     >>> model = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=150)
@@ -836,8 +960,8 @@ class HysteresisModel:
     100.0
     """
 
-    def __init__(self, core: _hbn.HysteresisModelCore) -> None:
-        if not isinstance(core, _hbn.HysteresisModelCore):
+    def __init__(self, core: Union[_hbn.HysteresisModelCore, _hbn.VectorModelCore]) -> None:
+        if not isinstance(core, (_hbn.HysteresisModelCore, _hbn.VectorModelCore)):
             raise TypeError(
                 "use HysteresisModel.fit(...), HysteresisModel.from_logs(...) or "
                 "HysteresisModel.load(path)"
@@ -845,6 +969,12 @@ class HysteresisModel:
         self._core = core
 
     def __repr__(self) -> str:
+        if self.is_vector:
+            du, dx, dy = self.dims
+            return (
+                f"HysteresisModel(vector: {du} inputs, {dx} states, {dy} sensors, "
+                f"rate_hz={self.rate_hz}, default_mode={self.default_mode!r})"
+            )
         p = self.params
         return (
             f"HysteresisModel(rate_hz={self.rate_hz}, transition_kernel="
@@ -885,14 +1015,23 @@ class HysteresisModel:
         max_signal_variance: Optional[float] = _P["max_signal_variance"],
         firmware_budget: Union[int, str, None] = _P["firmware_budget"],
     ) -> HysteresisModel:
-        """Learns both GPs from logged trajectories sampled at ``rate_hz`` Hz.
+        """Learns the GPs from logged trajectories sampled at ``rate_hz`` Hz.
 
-        ``u``, ``x``, ``y``: one trajectory (1-D arrays of equal length, at least 3 samples) or
-        lists of trajectories (rows never straddle two trajectories). ``signals`` (optional)
-        records where the signals come from, ``{"u": "/valve.pressure", "x": ..., "y": ...}``
-        (or ``{"name", "path", "unit"}`` dicts as values): ``hbn estimate --model`` then reads
-        ``u`` and ``y`` from those message paths. To train from MCAP logs use
-        :meth:`from_logs`, which keeps the logs' rate.
+        ``u``, ``x``, ``y``: one trajectory (arrays of equal length, at least 3 samples) or
+        lists of trajectories (rows never straddle two trajectories). 1-D arrays ``(T,)`` train
+        a scalar model. 2-D arrays ``(T, du)``, ``(T, dx)``, ``(T, dy)`` (all three 2-D) train a
+        vector model when any width is above 1 (at most 4 inputs, 3 state components and 4
+        sensors; ``docs/vector.md``), and a scalar model when all are 1, whose :meth:`estimate`
+        then returns ``(T, 1)`` arrays for ``(T, 1)`` inputs. ``signals`` (optional) records
+        where the signals come from, ``{"u": "/valve.pressure", "x": ..., "y": ...}`` (or
+        ``{"name", "path", "unit"}`` dicts as values; for a vector model a list of names or
+        message paths per key, one per column): ``hbn estimate --model`` then reads ``u`` and
+        ``y`` from those message paths. To train from MCAP logs use :meth:`from_logs`, which
+        keeps the logs' rate. A vector model takes the same training keywords. It chooses its
+        mode, its process-noise scale, each component's standard-deviation scale and, with the
+        default ``sensor_inputs``, each sensor's inputs on the held-out last quarter of every
+        trajectory; ``sensor_inputs`` given as one value applies to every sensor, as a list to
+        each sensor in turn (as ``hbn train --sensor-inputs``).
         {training}
         >>> import hbn
         >>> runs = [hbn.simulate("duhem", 200, seed=s, noise_gain=1.0) for s in (1, 2)]
@@ -907,6 +1046,16 @@ class HysteresisModel:
                 "signals", 'must be a dict like {"u": "/topic.field", "x": ..., "y": ...}', signals
             )
         params = _training_args(locals())
+        dims = _widths(us, xs, ys)
+        if dims is not None and dims != (1, 1, 1):
+            flat = lambda arrays: [a.ravel() for a in arrays]  # noqa: E731
+            return cls(
+                _hbn.VectorModelCore.fit(
+                    flat(us), flat(xs), flat(ys), dims, _names(signals, dims), params
+                )
+            )
+        if dims is not None:
+            us, xs, ys = [a[:, 0] for a in us], [a[:, 0] for a in xs], [a[:, 0] for a in ys]
         core = _hbn.HysteresisModelCore.fit(
             us, xs, ys, None if signals is None else dict(signals), params
         )
@@ -917,9 +1066,9 @@ class HysteresisModel:
     def from_logs(
         cls,
         logs: Union[PathLike, Sequence[PathLike]],
-        input: str = _L["input"],
-        state: str = _L["state"],
-        output: str = _L["output"],
+        input: Union[str, Sequence[str]] = _L["input"],
+        state: Union[str, Sequence[str]] = _L["state"],
+        output: Union[str, Sequence[str]] = _L["output"],
         rate_hz: Optional[float] = _L["rate_hz"],
         time_source: str = _L["time_source"],
         max_gap_s: float = _L["max_gap_s"],
@@ -951,7 +1100,9 @@ class HysteresisModel:
 
         ``logs``: one path or several (the CLI's ``--log``). ``input``, ``state``, ``output``:
         message paths of ``u``, ``x``, ``y`` (``/topic.field``; the defaults are the topics
-        ``hbn simulate`` writes). ``rate_hz``: grid rate in Hz (``None``: the native rate of
+        ``hbn simulate`` writes). Lists of paths, one per signal in order (the CLI's repeated
+        ``--input``, ``--state``, ``--output``), train a vector model when any list has more
+        than one (a single string stays scalar). ``rate_hz``: grid rate in Hz (``None``: the native rate of
         ``input`` in the first log, rounded to 0.1 Hz); the model keeps it. ``time_source``
         (``"log"`` or ``"header"``) and ``max_gap_s`` (the largest gap between two samples of a
         signal, seconds) say how the logs are read (``docs/your-robot.md``). ``min_coverage``:
@@ -965,11 +1116,25 @@ class HysteresisModel:
         paths = [logs] if isinstance(logs, (str, os.PathLike)) else list(logs)
         args = locals()
         params = {k: v for k, v in _training_args(args).items() if k != "rate_hz"}
+        signals = [_paths(input, "input"), _paths(state, "state"), _paths(output, "output")]
+        if any(len(p) > 1 for p in signals):
+            return cls(
+                _hbn.VectorModelCore.from_logs(
+                    [_fspath(p) for p in paths],
+                    *signals,
+                    _opt_float(rate_hz, "rate_hz"),
+                    str(time_source),
+                    _float(max_gap_s, "max_gap_s"),
+                    params,
+                    _float(min_coverage, "min_coverage"),
+                    _count(min_state_samples, "min_state_samples"),
+                )
+            )
         core = _hbn.HysteresisModelCore.from_logs(
             [_fspath(p) for p in paths],
-            str(input),
-            str(state),
-            str(output),
+            signals[0][0],
+            signals[1][0],
+            signals[2][0],
             _opt_float(rate_hz, "rate_hz"),
             str(time_source),
             _float(max_gap_s, "max_gap_s"),
@@ -982,12 +1147,18 @@ class HysteresisModel:
     def estimate(self, u: Any, y: Any, mode: Optional[str] = None) -> Estimate:
         """Estimates the state from the input ``u`` and the sensor output ``y`` (same length, at
         the model's rate). ``mode``: one of :data:`MODES` (``"ekf"``, ``"ekf-blr"``, ``"ukf"``;
-        ``None``: the model's :attr:`default_mode`, as ``hbn estimate`` without ``--mode``).
+        ``None``: the model's :attr:`default_mode`, as ``hbn estimate`` without ``--mode``; a
+        vector model runs ``"ekf"`` or ``"ukf"``).
+
+        A scalar model takes 1-D arrays and returns ``(T,)`` arrays, or ``(T, 1)`` arrays given
+        ``(T, 1)`` ones. A vector model takes ``u`` of shape ``(T, du)`` and ``y`` of shape
+        ``(T, dy)`` (a 1-D array for a single input or sensor) and returns ``(T, dx)`` arrays
+        (:class:`Estimate` lists them all).
 
         NaN/Inf samples are allowed (sensor drop-outs): the filter holds the last input or skips
-        the update and says so in ``flags``. Equal, sample for sample, to stepping
-        :meth:`filter` over the data. Returns an :class:`Estimate` that unpacks as ``(x,
-        x_std)``.
+        the update (a vector model leaves out the sensors whose value is not finite) and says so
+        in ``flags``. Equal, sample for sample, to stepping :meth:`filter` over the data.
+        Returns an :class:`Estimate` that unpacks as ``(x, x_std)``.
 
         >>> import hbn
         >>> tr = hbn.simulate("duhem", 300, seed=1)
@@ -996,17 +1167,46 @@ class HysteresisModel:
         >>> est.x.shape == est.x_std.shape == (300,)
         True
         """
-        uv, yv = _vector(u, "u"), _vector(y, "y")
-        fields = self._core.estimate(uv, yv, _opt_str(mode))
+        if isinstance(self._core, _hbn.VectorModelCore):
+            du, _, dy = self.dims
+            um, ym = self._columns(u, "u", du), self._columns(y, "y", dy)
+            if um.shape[0] != ym.shape[0]:
+                raise DataError(
+                    f"u and y must have equal lengths (got {um.shape[0]} and {ym.shape[0]})"
+                )
+            fields = self._core.estimate(um.ravel(), ym.ravel(), _opt_str(mode))
+            return Estimate(fields, self._mode_name(mode))
+        ua, ya = _signal(u, "u"), _signal(y, "y")
+        columns = ua.ndim == 2 or ya.ndim == 2
+        if columns:
+            ua, ya = self._columns(ua, "u", 1)[:, 0], self._columns(ya, "y", 1)[:, 0]
+        fields = self._core.estimate(_native(ua), _native(ya), _opt_str(mode))
+        if columns:
+            for k in ("x", "x_std", "y_pred", "innovation"):
+                fields[k] = fields[k].reshape(-1, 1)
         return Estimate(fields, self._mode_name(mode))
+
+    def _columns(self, a: Any, name: str, width: int) -> np.ndarray:
+        """``a`` as a ``(T, width)`` array (a 1-D array is one column); :class:`DataError`
+        naming the model's sizes otherwise."""
+        m = _signal(a, name)
+        if m.ndim == 1 and width == 1:
+            m = m.reshape(-1, 1)
+        if m.ndim != 2 or m.shape[1] != width:
+            du, dx, dy = self.dims
+            raise DataError(
+                f"{name} must have shape (T, {width}): the model has {du} inputs, {dx} state "
+                f"components and {dy} sensors; got shape {m.shape}"
+            )
+        return _native(m)
 
     @_renamed(max_gap="max_gap_s")
     def estimate_log(
         self,
         path: PathLike,
         mode: Optional[str] = None,
-        input: Optional[str] = None,
-        output: Optional[str] = None,
+        input: Union[str, Sequence[str], None] = None,
+        output: Union[str, Sequence[str], None] = None,
         csv: Optional[PathLike] = None,
         mcap: Optional[PathLike] = None,
         time_source: Optional[str] = None,
@@ -1019,7 +1219,25 @@ class HysteresisModel:
         ``max_gap_s`` as in :meth:`from_logs` (``None``: those the model was trained with); after
         a gap longer than ``max_gap_s`` the filter restarts (flag ``initialised``). Returns an
         :class:`Estimate` with ``t`` set.
+
+        A vector model reads its recorded message paths, or ``input`` and ``output`` given as
+        lists (one path per signal, in the model's order); its ``csv`` has the columns of
+        ``hbn estimate --csv`` (``x0``, ``x0_std``, ...), and ``mcap`` output takes scalar
+        models only.
         """
+        if isinstance(self._core, _hbn.VectorModelCore):
+            if mcap is not None:
+                raise _scalar_only("estimate_log(mcap=) (MCAP output)", self.dims)
+            t, fields = self._core.estimate_log(
+                _fspath(path),
+                _opt_str(mode),
+                [] if input is None else _paths(input, "input"),
+                [] if output is None else _paths(output, "output"),
+                None if csv is None else _fspath(csv),
+                _opt_str(time_source),
+                _opt_float(max_gap_s, "max_gap_s"),
+            )
+            return Estimate(fields, self._mode_name(mode), t)
         t, fields = self._core.estimate_log(
             _fspath(path),
             _opt_str(mode),
@@ -1035,7 +1253,8 @@ class HysteresisModel:
     def filter(self, mode: Optional[str] = None) -> Filter:
         """A streaming estimator over this model (it shares the model): call ``step(u, y)`` once
         per sample. It initialises like :meth:`estimate` and its outputs equal :meth:`estimate`'s
-        bit for bit. ``mode``: as in :meth:`estimate`.
+        bit for bit. ``mode``: as in :meth:`estimate`. A vector model's filter takes sequences
+        (``du`` inputs, ``dy`` measurements) and returns a :class:`VectorFilterOutput`.
 
         >>> import hbn
         >>> tr = hbn.simulate("duhem", 300, seed=1)
@@ -1046,6 +1265,26 @@ class HysteresisModel:
         True
         """
         return Filter(self._core.filter(_opt_str(mode)))
+
+    @property
+    def is_vector(self) -> bool:
+        """Whether this is a vector model (trained on ``(T, d)`` arrays or lists of message
+        paths with more than one input, state component or sensor)."""
+        return isinstance(self._core, _hbn.VectorModelCore)
+
+    @property
+    def dims(self) -> Tuple[int, int, int]:
+        """The numbers of inputs, state components and sensors: ``(1, 1, 1)`` for a scalar
+        model."""
+        if isinstance(self._core, _hbn.VectorModelCore):
+            return tuple(self._core.dims)  # type: ignore[return-value]
+        return (1, 1, 1)
+
+    def _scalar(self, what: str) -> _hbn.HysteresisModelCore:
+        """The scalar core, or the error that ``what`` takes scalar models."""
+        if isinstance(self._core, _hbn.VectorModelCore):
+            raise _scalar_only(what, self.dims)
+        return self._core
 
     def _mode_name(self, mode: Optional[str]) -> str:
         return self.default_mode if mode is None else str(mode).lower()
@@ -1059,7 +1298,7 @@ class HysteresisModel:
         >>> m.simulate_open_loop(tr["u"]).shape
         (300,)
         """
-        return self._core.simulate_open_loop(_vector(u, "u"))
+        return self._scalar("simulate_open_loop").simulate_open_loop(_vector(u, "u"))
 
     def save(self, path: PathLike) -> None:
         """Writes the model file (the CLI's format: ``hbn inspect`` / ``hbn estimate --model``
@@ -1076,13 +1315,14 @@ class HysteresisModel:
 
     @classmethod
     def load(cls, path: PathLike) -> HysteresisModel:
-        """Loads a model written by :meth:`save` or by ``hbn train --out``.
+        """Loads a model written by :meth:`save` or by ``hbn train --out``, scalar or vector (the
+        file's ``format`` tag says which).
 
         :class:`HbnFileNotFoundError` if the file is missing; :class:`ModelFileError` if it is not
         an hbn model file of the supported format version (a model file of an older version of
         hbn says so: train the model again).
         """
-        return cls(_hbn.HysteresisModelCore.load(_fspath(path)))
+        return cls(_hbn.load_model(_fspath(path)))
 
     def to_bytes(self) -> bytes:
         """The bytes of the model file :meth:`save` writes (what a pickled model holds).
@@ -1099,7 +1339,7 @@ class HysteresisModel:
     def from_bytes(cls, data: bytes) -> HysteresisModel:
         """A model from the bytes of a model file (:meth:`to_bytes`, or a file's contents);
         :class:`ModelFileError` as in :meth:`load`."""
-        return cls(_hbn.HysteresisModelCore.from_bytes(bytes(data), "<bytes>"))
+        return cls(_hbn.model_from_bytes(bytes(data), "<bytes>"))
 
     @property
     def rate_hz(self) -> float:
@@ -1115,8 +1355,10 @@ class HysteresisModel:
         return self._core.rate_hz
 
     @property
-    def signals(self) -> Dict[str, Dict[str, Optional[str]]]:
-        """Signal descriptions: ``{"input": {"name", "path", "unit"}, "state": ..., "output": ...}``."""
+    def signals(self) -> Dict[str, Any]:
+        """Signal descriptions: ``{"input": {"name", "path", "unit"}, "state": ..., "output": ...}``;
+        for a vector model the names (message paths) of each kind, ``{"inputs": [...],
+        "states": [...], "outputs": [...]}``."""
         return self._core.signals()
 
     @property
@@ -1138,7 +1380,7 @@ class HysteresisModel:
         """The filter's noise scales learned on held-out data, per mode (``q``: process noise,
         ``r``: measurement noise, ``std``: reported standard deviation; all 1 untuned), and the
         ``default_mode``. The held-out table is ``summary["validation"]``."""
-        return self._core.tuning()
+        return self._scalar("tuning").tuning()
 
     @property
     def summary(self) -> Dict[str, Any]:
@@ -1151,23 +1393,43 @@ class HysteresisModel:
     @property
     def transition(self) -> GaussianProcess:
         """The transition GP (inputs ``[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}]``, then the plays
-        and lags; target ``x_k``)."""
-        return GaussianProcess._from_core(self._core.transition())
+        and lags; target ``x_k``). A vector model has one per state component:
+        :attr:`transition_gps`."""
+        return GaussianProcess._from_core(self._scalar("transition").transition())
 
     @property
     def sensor(self) -> GaussianProcess:
         """The sensor GP (inputs ``[x_{k-1}, y_{k-1}, x_k]``, or ``[x_{k-1}, x_k]`` with
-        ``sensor_inputs="state"``; target ``y_k``)."""
-        return GaussianProcess._from_core(self._core.sensor())
+        ``sensor_inputs="state"``; target ``y_k``). A vector model has one per sensor:
+        :attr:`sensor_gps`."""
+        return GaussianProcess._from_core(self._scalar("sensor").sensor())
+
+    @property
+    def transition_gps(self) -> List[GaussianProcess]:
+        """The transition GPs, one per state component (a vector model's read every state
+        component, every input and their memory; ``[transition]`` for a scalar model)."""
+        core = self._core
+        if isinstance(core, _hbn.VectorModelCore):
+            return [GaussianProcess._from_core(core.transition(i)) for i in range(self.dims[1])]
+        return [GaussianProcess._from_core(core.transition())]
+
+    @property
+    def sensor_gps(self) -> List[GaussianProcess]:
+        """The sensor GPs, one per sensor (``[sensor]`` for a scalar model)."""
+        core = self._core
+        if isinstance(core, _hbn.VectorModelCore):
+            return [GaussianProcess._from_core(core.sensor(j)) for j in range(self.dims[2])]
+        return [GaussianProcess._from_core(core.sensor())]
 
     def ekf_config(self, mode: Optional[str] = None) -> Dict[str, Any]:
-        """The filter settings the estimator uses for ``mode`` (floors, bounds, training prior)."""
+        """The filter settings the estimator uses for ``mode`` (floors, bounds, training prior;
+        a vector model's per-component arrays are padded to the largest sizes)."""
         return self._core.ekf_config(_opt_str(mode))
 
     def initial_state(self, y0: float) -> Optional[Tuple[float, float]]:
         """Prior ``(mean, variance)`` of ``x_0`` the filter takes from a first measurement ``y0``
         (``None`` if ``y0`` is not finite: the training prior of :meth:`ekf_config` applies)."""
-        return self._core.initial_state(float(y0))
+        return self._scalar("initial_state").initial_state(float(y0))
 
 
 for _f in (HysteresisModel.fit, HysteresisModel.from_logs):
@@ -1177,8 +1439,8 @@ for _f in (HysteresisModel.fit, HysteresisModel.from_logs):
 
 
 def _model_from_bytes(data: bytes) -> HysteresisModel:
-    """Unpickles a :class:`HysteresisModel` (its model file's bytes)."""
-    return HysteresisModel(_hbn.HysteresisModelCore.from_bytes(data, "<pickle>"))
+    """Unpickles a :class:`HysteresisModel` (its model file's bytes, scalar or vector)."""
+    return HysteresisModel(_hbn.model_from_bytes(data, "<pickle>"))
 
 
 class Filter:
@@ -1188,7 +1450,10 @@ class Filter:
     initialises like :meth:`HysteresisModel.estimate` (the prior of ``x_0`` from the first
     measurement) and gives the same numbers, bit for bit. :meth:`step` returns a
     :class:`FilterOutput` (``x``, ``x_std``, ``y_pred``, ``innovation``, ``innovation_var``,
-    ``nis``, ``q_x``, ``r``, ``flags``, ``obs_min``, ``obs_max``, ``obs_x``, ``flag_names()``).
+    ``nis``, ``q_x``, ``r``, ``flags``, ``obs_min``, ``obs_max``, ``obs_x``, ``flag_names()``);
+    a vector model's filter takes sequences and returns a :class:`VectorFilterOutput` (``x``,
+    ``x_std``, ``x_cov``, ``y_pred``, ``innovation``, ``innovation_var``, ``q_x``, ``r`` as
+    tuples, ``nis``, ``flags``, ``flag_names()``).
 
     >>> import hbn
     >>> tr = hbn.simulate("duhem", 200, seed=1)
@@ -1198,18 +1463,32 @@ class Filter:
     True
     """
 
-    def __init__(self, core: _hbn.FilterCore) -> None:
-        if not isinstance(core, _hbn.FilterCore):
+    def __init__(self, core: Union[_hbn.FilterCore, _hbn.VectorFilterCore]) -> None:
+        if not isinstance(core, (_hbn.FilterCore, _hbn.VectorFilterCore)):
             raise TypeError("use HysteresisModel.filter(mode=...)")
         self._core = core
 
     def __repr__(self) -> str:
         return f"Filter(mode={self.mode!r}, steps={self.steps})"
 
-    def step(self, u: float, y: float) -> FilterOutput:
+    def step(
+        self, u: Union[float, Sequence[float]], y: Union[float, Sequence[float]]
+    ) -> Union[FilterOutput, VectorFilterOutput]:
         """Processes one sample: input ``u`` and measurement ``y`` (NaN allowed: the last input is
-        held or the update skipped, and the flags say so)."""
-        return self._core.step(float(u), float(y))
+        held or the update skipped, and the flags say so). A vector model's filter takes ``du``
+        inputs and ``dy`` measurements (sequences; a NaN measurement is left out of the update)
+        and returns a :class:`VectorFilterOutput`."""
+        core = self._core
+        if isinstance(core, _hbn.VectorFilterCore):
+            du, _, dy = core.dims
+            uv, yv = _vector(u, "u"), _vector(y, "y")
+            if uv.shape[0] != du or yv.shape[0] != dy:
+                raise DataError(
+                    f"step takes {du} inputs and {dy} measurements, got {uv.shape[0]} and "
+                    f"{yv.shape[0]}"
+                )
+            return core.step(uv, yv)
+        return core.step(float(u), float(y))
 
     def reset(self) -> None:
         """Forgets the state; the next step initialises again."""
@@ -1281,7 +1560,8 @@ class Explorer:
     The training parameters (keyword-only) are those of :meth:`HysteresisModel.fit`, used by
     the explorer's transition GP and by :meth:`model`. The defaults are the library's
     (:func:`default_explore_params`, :func:`default_params`). A bad value raises
-    :class:`ConfigError` whose ``keyword`` names it.
+    :class:`ConfigError` whose ``keyword`` names it. The explorer is scalar: one input, one
+    state and one sensor (several values raise ``ValueError``).
 
     >>> import hbn
     >>> explorer = hbn.Explorer(0.0, 1.0, 0.02, random_samples=40, max_points=60, n_starts=1)
@@ -1337,12 +1617,13 @@ class Explorer:
         firmware_budget: Union[int, str, None] = _P["firmware_budget"],
     ) -> None:
         params = _training_args(locals())
+        one = Explorer._one
         self._core = _hbn.ExplorerCore(
-            _float(u_min, "u_min"),
-            _float(u_max, "u_max"),
-            _float(max_step, "max_step"),
+            _float(one(u_min, "u_min"), "u_min"),
+            _float(one(u_max, "u_max"), "u_max"),
+            _float(one(max_step, "max_step"), "max_step"),
             _count(seed, "seed"),
-            _opt_float(u_start, "u_start"),
+            _opt_float(one(u_start, "u_start"), "u_start"),
             _count(random_samples, "random_samples"),
             _opt_float(alpha_start, "alpha_start"),
             _opt_float(alpha_end, "alpha_end"),
@@ -1365,6 +1646,17 @@ class Explorer:
             f"n_observed={self.n_observed}, phase={self.phase!r})"
         )
 
+    @staticmethod
+    def _one(v: Any, keyword: str) -> Any:
+        """``v`` unless it holds several values: the explorer is scalar."""
+        if np.ndim(v) > 0 and np.size(v) != 1:
+            raise ValueError(
+                f"the Explorer takes scalar models (one input, one state, one sensor), but "
+                f"{keyword} has {np.size(v)} values; a vector model trains from logged (T, d) "
+                f"arrays with HysteresisModel.fit"
+            )
+        return v.item() if isinstance(v, np.ndarray) else v
+
     def propose(self) -> float:
         """The next input to apply (draws one random step)."""
         return self._core.propose()
@@ -1372,8 +1664,12 @@ class Explorer:
     def observe(self, u: float, x: float, y: float) -> None:
         """Records the sample the robot produced: ``u`` as applied, measured ``x`` and ``y``
         (finite; a NaN raises :class:`DataError` and is not recorded). Refits the transition GP
-        when it is due."""
-        self._core.observe(_float(u, "u"), _float(x, "x"), _float(y, "y"))
+        when it is due. The explorer takes scalar models: several values in ``u``, ``x`` or
+        ``y`` raise ``ValueError``."""
+        one = Explorer._one
+        self._core.observe(
+            _float(one(u, "u"), "u"), _float(one(x, "x"), "x"), _float(one(y, "y"), "y")
+        )
 
     def model(self) -> HysteresisModel:
         """Trains the HBN on every sample observed (like :meth:`HysteresisModel.fit`)."""

@@ -13,6 +13,7 @@ __all__ = [
     "Estimate",
     "Filter",
     "FilterOutput",
+    "VectorFilterOutput",
     "GaussianProcess",
     "Explorer",
     "Simulator",
@@ -53,6 +54,7 @@ ModelFileError = _hbn.ModelFileError
 ConfigError = _hbn.ConfigError
 TrainingError = _hbn.TrainingError
 FilterOutput = _hbn.FilterOutput
+VectorFilterOutput = _hbn.VectorFilterOutput
 
 def default_params() -> Dict[str, Any]: ...
 def default_log_options() -> Dict[str, Any]: ...
@@ -143,12 +145,14 @@ class Estimate:
     y_pred: FloatArray
     innovation: FloatArray
     nis: FloatArray
-    q_x: FloatArray
-    r: FloatArray
+    q_x: Optional[FloatArray]
+    r: Optional[FloatArray]
     flags: npt.NDArray[np.uint32]
-    obs_min: FloatArray
-    obs_max: FloatArray
-    obs_x: FloatArray
+    obs_min: Optional[FloatArray]
+    obs_max: Optional[FloatArray]
+    obs_x: Optional[FloatArray]
+    x_cov: Optional[FloatArray]
+    unobservable: Optional[FloatArray]
     mode: str
     t: Optional[FloatArray]
     def __init__(
@@ -159,10 +163,10 @@ class Estimate:
     def flag_names(self, k: int) -> List[str]: ...
     def flag_counts(self) -> Dict[str, int]: ...
     def to_dict(self) -> Dict[str, np.ndarray]: ...
-    def score(self, x_ref: ArrayLike) -> Dict[str, float]: ...
+    def score(self, x_ref: ArrayLike) -> Dict[str, Any]: ...
 
 class HysteresisModel:
-    def __init__(self, core: _hbn.HysteresisModelCore) -> None: ...
+    def __init__(self, core: Union[_hbn.HysteresisModelCore, _hbn.VectorModelCore]) -> None: ...
     @classmethod
     def fit(
         cls,
@@ -196,9 +200,9 @@ class HysteresisModel:
     def from_logs(
         cls,
         logs: Union[PathLike, Sequence[PathLike]],
-        input: str = ...,
-        state: str = ...,
-        output: str = ...,
+        input: Union[str, Sequence[str]] = ...,
+        state: Union[str, Sequence[str]] = ...,
+        output: Union[str, Sequence[str]] = ...,
         rate_hz: Optional[float] = ...,
         time_source: str = ...,
         max_gap_s: float = ...,
@@ -230,14 +234,18 @@ class HysteresisModel:
         self,
         path: PathLike,
         mode: Optional[str] = None,
-        input: Optional[str] = None,
-        output: Optional[str] = None,
+        input: Union[str, Sequence[str], None] = None,
+        output: Union[str, Sequence[str], None] = None,
         csv: Optional[PathLike] = None,
         mcap: Optional[PathLike] = None,
         time_source: Optional[str] = ...,
         max_gap_s: Optional[float] = ...,
     ) -> Estimate: ...
     def filter(self, mode: Optional[str] = None) -> Filter: ...
+    @property
+    def is_vector(self) -> bool: ...
+    @property
+    def dims(self) -> Tuple[int, int, int]: ...
     def simulate_open_loop(self, u: ArrayLike) -> FloatArray: ...
     def save(self, path: PathLike) -> None: ...
     @classmethod
@@ -254,7 +262,7 @@ class HysteresisModel:
     @property
     def tuning(self) -> Dict[str, Any]: ...
     @property
-    def signals(self) -> Dict[str, Dict[str, Optional[str]]]: ...
+    def signals(self) -> Dict[str, Any]: ...
     @property
     def params(self) -> Dict[str, Any]: ...
     @property
@@ -263,12 +271,19 @@ class HysteresisModel:
     def transition(self) -> GaussianProcess: ...
     @property
     def sensor(self) -> GaussianProcess: ...
+    @property
+    def transition_gps(self) -> List[GaussianProcess]: ...
+    @property
+    def sensor_gps(self) -> List[GaussianProcess]: ...
     def ekf_config(self, mode: Optional[str] = None) -> Dict[str, Any]: ...
     def initial_state(self, y0: float) -> Optional[Tuple[float, float]]: ...
 
 class Filter:
-    def __init__(self, core: _hbn.FilterCore) -> None: ...
+    def __init__(self, core: Union[_hbn.FilterCore, _hbn.VectorFilterCore]) -> None: ...
+    @overload
     def step(self, u: float, y: float) -> FilterOutput: ...
+    @overload
+    def step(self, u: Sequence[float], y: Sequence[float]) -> VectorFilterOutput: ...
     def reset(self) -> None: ...
     @property
     def mode(self) -> str: ...
