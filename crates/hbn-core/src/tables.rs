@@ -24,6 +24,14 @@
 //!
 //! The local training data of EKF+BLR is only written for that mode: the EKF and the UKF read
 //! the two GPs, the filter settings and the prior of `x_0`.
+//!
+//! A vector model (several inputs, state components and sensors, [`crate::vector`]) has tables
+//! of its own, with their own magic number ([`VECTOR_MAGIC`]): [`encode_vector`] writes them,
+//! [`VectorTables::model`] reads them back as a [`VectorTableModel`] whose
+//! [`VectorTableModel::view`] is the [`VectorView`] the vector step reads. They hold the sizes,
+//! one GP per state component and per sensor in the scalar tables' GP layout, the memory
+//! operators, the settings and the first-measurement prior's rows; only the model's sizes are
+//! stored, never the maxima. [`split_ranges`], [`widen_scratch`] and [`widen`] read both kinds.
 
 use crate::CoreError;
 use crate::blr::{LocalRegression, Neighbourhood, NeighbourhoodParts};
@@ -31,6 +39,7 @@ use crate::ekf::{EkfConfig, HbnView, InitPrior, Mode};
 use crate::gp::{GpParts, GpView, Variance};
 use crate::kernel::{Kernel, KernelSpec, Metric, Profile, at};
 use crate::play::Plays;
+use crate::vector::{Dims, MAX_SENSORS, MAX_STATES, VectorConfig, VectorInitPrior, VectorView};
 
 /// First value of every layout: `"HBN1"` as little-endian bytes.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"HBN1");
@@ -85,6 +94,14 @@ pub struct TableModel<'a> {
 /// local regression, prior of `x_0` and play block).
 pub const MAX_SPLIT_RANGES: usize = 8;
 
+/// First value of a vector model's layout: `"HBV1"` as little-endian bytes.
+pub const VECTOR_MAGIC: u32 = u32::from_le_bytes(*b"HBV1");
+/// Format version of a vector model's tables ([`encode_vector`], [`VectorTables::model`]).
+pub const VECTOR_VERSION: u32 = 1;
+/// Most split ranges a vector layout lists: the settings, two per GP (its inputs and its
+/// variance factor), the prior of `x_0` and the plays.
+pub const MAX_VECTOR_SPLIT_RANGES: usize = 2 + 2 * (MAX_STATES + MAX_SENSORS) + 2;
+
 /// The ranges of `reals` (as `start..end` indices) that an `f32` export stores in two parts,
 /// in increasing order, read from a layout (none in a layout of format version 5 or lower).
 #[derive(Clone, Copy, Debug)]
@@ -107,16 +124,22 @@ impl SplitRanges<'_> {
     }
 }
 
-/// The split ranges `layout` lists. Fails on a layout that is not hbn tables of a readable
-/// version, or whose ranges are unordered, overlapping or more than [`MAX_SPLIT_RANGES`].
+/// The split ranges `layout` (a scalar or a vector model's) lists. Fails on a layout that is
+/// not hbn tables of a readable version, or whose ranges are unordered, overlapping or more
+/// than [`MAX_SPLIT_RANGES`] ([`MAX_VECTOR_SPLIT_RANGES`] for a vector model).
 pub fn split_ranges(layout: &[u32]) -> Result<SplitRanges<'_>, CoreError> {
     let mut r = Reader {
         ints: layout,
         keys: &[],
         reals: &[],
     };
-    let version = r.header()?;
-    let pairs = r.split_pairs(version)?;
+    let pairs = if layout.first() == Some(&VECTOR_MAGIC) {
+        r.vector_header()?;
+        r.split_pairs_upto(MAX_VECTOR_SPLIT_RANGES)?
+    } else {
+        let version = r.header()?;
+        r.split_pairs(version)?
+    };
     Ok(SplitRanges { pairs })
 }
 
@@ -201,6 +224,7 @@ pub fn encode_with<S: TableSink>(
         reals: 0,
         split: Split::default(),
         open: None,
+        limit: MAX_SPLIT_RANGES,
     };
     write_tables(
         view,
@@ -215,6 +239,7 @@ pub fn encode_with<S: TableSink>(
         reals: 0,
         split: Split::default(),
         open: None,
+        limit: MAX_SPLIT_RANGES,
     };
     write_tables(view, config, split_factors, &split, &mut writer)
 }
@@ -222,7 +247,7 @@ pub fn encode_with<S: TableSink>(
 /// The split ranges the encoder found, as `(start, len)` pairs of reals.
 #[derive(Clone, Copy, Debug, Default)]
 struct Split {
-    ranges: [[u32; 2]; MAX_SPLIT_RANGES],
+    ranges: [[u32; 2]; MAX_VECTOR_SPLIT_RANGES],
     len: usize,
 }
 
@@ -233,6 +258,8 @@ struct Writer<'s, S> {
     split: Split,
     /// Where the split range being written began.
     open: Option<usize>,
+    /// Most split ranges the layout may list.
+    limit: usize,
 }
 
 impl<S: TableSink> Writer<'_, S> {
@@ -279,10 +306,11 @@ impl<S: TableSink> Writer<'_, S> {
             last[1] = end - last[0];
             return Ok(());
         }
-        let slot = split
-            .ranges
-            .get_mut(split.len)
-            .ok_or(CoreError::InvalidSpec("too many split ranges"))?;
+        let too_many = CoreError::InvalidSpec("too many split ranges");
+        if split.len >= self.limit {
+            return Err(too_many);
+        }
+        let slot = split.ranges.get_mut(split.len).ok_or(too_many)?;
         *slot = [start, end - start];
         split.len += 1;
         Ok(())
@@ -536,6 +564,13 @@ impl<'a> Reader<'a> {
         self.reals = rest;
         Ok(v)
     }
+
+    /// The next `N` reals.
+    fn array<const N: usize>(&mut self) -> Result<[f64; N], CoreError> {
+        let (v, rest) = self.reals.split_first_chunk::<N>().ok_or(TRUNCATED)?;
+        self.reals = rest;
+        Ok(*v)
+    }
 }
 
 impl<'a> Reader<'a> {
@@ -562,8 +597,29 @@ impl<'a> Reader<'a> {
         if version < 6 {
             return Ok(&[]);
         }
+        self.split_pairs_upto(MAX_SPLIT_RANGES)
+    }
+
+    /// Reads the magic number and the version of a vector model's tables.
+    fn vector_header(&mut self) -> Result<(), CoreError> {
+        if self.int()? != VECTOR_MAGIC {
+            return Err(CoreError::InvalidSpec(
+                "not hbn vector model tables (the magic number differs)",
+            ));
+        }
+        if self.int()? != VECTOR_VERSION {
+            return Err(CoreError::InvalidSpec(
+                "vector model tables of another format version: export the model again",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The split ranges as `(start, len)` pairs, at most `max`, checked to be increasing and
+    /// apart.
+    fn split_pairs_upto(&mut self, max: usize) -> Result<&'a [[u32; 2]], CoreError> {
         let n = self.size()?;
-        if n > MAX_SPLIT_RANGES {
+        if n > max {
             return Err(TRUNCATED);
         }
         let (pairs, _) = self.ints(mul(n, 2)?)?.as_chunks::<2>();
@@ -841,6 +897,362 @@ fn read_local<'a>(r: &mut Reader<'a>) -> Result<Neighbourhood<'a>, CoreError> {
             input_var,
         },
     )
+}
+
+// ---- vector models ----
+
+/// The first-measurement prior of a vector model as tables hold it (what
+/// [`VectorInitPrior::new`] is built from): training rows `[y (dy), x (dx)]`, each sensor's
+/// distance scale, the neighbours averaged and each component's variance floor.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VectorInitParts<'a> {
+    /// Rows `[y (dy), x (dx)]`, row-major.
+    pub rows: &'a [f64],
+    /// Scale of each sensor's distance (`dy` values).
+    pub y_scale: &'a [f64],
+    /// Rows averaged.
+    pub neighbours: usize,
+    /// Floor of each component's variance (`dx` values).
+    pub var_floor: &'a [f64],
+}
+
+impl<'a> VectorInitParts<'a> {
+    /// The checked prior for a model of sizes `dims` ([`VectorInitPrior::new`]).
+    pub fn prior(&self, dims: Dims) -> Result<VectorInitPrior<'a>, CoreError> {
+        VectorInitPrior::new(
+            self.rows,
+            dims,
+            self.y_scale,
+            self.neighbours,
+            self.var_floor,
+        )
+    }
+}
+
+/// Writes a vector model as tables into `sink`: the sizes, the settings (the entries of the
+/// model's sizes only), one GP per state component and per sensor (as the scalar tables write
+/// a GP), the prior of `x_0` from `init` (the view's own `init` is not read: its parts are
+/// private to the step) and the plays. `split_factors[i]` puts the variance factor of GP `i`
+/// (transitions first, then sensors; missing entries count as `false`) in the split ranges, as
+/// [`encode_with`] does for a scalar model. Fails on an invalid view or settings, or a count
+/// that exceeds `u32`.
+pub fn encode_vector<S: TableSink>(
+    view: &VectorView<'_>,
+    init: Option<&VectorInitParts<'_>>,
+    config: &VectorConfig,
+    split_factors: &[bool],
+    sink: &mut S,
+) -> Result<(), CoreError> {
+    view.validate()?;
+    config.validate(view.dims)?;
+    if let Some(init) = init {
+        init.prior(view.dims)?;
+    }
+    let mut count_only = Writer::<S> {
+        sink: None,
+        reals: 0,
+        split: Split::default(),
+        open: None,
+        limit: MAX_VECTOR_SPLIT_RANGES,
+    };
+    write_vector_tables(
+        view,
+        init,
+        config,
+        split_factors,
+        &Split::default(),
+        &mut count_only,
+    )?;
+    let split = count_only.split;
+    let mut writer = Writer {
+        sink: Some(sink),
+        reals: 0,
+        split: Split::default(),
+        open: None,
+        limit: MAX_VECTOR_SPLIT_RANGES,
+    };
+    write_vector_tables(view, init, config, split_factors, &split, &mut writer)
+}
+
+fn write_vector_tables<S: TableSink>(
+    view: &VectorView<'_>,
+    init: Option<&VectorInitParts<'_>>,
+    config: &VectorConfig,
+    split_factors: &[bool],
+    split: &Split,
+    w: &mut Writer<'_, S>,
+) -> Result<(), CoreError> {
+    let d = view.dims;
+    w.int(VECTOR_MAGIC);
+    w.int(VECTOR_VERSION);
+    w.int(count(split.len)?);
+    for [start, len] in split.ranges.iter().take(split.len) {
+        w.int(*start);
+        w.int(*len);
+    }
+    w.int(mode_code(config.mode));
+    w.int(count(d.inputs)?);
+    w.int(count(d.states)?);
+    w.int(count(d.sensors)?);
+    w.int(u32::from(init.is_some()));
+    let c = config;
+    w.begin_split();
+    for v in [
+        c.q_floor,
+        c.r_floor,
+        c.p_min,
+        c.p_max,
+        c.jac_max,
+        c.innovation_min,
+        c.nis_gate,
+        c.q_scale,
+        c.r_scale,
+    ] {
+        w.real(v);
+    }
+    for i in 0..d.states {
+        let (lo, hi) = c.x_bounds.get(i).copied().unwrap_or((0.0, 0.0));
+        for v in [
+            lo,
+            hi,
+            at(&c.x0_mean, i),
+            at(&c.x0_var, i),
+            at(&c.qx_model_floor, i),
+            at(&c.std_scale, i),
+        ] {
+            w.real(v);
+        }
+    }
+    for j in 0..d.sensors {
+        let (lo, hi) = c.y_bounds.get(j).copied().unwrap_or((0.0, 0.0));
+        for v in [lo, hi, at(&c.r_model_floor, j)] {
+            w.real(v);
+        }
+    }
+    w.end_split()?;
+    for (i, gp) in view.transitions.iter().chain(view.sensors).enumerate() {
+        encode_gp(gp, split_factors.get(i).copied().unwrap_or(false), w)?;
+    }
+    if let Some(init) = init {
+        let width = d.sensors + d.states;
+        w.int(count(init.rows.len() / width.max(1))?);
+        w.int(count(init.neighbours)?);
+        w.begin_split();
+        for v in init.y_scale.iter().chain(init.var_floor) {
+            w.real(*v);
+        }
+        w.end_split()?;
+        for v in init.rows {
+            w.real(*v);
+        }
+    }
+    w.begin_split();
+    w.int(count(view.plays.radii().len())?);
+    for &r in view.plays.radii() {
+        w.real(r);
+    }
+    w.int(count(view.plays.lags().len())?);
+    for &a in view.plays.lags() {
+        w.real(a);
+    }
+    w.end_split()?;
+    w.int(END);
+    Ok(())
+}
+
+/// A vector model's constant tables, borrowed: the layout and the reals (widened to `f64` for
+/// an `f32` export, see [`widen`]). A vector model has no local regression, so no keys.
+#[derive(Clone, Copy, Debug)]
+pub struct VectorTables<'a> {
+    /// Structural integers.
+    pub layout: &'a [u32],
+    /// Real numbers.
+    pub reals: &'a [f64],
+}
+
+/// What [`VectorTables::model`] returns: the GP views, plays, prior and settings of a vector
+/// model. It holds the GP views the [`VectorView`] borrows ([`VectorTableModel::view`]), so it
+/// is the storage a firmware keeps (a `static`, a stack value or a C filter's memory); nothing
+/// in it points into itself, so it may be moved or copied.
+#[derive(Clone, Copy, Debug)]
+pub struct VectorTableModel<'a> {
+    /// The model's sizes.
+    pub dims: Dims,
+    /// The filter settings (mode included; the entries past the sizes hold the defaults of
+    /// [`VectorTableModel::view`]'s unused components: box `(0, 1)`, variance and scale 1).
+    pub config: VectorConfig,
+    /// The memory operators.
+    pub plays: Plays,
+    /// The first-measurement prior, if the tables hold one.
+    pub init: Option<VectorInitPrior<'a>>,
+    transitions: [GpView<'a>; MAX_STATES],
+    sensors: [GpView<'a>; MAX_SENSORS],
+}
+
+impl<'a> VectorTableModel<'a> {
+    /// The model view the vector step reads ([`crate::VectorEkf::new`],
+    /// [`crate::VectorEstimator::new`]), borrowing this model's GP views.
+    pub fn view(&self) -> VectorView<'_> {
+        VectorView {
+            dims: self.dims,
+            transitions: self.transitions.get(..self.dims.states).unwrap_or(&[]),
+            sensors: self.sensors.get(..self.dims.sensors).unwrap_or(&[]),
+            plays: self.plays,
+            init: self.init,
+        }
+    }
+
+    /// Scratch values the step needs ([`VectorView::scratch_len`]).
+    pub fn scratch_len(&self) -> usize {
+        self.view().scratch_len()
+    }
+}
+
+/// Scratch values the vector step needs for the model in `layout`
+/// ([`VectorView::scratch_len`] of its view), read from the layout alone, as [`scratch_len`]
+/// does for a scalar model.
+pub fn vector_scratch_len(layout: &[u32]) -> Result<usize, CoreError> {
+    let mut r = Reader {
+        ints: layout,
+        keys: &[],
+        reals: &[],
+    };
+    r.vector_header()?;
+    r.split_pairs_upto(MAX_VECTOR_SPLIT_RANGES)?;
+    let _mode = r.int()?;
+    let dims = Dims::new(r.size()?, r.size()?, r.size()?)?;
+    let _has_init = r.int()?;
+    let mut len = 0;
+    // Each GP's integers: profile, metric, dim, warp units, direction (2), n, sparse, mean
+    // input, whitening length, linear mean's length.
+    for _ in 0..dims.states + dims.sensors {
+        r.ints(6)?;
+        let n = r.size()?;
+        let sparse = r.int()? != 0;
+        r.ints(3)?;
+        len = len.max(crate::gp::predict_scratch(n, sparse, crate::gp::Want::ALL));
+    }
+    Ok(len)
+}
+
+impl<'a> VectorTables<'a> {
+    /// Reads the vector model back, checking every value once (as the model's own view and
+    /// settings are checked: [`VectorView::validate`], [`VectorConfig::validate`]). Fails on
+    /// tables of another kind, format or version, truncated or corrupt tables, or values the
+    /// constructors reject.
+    pub fn model(&self) -> Result<VectorTableModel<'a>, CoreError> {
+        let mut r = Reader {
+            ints: self.layout,
+            keys: &[],
+            reals: self.reals,
+        };
+        r.vector_header()?;
+        let split = SplitRanges {
+            pairs: r.split_pairs_upto(MAX_VECTOR_SPLIT_RANGES)?,
+        };
+        if split.iter().any(|range| range.end > self.reals.len()) {
+            return Err(TRUNCATED);
+        }
+        let mode = match r.int()? {
+            0 => Mode::Ekf,
+            1 => Mode::EkfBlr,
+            2 => Mode::Ukf,
+            _ => return Err(TRUNCATED),
+        };
+        let dims = Dims::new(r.size()?, r.size()?, r.size()?)?;
+        let has_init = r.int()? != 0;
+        let mut config = VectorConfig {
+            mode,
+            x_bounds: [(0.0, 1.0); MAX_STATES],
+            y_bounds: [(0.0, 1.0); MAX_SENSORS],
+            x0_mean: [0.0; MAX_STATES],
+            x0_var: [1.0; MAX_STATES],
+            qx_model_floor: [0.0; MAX_STATES],
+            r_model_floor: [0.0; MAX_SENSORS],
+            q_floor: r.real()?,
+            r_floor: r.real()?,
+            p_min: r.real()?,
+            p_max: r.real()?,
+            jac_max: r.real()?,
+            innovation_min: r.real()?,
+            nis_gate: r.real()?,
+            q_scale: r.real()?,
+            r_scale: r.real()?,
+            std_scale: [1.0; MAX_STATES],
+        };
+        for i in 0..dims.states {
+            let [lo, hi, mean, var, floor, std] = r.array::<6>()?;
+            set(&mut config.x_bounds, i, (lo, hi));
+            set(&mut config.x0_mean, i, mean);
+            set(&mut config.x0_var, i, var);
+            set(&mut config.qx_model_floor, i, floor);
+            set(&mut config.std_scale, i, std);
+        }
+        for j in 0..dims.sensors {
+            let [lo, hi, floor] = r.array::<3>()?;
+            set(&mut config.y_bounds, j, (lo, hi));
+            set(&mut config.r_model_floor, j, floor);
+        }
+        let first = read_gp(&mut r, VERSION)?;
+        let mut transitions = [first; MAX_STATES];
+        for slot in transitions.iter_mut().take(dims.states).skip(1) {
+            *slot = read_gp(&mut r, VERSION)?;
+        }
+        let first = read_gp(&mut r, VERSION)?;
+        let mut sensors = [first; MAX_SENSORS];
+        for slot in sensors.iter_mut().take(dims.sensors).skip(1) {
+            *slot = read_gp(&mut r, VERSION)?;
+        }
+        let init = if has_init {
+            let rows = r.size()?;
+            let neighbours = r.size()?;
+            let y_scale = r.reals(dims.sensors)?;
+            let var_floor = r.reals(dims.states)?;
+            let rows = r.reals(mul(rows, dims.sensors + dims.states)?)?;
+            Some(
+                VectorInitParts {
+                    rows,
+                    y_scale,
+                    neighbours,
+                    var_floor,
+                }
+                .prior(dims)?,
+            )
+        } else {
+            None
+        };
+        let n = r.size()?;
+        if n > crate::play::MAX_PLAYS {
+            return Err(TRUNCATED);
+        }
+        let radii = r.reals(n)?;
+        let n = r.size()?;
+        if n > crate::play::MAX_PLAYS {
+            return Err(TRUNCATED);
+        }
+        let plays = Plays::with_lags(radii, r.reals(n)?)?;
+        if r.int()? != END || !r.ints.is_empty() || !r.reals.is_empty() {
+            return Err(TRUNCATED);
+        }
+        let model = VectorTableModel {
+            dims,
+            config,
+            plays,
+            init,
+            transitions,
+            sensors,
+        };
+        model.view().validate()?;
+        config.validate(dims)?;
+        Ok(model)
+    }
+}
+
+/// Sets entry `i` of `v` (no-op past its end).
+fn set<T>(v: &mut [T], i: usize, x: T) {
+    if let Some(slot) = v.get_mut(i) {
+        *slot = x;
+    }
 }
 
 #[cfg(test)]

@@ -41,6 +41,12 @@ use hbn_core::tables::{self, TableSink, Tables};
 use hbn_core::{CoreError, EkfConfig, Estimator, HbnView, InitPrior, Mode};
 use hbn_model::{HysteresisModel, ModelError};
 
+mod vector;
+pub use vector::{
+    VECTOR_MODES, export_vector, vector_f32_variance_errors, vector_factors_in_two_parts,
+    vector_model_tables, vector_size_report, vector_size_table,
+};
+
 /// What the exported source is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Format {
@@ -495,7 +501,7 @@ pub fn export(
             },
             GeneratedFile {
                 name: "hbn_model.c",
-                text: c_source(&t, r32.as_deref(), &info),
+                text: c_source(&t, r32.as_deref(), &info.describe()),
             },
         ],
     })
@@ -626,8 +632,13 @@ pub fn hbn_model(
 }
 
 fn c_comment(info: &Info<'_>) -> String {
+    c_comment_text(&info.describe())
+}
+
+/// `describe` as a C block comment.
+fn c_comment_text(describe: &str) -> String {
     let mut s = String::from("/*\n");
-    for line in info.describe().lines() {
+    for line in describe.lines() {
         let _ = writeln!(s, " * {line}");
     }
     s.push_str(" */\n");
@@ -683,7 +694,9 @@ extern const HbnModelData hbn_model;
     )
 }
 
-fn c_source(t: &ModelTables, r32: Option<&[f32]>, info: &Info<'_>) -> String {
+/// `hbn_model.c`: the tables as `const` data and `hbn_model`, headed by `describe`.
+fn c_source(t: &ModelTables, r32: Option<&[f32]>, describe: &str) -> String {
+    let reals_len = r32.map_or(t.reals.len(), <[f32]>::len);
     // C has no empty arrays: an empty table gets one unused element (its length stays 0).
     let keys = if t.keys.is_empty() {
         "    0,\n".to_owned()
@@ -727,12 +740,12 @@ const HbnModelData hbn_model = {{
     {f64_ptr}, {f32_ptr}, {nr}u,
 }};
 "#,
-        comment = c_comment(info),
+        comment = c_comment_text(describe),
         nl = t.layout.len(),
         layout = list(&t.layout, 8, "    ", |v| format!("{v}u")),
         nk_alloc = t.keys.len().max(1),
         nk = t.keys.len(),
-        nr = info.reals,
+        nr = reals_len,
     )
 }
 

@@ -909,6 +909,19 @@ impl VectorModel {
         )
         .ok()
     }
+
+    /// The parts [`VectorModel::init_prior`] builds the prior of `x_0` from (for exporting
+    /// the model as tables): the training rows `[y (dy), x (dx)]`, each sensor's distance
+    /// scale, the neighbours averaged and each component's variance floor.
+    pub fn init_prior_parts(&self) -> (&[f64], Vec<f64>, usize, Vec<f64>) {
+        let y_scale = self.y_stats.iter().map(|s| s.span().max(1e-12)).collect();
+        let var_floor = self
+            .x_stats
+            .iter()
+            .map(|s| (1e-4 * s.span() * s.span()).max(1e-18))
+            .collect();
+        (&self.init_rows, y_scale, INIT_NEIGHBOURS, var_floor)
+    }
 }
 
 fn unreachable_gp() -> Result<(GaussianProcess, GaussianProcess), ModelError> {
