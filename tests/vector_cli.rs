@@ -1,7 +1,8 @@
 //! A vector model through the CLI: `hbn simulate --system finger`, `hbn train` with repeated
 //! `--input`, `--state` and `--output` flags (and with none, finding the simulated log's
-//! signals), `hbn estimate --csv [--covariance]` with the per-component columns, and the
-//! commands that take scalar models refusing a vector one by name.
+//! signals, and with sensor inputs given per sensor), `hbn estimate --csv [--covariance]` with
+//! the per-component columns and `--out` with arrays, `hbn eval`'s table per component and
+//! plot, and `hbn inspect` listing every GP.
 
 use std::path::Path;
 
@@ -139,10 +140,82 @@ fn a_finger_trains_and_estimates_through_the_cli() {
         out.contains("/input1.data") && out.contains("/state.x1") && out.contains("/sensor2.data"),
         "{out}"
     );
-    // Commands that take scalar models name the problem.
-    let (r, _) = hbn(&["inspect", s(&model)]);
-    let e = format!("{:#}", r.expect_err("inspect takes scalar models"));
-    assert!(e.contains("vector model"), "{e}");
+    // `hbn eval` prints a table per component (with the plot), `hbn inspect` every GP.
+    let png = d.path().join("eval.png");
+    let (r, out) = hbn(&[
+        "eval",
+        "--model",
+        s(&model),
+        "--log",
+        s(&test),
+        "--plot",
+        s(&png),
+    ]);
+    r.expect("eval");
+    assert!(out.contains("state component 0 (/state.x0)"), "{out}");
+    assert!(out.contains("state component 1 (/state.x1)"), "{out}");
+    assert_eq!(out.matches("ekf").count() >= 2, true, "{out}");
+    assert!(std::fs::metadata(&png).expect("plot").len() > 10_000);
+    let (r, out) = hbn(&["inspect", s(&model)]);
+    r.expect("inspect");
+    for gp in [
+        "transition 0",
+        "transition 1",
+        "sensor 0",
+        "sensor 1",
+        "sensor 2",
+    ] {
+        assert!(out.contains(gp), "{gp}: {out}");
+    }
+    // The MCAP output carries arrays in the model's order, with the signals' names.
+    let mcap = d.path().join("est.mcap");
+    let (r, _) = hbn(&[
+        "estimate",
+        "--model",
+        s(&model),
+        "--log",
+        s(&test),
+        "--out",
+        s(&mcap),
+    ]);
+    r.expect("estimate to MCAP");
+    let x1 = hbn_io::read_signals(
+        &mcap,
+        &["/hbn/estimate.x[1]".parse().expect("path")],
+        &hbn_io::ReadOptions::default(),
+    )
+    .expect("read the estimate's second component");
+    let csv_x1: Vec<f64> = rows.iter().map(|r| r[3].parse().expect("x1")).collect();
+    assert_eq!(x1[0].value, csv_x1);
+    // Sensor inputs given per sensor are kept.
+    let model3 = d.path().join("finger3.json");
+    let (r, out) = hbn(&[
+        "train",
+        "--log",
+        s(&train),
+        "--max-points",
+        "150",
+        "--sensor-inputs",
+        "state,thesis,state",
+        "--out",
+        s(&model3),
+    ]);
+    r.expect("train with sensor inputs per sensor");
+    assert!(
+        out.contains("sensors 0: state only, 1: thesis inputs, 2: state only"),
+        "{out}"
+    );
+    let (r, _) = hbn(&[
+        "train",
+        "--log",
+        s(&train),
+        "--sensor-inputs",
+        "state,thesis",
+        "--out",
+        s(&d.path().join("bad.json")),
+    ]);
+    let e = format!("{:#}", r.expect_err("two values for three sensors"));
+    assert!(e.contains("sensor-inputs"), "{e}");
     // A scalar path count that does not match the model's is refused.
     let (r, _) = hbn(&[
         "estimate",

@@ -732,15 +732,16 @@ pub struct EvalArgs {
     /// Mode to evaluate, or `all`.
     #[arg(long, value_parser = mode_choice(), default_value_t = ModeChoice::All)]
     pub mode: ModeChoice,
-    /// Input signal (default: the model's).
-    #[arg(long, value_parser = parse_path)]
-    pub input: Option<SignalPath>,
-    /// Reference state signal (default: the model's).
-    #[arg(long, value_parser = parse_path)]
-    pub state: Option<SignalPath>,
-    /// Sensor signal (default: the model's).
-    #[arg(long, value_parser = parse_path)]
-    pub output: Option<SignalPath>,
+    /// Input signal (default: the model's); repeat for each input of a vector model, in order.
+    #[arg(long, action = clap::ArgAction::Append, value_parser = parse_path)]
+    pub input: Vec<SignalPath>,
+    /// Reference state signal (default: the model's); repeat for each component of a vector
+    /// model, in order.
+    #[arg(long, action = clap::ArgAction::Append, value_parser = parse_path)]
+    pub state: Vec<SignalPath>,
+    /// Sensor signal (default: the model's); repeat for each sensor of a vector model.
+    #[arg(long, action = clap::ArgAction::Append, value_parser = parse_path)]
+    pub output: Vec<SignalPath>,
     /// Write a PNG plot: per mode the estimate with its 2-sigma band against the logged state
     /// (nRMSE and 2-sigma coverage in the legend), and the hysteresis loops.
     #[arg(long)]

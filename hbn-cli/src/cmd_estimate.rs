@@ -24,25 +24,31 @@ pub fn is_vector_model(file: &Path) -> bool {
         .is_some_and(|f| f == hbn_model::vector::VECTOR_MODEL_FORMAT)
 }
 
-/// `hbn estimate` with a vector model: the CSV of [`hbn_pipeline::vector_csv`].
-fn run_vector(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<()> {
-    let model = VectorModel::load(&args.model)
-        .with_context(|| format!("cannot load the model `{}`", args.model.display()))?;
-    if args.out.is_some() {
+/// The one path a scalar model takes from a repeatable flag (`None`: the model's).
+pub fn one_path(
+    v: &[hbn_io::SignalPath],
+    flag: &str,
+    model: &Path,
+) -> anyhow::Result<Option<hbn_io::SignalPath>> {
+    if v.len() > 1 {
         anyhow::bail!(
-            "--out (MCAP output) takes scalar models; write a vector model's estimate with --csv"
+            "{flag} is given {} times, but `{}` is a scalar model (one input, one state, one \
+             sensor); give it once",
+            v.len(),
+            model.display()
         );
     }
-    let mode = match args.mode {
-        None => model.default_mode(),
-        Some(m) => match m.modes().as_slice() {
-            [one] => *one,
-            _ => anyhow::bail!("--mode all takes scalar models; choose ekf or ukf"),
-        },
-    };
-    let signals = hbn_pipeline::model_signals(&model, &args.input, &args.output)?;
+    Ok(v.first().cloned())
+}
+
+/// How to read a log for a vector model: as its training logs were read, with these flags'
+/// values where given.
+pub fn vector_log_options(
+    model: &VectorModel,
+    read: &crate::cli::ModelReadArgs,
+) -> hbn_pipeline::LogOptions {
     let mut opts = hbn_pipeline::LogOptions {
-        min_coverage: args.read.min_coverage,
+        min_coverage: read.min_coverage,
         ..hbn_pipeline::LogOptions::default()
     };
     if let Some((t, gap)) = model.read_options() {
@@ -51,12 +57,32 @@ fn run_vector(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<()> {
         }
         opts.max_gap_s = gap;
     }
-    if let Some(ts) = args.read.time_source {
+    if let Some(ts) = read.time_source {
         opts.time_source = ts.into();
     }
-    if let Some(gap) = args.read.max_gap {
+    if let Some(gap) = read.max_gap {
         opts.max_gap_s = gap;
     }
+    opts
+}
+
+/// `hbn estimate` with a vector model: the CSV of [`hbn_pipeline::vector_csv`] and the MCAP
+/// log of [`hbn_pipeline::VectorLogEstimate::write_mcap`].
+fn run_vector(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<()> {
+    let model = VectorModel::load(&args.model)
+        .with_context(|| format!("cannot load the model `{}`", args.model.display()))?;
+    let mode = match args.mode {
+        None => model.default_mode(),
+        Some(m) => match m.modes().as_slice() {
+            [one] if *one != Mode::EkfBlr => *one,
+            [_] => anyhow::bail!(
+                "--mode ekf-blr takes scalar models; a vector model filters with ekf or ukf"
+            ),
+            _ => anyhow::bail!("--mode all takes scalar models here; choose ekf or ukf"),
+        },
+    };
+    let signals = hbn_pipeline::model_signals(&model, &args.input, &args.output)?;
+    let opts = vector_log_options(&model, &args.read);
     let mut render = Renderer::default();
     let result =
         hbn_pipeline::estimate_vector_log(&model, &args.log, &signals, mode, opts, &mut |e| {
@@ -66,25 +92,32 @@ fn run_vector(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<()> {
     let run = result
         .map_err(|e| report::error(e, opts.time_source))
         .with_context(|| format!("estimation on `{}` failed", args.log.display()))?;
-    if let Some(csv) = &args.csv {
-        hbn_fs::write_atomic(
-            csv,
-            hbn_pipeline::vector_csv(&run, args.covariance).as_bytes(),
-        )
-        .with_context(|| format!("cannot write `{}`", csv.display()))?;
+    // Both outputs are rendered before either is written.
+    let csv_text = args
+        .csv
+        .as_ref()
+        .map(|_| hbn_pipeline::vector_csv(&run, args.covariance));
+    if let Some(mcap) = &args.out {
+        run.write_mcap(mcap, model.signal_names())
+            .map_err(|e| report::error(e, opts.time_source))?;
+    }
+    if let (Some(csv), Some(text)) = (&args.csv, csv_text) {
+        hbn_fs::write_atomic(csv, text.as_bytes())
+            .with_context(|| format!("cannot write `{}`", csv.display()))?;
     }
     let e = &run.estimate;
     let d = e.dims;
+    let wrote: String = [&args.csv, &args.out]
+        .iter()
+        .filter_map(|f| f.as_ref())
+        .map(|f| format!("; wrote `{}`", f.display()))
+        .collect();
     let mut text = format!(
-        "estimated {} state components over {} samples of `{}` with {}{}\n",
+        "estimated {} state components over {} samples of `{}` with {}{wrote}\n",
         d.states,
         e.len(),
         args.log.display(),
         mode,
-        args.csv
-            .as_ref()
-            .map(|c| format!("; wrote `{}`", c.display()))
-            .unwrap_or_default()
     );
     for (i, f) in e.unobservable.iter().enumerate() {
         if *f > 0.05 {
@@ -103,7 +136,7 @@ pub fn load_model(file: &Path) -> anyhow::Result<HysteresisModel> {
     if is_vector_model(file) {
         anyhow::bail!(
             "`{}` is a vector model (several inputs, states or sensors); this command takes \
-             scalar models. A vector model runs with `hbn estimate --csv`",
+             scalar models. A vector model runs with `hbn estimate`, `hbn eval` and `hbn inspect`",
             file.display()
         );
     }
@@ -199,18 +232,7 @@ pub fn run(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<Vec<LogEstima
         return Ok(Vec::new());
     }
     let model = load_model(&args.model)?;
-    let one =
-        |v: &[hbn_io::SignalPath], flag: &str| -> anyhow::Result<Option<hbn_io::SignalPath>> {
-            if v.len() > 1 {
-                anyhow::bail!(
-                    "{flag} is given {} times, but `{}` is a scalar model (one input, one sensor); \
-                 give it once",
-                    v.len(),
-                    args.model.display()
-                );
-            }
-            Ok(v.first().cloned())
-        };
+    let one = |v: &[hbn_io::SignalPath], flag: &str| one_path(v, flag, &args.model);
     let signals = SignalChoice {
         input: one(&args.input, "--input")?,
         state: None,

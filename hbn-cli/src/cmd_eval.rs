@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use anyhow::Context;
-use hbn_model::HysteresisModel;
+use hbn_model::{HysteresisModel, VectorModel};
 use hbn_pipeline::{Evaluation, Method, SignalChoice, evaluate_log};
 
 use crate::Ui;
@@ -164,16 +164,26 @@ pub fn plot_data<'a>(
     }
 }
 
-/// Runs `hbn eval`.
-pub fn run(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<Evaluation> {
+/// Runs `hbn eval` with a scalar or a vector model.
+pub fn run(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<()> {
     if let Some(p) = &args.plot {
         crate::check_output(p, "plot")?;
     }
+    if crate::cmd_estimate::is_vector_model(&args.model) {
+        return run_vector(ui, args);
+    }
+    run_scalar(ui, args).map(|_| ())
+}
+
+/// `hbn eval` with a scalar model; returns the evaluation.
+pub fn run_scalar(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<Evaluation> {
     let model = load_model(&args.model)?;
+    let one =
+        |v: &[hbn_io::SignalPath], flag: &str| crate::cmd_estimate::one_path(v, flag, &args.model);
     let signals = SignalChoice {
-        input: args.input.clone(),
-        state: args.state.clone(),
-        output: args.output.clone(),
+        input: one(&args.input, "--input")?,
+        state: one(&args.state, "--state")?,
+        output: one(&args.output, "--output")?,
     };
     let modes = args.mode.modes();
     let opts = args.read.options(&model);
@@ -226,4 +236,205 @@ pub fn run(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<Evaluation> {
         }
     }
     Ok(ev)
+}
+
+/// The scores of a vector model, one table per state component: a row per mode with RMSE,
+/// nRMSE and the share within 2 standard deviations (with `verbose` also within 1, the mean
+/// NEES and the NLPD); the model's default mode marked `*`.
+pub fn vector_tables(
+    ev: &hbn_pipeline::VectorEvaluation,
+    model: &VectorModel,
+    verbose: bool,
+) -> String {
+    let names = model.signal_names();
+    let mut s = String::new();
+    for i in 0..model.dims().states {
+        let name = names.states.get(i).map_or("", String::as_str);
+        s.push_str(&format!("state component {i} ({name}):\n"));
+        s.push_str(&format!(
+            "  {:<11} {:>10} {:>8} {:>8}",
+            "method", "RMSE", "nRMSE", "in 2 sd"
+        ));
+        if verbose {
+            s.push_str(&format!(
+                " {:>8} {:>10} {:>8}",
+                "in 1 sd", "mean NEES", "NLPD"
+            ));
+        }
+        s.push('\n');
+        for run in &ev.runs {
+            let Some(sc) = run.scores.get(i) else {
+                continue;
+            };
+            let star = if run.mode == model.default_mode() {
+                "*"
+            } else {
+                ""
+            };
+            let c = &sc.calibration;
+            s.push_str(&format!(
+                "  {:<11} {:>10.6} {:>8.4} {:>7.1}%",
+                format!("{}{star}", run.mode.name()),
+                sc.rmse,
+                sc.nrmse,
+                100.0 * c.coverage_2sigma
+            ));
+            if verbose {
+                s.push_str(&format!(
+                    " {:>7.1}% {:>10.2} {:>8.3}",
+                    100.0 * c.coverage_1sigma,
+                    c.mean_nees,
+                    c.nlpd
+                ));
+            }
+            s.push('\n');
+        }
+    }
+    if ev.runs.iter().any(|r| r.mode == model.default_mode()) {
+        s.push_str("* the model's default mode\n");
+    }
+    s
+}
+
+/// `hbn eval` with a vector model.
+fn run_vector(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<()> {
+    let model = VectorModel::load(&args.model)
+        .with_context(|| format!("cannot load the model `{}`", args.model.display()))?;
+    let mut signals = hbn_pipeline::model_signals(&model, &args.input, &args.output)?;
+    if !args.state.is_empty() {
+        if args.state.len() != signals.states.len() {
+            anyhow::bail!(
+                "--state is given {} times; the model has {} state components: give one path \
+                 per component, in the model's order, or none",
+                args.state.len(),
+                signals.states.len()
+            );
+        }
+        signals.states = args.state.clone();
+    }
+    let modes: Vec<hbn_core::Mode> = args
+        .mode
+        .modes()
+        .into_iter()
+        .filter(|m| *m != hbn_core::Mode::EkfBlr)
+        .collect();
+    let opts = crate::cmd_estimate::vector_log_options(&model, &args.read);
+    let mut render = Renderer::default();
+    let result =
+        hbn_pipeline::evaluate_vector_log(&model, &args.log, &signals, &modes, opts, &mut |e| {
+            render.event(ui, e)
+        });
+    render.finish();
+    let ev = result
+        .map_err(|e| report::error(e, opts.time_source))
+        .with_context(|| format!("evaluation on `{}` failed", args.log.display()))?;
+    if let Some(p) = &args.plot {
+        vector_plot(p, &ev, &model, &args.log)?;
+    }
+    if args.json {
+        let runs: Vec<serde_json::Value> = ev
+            .runs
+            .iter()
+            .map(|r| {
+                let comps: Vec<serde_json::Value> = r
+                    .scores
+                    .iter()
+                    .map(|sc| {
+                        serde_json::json!({
+                            "rmse": sc.rmse,
+                            "nrmse": sc.nrmse,
+                            "coverage_1sigma": sc.calibration.coverage_1sigma,
+                            "coverage_2sigma": sc.calibration.coverage_2sigma,
+                            "mean_nees": sc.calibration.mean_nees,
+                            "nlpd": sc.calibration.nlpd,
+                        })
+                    })
+                    .collect();
+                serde_json::json!({"mode": r.mode.name(), "components": comps})
+            })
+            .collect();
+        let v = serde_json::json!({
+            "model": args.model,
+            "log": args.log,
+            "states": model.signal_names().states,
+            "default_mode": model.default_mode().name(),
+            "runs": runs,
+        });
+        ui.line(serde_json::to_string_pretty(&v).context("cannot format JSON")?)?;
+    } else {
+        ui.print(format!(
+            "scored `{}` on `{}`: {}\n",
+            args.model.display(),
+            args.log.display(),
+            report::grid_text(&ev.log)
+        ))?;
+        ui.print(vector_tables(&ev, &model, ui.verbose))?;
+        ui.print(legend(ui.verbose))?;
+        if let Some(p) = &args.plot {
+            ui.line(format!("wrote plot `{}`", p.display()))?;
+        }
+    }
+    Ok(())
+}
+
+/// One panel per state component and mode: the logged component, the estimate and its
+/// 2-sigma band against time.
+fn vector_plot(
+    file: &Path,
+    ev: &hbn_pipeline::VectorEvaluation,
+    model: &VectorModel,
+    log: &Path,
+) -> anyhow::Result<()> {
+    let d = model.dims();
+    let names = model.signal_names();
+    let t = &ev.log.aligned.t_s;
+    // Per component: each mode's estimate and standard deviation.
+    type Series = Vec<Vec<f64>>;
+    let comps: Vec<(Series, Series)> = (0..d.states)
+        .map(|i| {
+            (
+                ev.runs.iter().map(|r| r.estimate.component(i)).collect(),
+                ev.runs
+                    .iter()
+                    .map(|r| r.estimate.component_std(i))
+                    .collect(),
+            )
+        })
+        .collect();
+    let panels: Vec<EvalPlot<'_>> = (0..d.states)
+        .map(|i| {
+            let (xs, ss) = &comps[i];
+            EvalPlot {
+                title: format!(
+                    "{} on {}: state component {i} ({})",
+                    "vector model",
+                    log.display(),
+                    names.states.get(i).map_or("", String::as_str)
+                ),
+                t,
+                u: ev.log.column(0),
+                x_ref: ev.state(d, i),
+                y: ev.log.column(d.inputs + d.states),
+                input_label: names.inputs.first().cloned().unwrap_or_default(),
+                state_label: names.states.get(i).cloned().unwrap_or_default(),
+                output_label: names.outputs.first().cloned().unwrap_or_default(),
+                modes: ev
+                    .runs
+                    .iter()
+                    .enumerate()
+                    .map(|(m, r)| ModeSeries {
+                        label: r.mode.name().to_owned(),
+                        x: &xs[m],
+                        x_std: &ss[m],
+                        nrmse: r.scores[i].nrmse,
+                        coverage_2sigma: r.scores[i].calibration.coverage_2sigma,
+                    })
+                    .collect(),
+                loops_mode: 0,
+                open_loop: &[],
+                open_loop_nrmse: f64::NAN,
+            }
+        })
+        .collect();
+    plot::components_plot(file, &panels)
 }

@@ -337,6 +337,16 @@ pub fn model_text(model: &HysteresisModel, file: &std::path::Path) -> String {
 
 /// Runs `hbn inspect`.
 pub fn run(ui: &mut Ui<'_>, args: &InspectArgs) -> anyhow::Result<()> {
+    if crate::cmd_estimate::is_vector_model(&args.model) {
+        let model = hbn_model::VectorModel::load(&args.model).map_err(|e| {
+            anyhow::anyhow!(e).context(format!("cannot load the model `{}`", args.model.display()))
+        })?;
+        return if args.json {
+            ui.line(serde_json::to_string_pretty(&vector_json(&model))?)
+        } else {
+            ui.print(vector_text(&model, &args.model))
+        };
+    }
     let model = load_model(&args.model)?;
     if args.json {
         let text = serde_json::to_string_pretty(&model_json(&model))?;
@@ -346,4 +356,114 @@ pub fn run(ui: &mut Ui<'_>, args: &InspectArgs) -> anyhow::Result<()> {
         ui.line("\nfirmware (`hbn export`, docs/firmware.md):")?;
         ui.print(crate::cmd_export::size_text(&model, None)?)
     }
+}
+
+/// One line per GP of a vector model.
+fn vector_gps(model: &hbn_model::VectorModel) -> Vec<(String, &GaussianProcess)> {
+    let d = model.dims();
+    let names = model.signal_names();
+    let name = |v: &[String], i: usize| v.get(i).cloned().unwrap_or_default();
+    let mut out = Vec::new();
+    for i in 0..d.states {
+        if let Some(gp) = model.transition(i) {
+            out.push((format!("transition {i} ({})", name(&names.states, i)), gp));
+        }
+    }
+    for j in 0..d.sensors {
+        if let Some(gp) = model.sensor(j) {
+            let inputs = if model.sensor_reads_output(j).unwrap_or(true) {
+                "thesis inputs"
+            } else {
+                "state only"
+            };
+            out.push((
+                format!("sensor {j} ({}, {inputs})", name(&names.outputs, j)),
+                gp,
+            ));
+        }
+    }
+    out
+}
+
+/// `hbn inspect` of a vector model: sizes, signals, choices, every GP, the held-out scores.
+pub fn vector_text(model: &hbn_model::VectorModel, file: &std::path::Path) -> String {
+    let d = model.dims();
+    let names = model.signal_names();
+    let s = model.summary();
+    let mut t = format!(
+        "vector model `{}`: {} inputs, {} state components, {} sensors at {} Hz; default mode {}\n",
+        file.display(),
+        d.inputs,
+        d.states,
+        d.sensors,
+        model.rate_hz(),
+        model.default_mode()
+    );
+    t.push_str(&format!(
+        "  signals: inputs {}; states {}; outputs {}\n",
+        names.inputs.join(", "),
+        names.states.join(", "),
+        names.outputs.join(", ")
+    ));
+    t.push_str(&format!(
+        "  trained on {} samples from {} trajectories in {:.1} s\n",
+        s.samples, s.trajectories, s.seconds
+    ));
+    t.push_str("GPs:\n");
+    for (label, gp) in vector_gps(model) {
+        t.push_str(&format!(
+            "  {label}: {} inputs, {} support points{}, noise variance {:.3e}\n",
+            gp.kernel().dim,
+            gp.n_support(),
+            if gp.is_sparse() { " (inducing)" } else { "" },
+            gp.noise_variance()
+        ));
+    }
+    if !s.validation.is_empty() {
+        t.push_str(
+            "held-out choices (NLPD of the state summed over components; lower is better):\n",
+        );
+        for r in &s.validation {
+            let nrmse: Vec<String> = r.nrmse.iter().map(|v| format!("{v:.4}")).collect();
+            t.push_str(&format!(
+                "  {:<40} NLPD {:>9.3}  nRMSE {}{}\n",
+                r.what,
+                r.nlpd,
+                nrmse.join(", "),
+                if r.chosen { "  (kept)" } else { "" }
+            ));
+        }
+    }
+    for w in &s.warnings {
+        t.push_str(&format!("warning: {w}\n"));
+    }
+    t
+}
+
+/// `hbn inspect --json` of a vector model.
+pub fn vector_json(model: &hbn_model::VectorModel) -> Value {
+    let d = model.dims();
+    let gps: Vec<Value> = vector_gps(model)
+        .into_iter()
+        .map(|(label, gp)| {
+            json!({
+                "gp": label,
+                "inputs": gp.kernel().dim,
+                "support_points": gp.n_support(),
+                "sparse": gp.is_sparse(),
+                "noise_variance": gp.noise_variance(),
+            })
+        })
+        .collect();
+    json!({
+        "kind": "vector",
+        "inputs": d.inputs,
+        "states": d.states,
+        "sensors": d.sensors,
+        "rate_hz": model.rate_hz(),
+        "default_mode": model.default_mode().name(),
+        "signals": model.signal_names(),
+        "gps": gps,
+        "summary": model.summary(),
+    })
 }

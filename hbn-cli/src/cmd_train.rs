@@ -105,9 +105,14 @@ fn run_vector(ui: &mut Ui<'_>, args: &TrainArgs, signals: &VectorSignals) -> any
         ..args.read.options(args.rate)
     };
     let mut render = Renderer::default();
-    let trained = train_vector_from_logs(&args.logs, signals, opts, args.params(), &mut |e| {
-        render.event(ui, e)
-    });
+    let trained = train_vector_from_logs(
+        &args.logs,
+        signals,
+        opts,
+        args.params(),
+        &args.sensor_inputs,
+        &mut |e| render.event(ui, e),
+    );
     render.finish();
     let trained = trained.map_err(|e| report::error(e, opts.time_source))?;
     let model = trained.model;

@@ -367,6 +367,38 @@ pub fn eval_plot(file: &Path, d: &EvalPlot<'_>) -> anyhow::Result<()> {
     })
 }
 
+/// One panel per component and mode (a vector model): each component's logged values, the
+/// mode's estimate and its 2-sigma band against time, with the nRMSE and the share inside the
+/// band in the legend.
+pub fn components_plot(file: &Path, components: &[EvalPlot<'_>]) -> anyhow::Result<()> {
+    let rows: usize = components.iter().map(|c| c.modes.len()).sum();
+    let size = (WIDTH, 50 + rows.max(1) as u32 * PANEL_H);
+    let title = components
+        .first()
+        .map(|c| {
+            c.title
+                .split(": state component")
+                .next()
+                .unwrap_or("")
+                .to_owned()
+        })
+        .unwrap_or_default();
+    render_png(file, size, |root| {
+        let root = root.titled(&title, ("sans-serif", 22)).map_err(pe)?;
+        let panels = root.split_evenly((rows.max(1), 1));
+        let mut next = panels.iter();
+        for c in components {
+            for (i, m) in c.modes.iter().enumerate() {
+                let Some(area) = next.next() else { break };
+                let mut legend = mode_legend(c, i);
+                legend.insert(0, LegendEntry::Text(format!("{} ", c.state_label)));
+                time_panel(area, c, (m.x, Some(m.x_std), color(i)), &legend)?;
+            }
+        }
+        Ok(())
+    })
+}
+
 /// One hysteresis-loop panel: the reference loop in black and, if given, the estimate's.
 fn loop_panel(
     area: &Area<'_>,

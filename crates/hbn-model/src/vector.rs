@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{DataError, ModelError, ModelFileProblem, Signal};
 use crate::model::{GpRole, OUTLIER_GATE, SignalStats};
-use crate::params::{CheckedHbnParams, HbnParams};
+use crate::params::{CheckedHbnParams, ConfigError, HbnParams, Param, Problem, SensorInputs};
 
 /// The model file's tag.
 pub const VECTOR_MODEL_FORMAT: &str = "hbn-vector-model";
@@ -254,6 +254,7 @@ struct VectorModelFile {
 }
 
 /// The GPs fitted on one set of trajectories.
+#[derive(Clone)]
 struct Fitted {
     transitions: Vec<GaussianProcess>,
     /// Per sensor: with its own previous output, state only.
@@ -277,6 +278,17 @@ impl VectorModel {
         params: &CheckedHbnParams,
         names: SignalNames,
     ) -> Result<Self, ModelError> {
+        Self::fit_with_sensors(trajectories, params, names, &[])
+    }
+
+    /// [`VectorModel::fit_checked`] with each sensor's inputs given: none (chosen on held-out
+    /// data, one sensor at a time), one for every sensor, or one per sensor.
+    pub fn fit_with_sensors(
+        trajectories: &[VectorSequence<'_>],
+        params: &CheckedHbnParams,
+        names: SignalNames,
+        sensors: &[SensorInputs],
+    ) -> Result<Self, ModelError> {
         let t0 = Instant::now();
         let first = trajectories.first().ok_or(DataError::NoTrajectories)?;
         let dims = first.dims;
@@ -296,29 +308,57 @@ impl VectorModel {
                 "too many transition inputs (2 dx + du (2 + memory) > 32): use fewer memory radii",
             )));
         }
-        // Training and held-out parts: the last quarter of each trajectory long enough.
-        let mut train = Vec::new();
-        let mut held = Vec::new();
-        for t in trajectories {
-            let n = t.len();
-            let cut = n - n / 4;
-            if n / 4 >= 20 && cut >= 20 {
-                train.push(t.slice(0, cut));
-                held.push(t.slice(cut, n));
-            } else {
-                train.push(*t);
+        // Folds: each quarter of every trajectory long enough, held out in turn. The GPs'
+        // hyperparameters are optimised once, on the first fold's training part (all but the
+        // last quarter); the other folds refit them with those hyperparameters.
+        let folds = folds(trajectories);
+        let fixed: Vec<bool> = match sensors {
+            [] => Vec::new(),
+            [one] => vec![*one == SensorInputs::Thesis; dims.sensors],
+            many if many.len() == dims.sensors => {
+                many.iter().map(|s| *s == SensorInputs::Thesis).collect()
             }
-        }
+            _ => {
+                return Err(ModelError::Config(ConfigError {
+                    param: Param::SensorInputs,
+                    problem: Problem::Invalid {
+                        reason: "a vector model takes one sensor-inputs value for every sensor \
+                                 or one per sensor",
+                    },
+                }));
+            }
+        };
         let stats = Stats::of(trajectories);
-        let fitted = Self::fit_gps(&train, params, &plays, None)?;
-        let pairs = fitted.sensors.clone();
-        let mut model = Self::assemble(params, dims, &plays, &stats, trajectories, fitted, names);
+        let mut fold_fits: Vec<Fitted> = Vec::with_capacity(folds.len());
+        for (train, _) in &folds {
+            let fit = Self::fit_gps(train, params, &plays, fold_fits.first())?;
+            fold_fits.push(fit);
+        }
+        let primary = match fold_fits.first() {
+            Some(f) => f.clone(),
+            None => Self::fit_gps(trajectories, params, &plays, None)?,
+        };
+        let mut model = Self::assemble(
+            params,
+            dims,
+            &plays,
+            &stats,
+            trajectories,
+            primary.clone(),
+            names,
+        );
+        for (j, reads) in fixed.iter().enumerate() {
+            model.sensors[j] = primary.sensors[j][usize::from(!reads)].clone();
+            model.sensor_reads_output[j] = *reads;
+        }
         let mut validation = Vec::new();
-        if !held.is_empty() {
-            model.choose_on_held_out(&held, &pairs, &mut validation)?;
+        if !folds.is_empty() {
+            let held: Vec<&[VectorSequence<'_>]> =
+                folds.iter().map(|(_, h)| h.as_slice()).collect();
+            model.choose_on_held_out(&held, &fold_fits, !fixed.is_empty(), &mut validation)?;
         }
         // Refit on every sample with the hyperparameters found.
-        let refit = Self::fit_gps(trajectories, params, &plays, Some(&model))?;
+        let refit = Self::fit_gps(trajectories, params, &plays, Some(&primary))?;
         let choice = model.sensor_reads_output.clone();
         model.transitions = refit.transitions;
         model.sensors = refit
@@ -355,12 +395,13 @@ impl VectorModel {
     }
 
     /// Fits every GP on `trajectories`: the transitions and both variants of each sensor.
-    /// With `fixed`, each GP keeps that model's hyperparameters (a refit on more data).
+    /// With `fixed`, each GP keeps the hyperparameters of its twin there (a refit on other
+    /// data).
     fn fit_gps(
         trajectories: &[VectorSequence<'_>],
         params: &CheckedHbnParams,
         plays: &Plays,
-        fixed: Option<&VectorModel>,
+        fixed: Option<&Fitted>,
     ) -> Result<Fitted, ModelError> {
         let dims = trajectories[0].dims;
         let (t_rows, t_targets) = transition_rows(trajectories, plays);
@@ -376,8 +417,8 @@ impl VectorModel {
             })?;
             let mut g = params.gp_params(spec, GpRole::Transition);
             g.seed = params.seed.wrapping_add(i as u64);
-            if let Some(m) = fixed {
-                g.init = Some(m.transitions[i].hyperparameters());
+            if let Some(f) = fixed {
+                g.init = Some(f.transitions[i].hyperparameters());
                 g.optimize = false;
             }
             let targets: Vec<f64> = t_targets
@@ -395,38 +436,28 @@ impl VectorModel {
         let mut sensors = Vec::with_capacity(dims.sensors);
         for j in 0..dims.sensors {
             let mut pair = Vec::with_capacity(2);
-            for reads in [true, false] {
+            for (v, reads) in [true, false].into_iter().enumerate() {
                 let (rows, targets) = sensor_rows(trajectories, j, reads);
                 let mut spec = params.sensor_kernel.spec(dims.sensor_dim(reads), [0, 0]);
                 spec.direction = None;
                 let mut g = params.gp_params(spec, GpRole::Sensor);
                 g.seed = params.seed.wrapping_add(100 + j as u64);
-                if let Some(m) = fixed {
-                    // Only the chosen variant is kept; the other is refitted as it was.
-                    if m.sensor_reads_output[j] == reads {
-                        g.init = Some(m.sensors[j].hyperparameters());
-                        g.optimize = false;
-                    } else {
-                        pair.push(None);
-                        continue;
-                    }
+                if let Some(f) = fixed {
+                    g.init = Some(f.sensors[j][v].hyperparameters());
+                    g.optimize = false;
                 }
                 let gp = hbn_gp::fit(&g, &rows, &targets).map_err(|source| ModelError::Gp {
                     which: GpRole::Sensor,
                     source,
                 })?;
-                pair.push(Some(gp));
+                pair.push(gp);
             }
-            let with_y = pair[0].clone();
-            let state_only = pair[1].clone();
-            // A refit fills the variant not chosen with the chosen one (never read).
-            let (a, b) = match (with_y, state_only) {
-                (Some(a), Some(b)) => (a, b),
-                (Some(a), None) => (a.clone(), a),
-                (None, Some(b)) => (b.clone(), b),
-                (None, None) => unreachable_gp()?,
-            };
-            sensors.push([a, b]);
+            let state_only = pair.pop();
+            let with_y = pair.pop();
+            match (with_y, state_only) {
+                (Some(a), Some(b)) => sensors.push([a, b]),
+                _ => return Err(unfitted()),
+            }
         }
         Ok(Fitted {
             transitions,
@@ -483,55 +514,71 @@ impl VectorModel {
         }
     }
 
-    /// Chooses, on the held-out parts: each sensor's inputs (one sensor at a time: its
-    /// state-only GP replaces the thesis' where the score falls), the mode, the process-noise
-    /// scale, then each component's std scale (its held-out NEES made one).
+    /// Chooses, on the held-out folds: each sensor's inputs (one sensor at a time: its
+    /// state-only GP replaces the thesis' where the score falls; skipped when given), the
+    /// mode, the process-noise scale, then each component's std scale (its held-out NEES
+    /// made one). `fits` holds each fold's GPs, `held` its held-out parts.
     fn choose_on_held_out(
         &mut self,
-        held: &[VectorSequence<'_>],
-        pairs: &[[GaussianProcess; 2]],
+        held: &[&[VectorSequence<'_>]],
+        fits: &[Fitted],
+        sensors_given: bool,
         rows: &mut Vec<VectorValidationRow>,
     ) -> Result<(), ModelError> {
-        let mut best = self.held_out_score(held)?;
-        rows.push(best.row("sensors read their own previous output".into(), true));
-        for (j, pair) in pairs.iter().enumerate() {
-            let mut candidate = self.clone();
-            candidate.sensors[j] = pair[1].clone();
-            candidate.sensor_reads_output[j] = false;
-            let s = candidate.held_out_score(held)?;
+        let mut best = self.held_out_score(held, fits)?;
+        let first = if sensors_given {
+            "sensor inputs as given"
+        } else {
+            "sensors read their own previous output"
+        };
+        rows.push(best.row(first.into(), true));
+        let mut consider = |this: &mut Self,
+                            candidate: Self,
+                            what: String,
+                            best: &mut HeldOut|
+         -> Result<(), ModelError> {
+            let s = candidate.held_out_score(held, fits)?;
             let better = s.nlpd < best.nlpd;
-            rows.push(s.row(format!("sensor {j}: state only"), better));
+            rows.push(s.row(what, better));
             if better {
-                *self = candidate;
-                best = s;
+                *this = candidate;
+                *best = s;
+            }
+            Ok(())
+        };
+        if !sensors_given {
+            for j in 0..self.dims.sensors {
+                let mut candidate = self.clone();
+                candidate.sensor_reads_output[j] = false;
+                if let Some(f) = fits.first() {
+                    candidate.sensors[j] = f.sensors[j][1].clone();
+                }
+                consider(
+                    self,
+                    candidate,
+                    format!("sensor {j}: state only"),
+                    &mut best,
+                )?;
             }
         }
         let mut candidate = self.clone();
         candidate.mode = Mode::Ukf;
-        let s = candidate.held_out_score(held)?;
-        let better = s.nlpd < best.nlpd;
-        rows.push(s.row("mode ukf".into(), better));
-        if better {
-            *self = candidate;
-            best = s;
-        }
+        consider(self, candidate, "mode ukf".into(), &mut best)?;
         for q in Q_SCALES.into_iter().filter(|q| *q != 1.0) {
             let mut candidate = self.clone();
             candidate.q_scale = q;
-            let s = candidate.held_out_score(held)?;
-            let better = s.nlpd < best.nlpd;
-            rows.push(s.row(format!("process noise x{q}"), better));
-            if better {
-                *self = candidate;
-                best = s;
-            }
+            consider(self, candidate, format!("process noise x{q}"), &mut best)?;
         }
+        // The band is scaled so that 95% of the held-out states fall inside +-2 std: the 95th
+        // percentile of |error| / std over 2 (robust where a few stretches, such as a filter
+        // starting on a held-out quarter, have large normalised errors).
         self.std_scale = best
-            .nees
+            .normalised
             .iter()
-            .map(|n| {
-                if n.is_finite() && *n > 0.0 {
-                    n.sqrt().clamp(0.2, 5.0)
+            .map(|z| {
+                let q = quantile(z, 0.95) / 2.0;
+                if q.is_finite() && q > 0.0 {
+                    q.clamp(0.2, 10.0)
                 } else {
                     1.0
                 }
@@ -540,24 +587,47 @@ impl VectorModel {
         Ok(())
     }
 
-    /// The filter's held-out score over `held` with this model's settings.
-    fn held_out_score(&self, held: &[VectorSequence<'_>]) -> Result<HeldOut, ModelError> {
+    /// This model's settings (sensor choice, mode, noise scale) with fold `f`'s GPs.
+    fn on_fold(&self, fit: &Fitted) -> Self {
+        let mut m = self.clone();
+        m.transitions = fit.transitions.clone();
+        m.sensors = fit
+            .sensors
+            .iter()
+            .zip(&self.sensor_reads_output)
+            .map(|(pair, reads)| pair[usize::from(!reads)].clone())
+            .collect();
+        m.std_scale = vec![1.0; self.dims.states];
+        m
+    }
+
+    /// The filter's held-out score over every fold with this model's settings (each fold's
+    /// own GPs), pooled over the held-out samples.
+    fn held_out_score(
+        &self,
+        held: &[&[VectorSequence<'_>]],
+        fits: &[Fitted],
+    ) -> Result<HeldOut, ModelError> {
         let dx = self.dims.states;
         let (mut nlpd, mut count) = (0.0, 0usize);
         let mut sq = vec![0.0; dx];
-        let mut nees = vec![0.0; dx];
-        for t in held {
-            let e = self.estimate(t.u, t.y, self.mode)?;
-            for k in 0..t.len() {
-                for i in 0..dx {
-                    let err = e.x[k * dx + i] - t.x[k * dx + i];
-                    let sd = e.x_std[k * dx + i].max(1e-300);
-                    let var = sd * sd;
-                    nlpd += 0.5 * (2.0 * std::f64::consts::PI * var).ln() + err * err / (2.0 * var);
-                    sq[i] += err * err;
-                    nees[i] += err * err / var;
+        let mut normalised = vec![Vec::new(); dx];
+        for (parts, fit) in held.iter().zip(fits) {
+            let model = self.on_fold(fit);
+            for t in parts.iter() {
+                let e = model.estimate(t.u, t.y, model.mode)?;
+                for k in 0..t.len() {
+                    for i in 0..dx {
+                        let err = e.x[k * dx + i] - t.x[k * dx + i];
+                        let sd = e.x_std[k * dx + i].max(1e-300);
+                        let var = sd * sd;
+                        nlpd +=
+                            0.5 * (2.0 * std::f64::consts::PI * var).ln() + err * err / (2.0 * var);
+                        sq[i] += err * err;
+                        normalised[i].push(err.abs() / sd);
+                    }
+                    count += 1;
                 }
-                count += 1;
             }
         }
         let n = count.max(1) as f64;
@@ -574,7 +644,7 @@ impl VectorModel {
                 f64::INFINITY
             },
             nrmse,
-            nees: nees.iter().map(|v| v / n).collect(),
+            normalised,
         })
     }
 
@@ -924,17 +994,63 @@ impl VectorModel {
     }
 }
 
-fn unreachable_gp() -> Result<(GaussianProcess, GaussianProcess), ModelError> {
-    Err(ModelError::Core(hbn_core::CoreError::InvalidSpec(
+fn unfitted() -> ModelError {
+    ModelError::Core(hbn_core::CoreError::InvalidSpec(
         "a sensor GP could not be fitted",
-    )))
+    ))
+}
+
+/// The held-out folds of `trajectories`: for each quarter `q` (the last first), the training
+/// parts (every trajectory long enough without its quarter `q`, the pieces before and after
+/// it as trajectories of their own; shorter trajectories whole) and the held-out quarters.
+/// None when no trajectory is long enough (80 samples).
+#[allow(clippy::type_complexity)]
+fn folds<'a>(
+    trajectories: &[VectorSequence<'a>],
+) -> Vec<(Vec<VectorSequence<'a>>, Vec<VectorSequence<'a>>)> {
+    if !trajectories.iter().any(|t| t.len() >= 80) {
+        return Vec::new();
+    }
+    (0..4)
+        .rev()
+        .map(|q| {
+            let (mut train, mut held) = (Vec::new(), Vec::new());
+            for t in trajectories {
+                let n = t.len();
+                if n < 80 {
+                    train.push(*t);
+                    continue;
+                }
+                let (a, b) = (q * n / 4, (q + 1) * n / 4);
+                for (from, to) in [(0, a), (b, n)] {
+                    if to - from >= 20 {
+                        train.push(t.slice(from, to));
+                    }
+                }
+                held.push(t.slice(a, b));
+            }
+            (train, held)
+        })
+        .collect()
 }
 
 /// A configuration's held-out scores.
 struct HeldOut {
     nlpd: f64,
     nrmse: Vec<f64>,
-    nees: Vec<f64>,
+    /// Per component, `|error| / std` of every held-out sample.
+    normalised: Vec<Vec<f64>>,
+}
+
+/// The `p` quantile of `values` (NaN when empty; non-finite values sort last).
+fn quantile(values: &[f64], p: f64) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let idx = ((v.len() - 1) as f64 * p).round() as usize;
+    v[idx.min(v.len() - 1)]
 }
 
 impl HeldOut {

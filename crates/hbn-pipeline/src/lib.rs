@@ -56,6 +56,7 @@ pub use train::{
     Trained, train_from_logs,
 };
 pub use vector::{
-    TrainedVector, VectorLogEstimate, VectorSignals, default_signals, estimate_vector_log,
-    model_signals, train_vector_from_logs, vector_csv,
+    ComponentScore, TrainedVector, VECTOR_ESTIMATE_SCHEMA, VectorEvaluation, VectorLogEstimate,
+    VectorModeRun, VectorSignals, default_signals, estimate_vector_log, evaluate_vector_log,
+    model_signals, train_vector_from_logs, vector_csv, vector_estimate_schema,
 };

@@ -8,7 +8,11 @@ use std::path::{Path, PathBuf};
 use hbn_core::vector::Dims;
 use hbn_core::{Flags, Mode};
 use hbn_io::SignalPath;
-use hbn_model::{HbnParams, Problem, SignalNames, VectorEstimate, VectorModel, VectorSequence};
+use hbn_model::metrics::{Calibration, calibration, nrmse, rmse};
+use hbn_model::{
+    HbnParams, Problem, SensorInputs, SignalNames, VectorEstimate, VectorModel, VectorSequence,
+};
+use serde_json::{Value, json};
 
 use crate::error::{LogOption, OptionError, PipelineError};
 use crate::log::{Event, LogData, LogOptions, Observer, load_log, load_log_pieces};
@@ -145,12 +149,14 @@ fn rows(log: &LogData, first: usize, d: usize) -> Vec<f64> {
 }
 
 /// Trains a vector model from MCAP logs, each log (piece between gaps) one trajectory; as
-/// [`crate::train_from_logs`] for a scalar one.
+/// [`crate::train_from_logs`] for a scalar one. `sensor_inputs`: each sensor's inputs, none
+/// (chosen on held-out data), one for all sensors or one per sensor.
 pub fn train_vector_from_logs(
     logs: &[PathBuf],
     signals: &VectorSignals,
     log_options: LogOptions,
     params: HbnParams,
+    sensor_inputs: &[SensorInputs],
     observe: &mut Observer<'_>,
 ) -> Result<TrainedVector, PipelineError> {
     if logs.is_empty() {
@@ -213,7 +219,7 @@ pub fn train_vector_from_logs(
         .iter()
         .map(|(u, x, y)| VectorSequence::new(u, x, y, dims))
         .collect();
-    let mut model = VectorModel::fit_checked(&seqs, &params, signals.names())?;
+    let mut model = VectorModel::fit_with_sensors(&seqs, &params, signals.names(), sensor_inputs)?;
     model.set_read_options(opts.time_source.name(), opts.max_gap_s);
     Ok(TrainedVector { model, logs: data })
 }
@@ -361,4 +367,161 @@ pub fn vector_csv(e: &VectorLogEstimate, covariance: bool) -> String {
         );
     }
     out
+}
+
+/// Schema name of a vector model's estimate messages.
+pub const VECTOR_ESTIMATE_SCHEMA: &str = "hbn/VectorEstimate";
+
+/// JSON schema of a vector model's estimate messages.
+pub fn vector_estimate_schema() -> Value {
+    let numbers =
+        |what: &str| json!({"type": "array", "items": {"type": "number"}, "description": what});
+    let names =
+        |what: &str| json!({"type": "array", "items": {"type": "string"}, "description": what});
+    json!({
+        "title": VECTOR_ESTIMATE_SCHEMA,
+        "description": "State estimate of a vector hbn model, one message per resampled sample",
+        "type": "object",
+        "properties": {
+            "x": numbers("estimate of each state component, in the order of `states`"),
+            "x_std": numbers("standard deviation of each component"),
+            "y_pred": numbers("predicted output of each sensor before the update, in the order of `outputs`"),
+            "innovation": numbers("y - y_pred per sensor (0 where a sensor was not updated)"),
+            "nis": {"type": "number", "description": "normalised innovation squared of the update"},
+            "flags": {"type": "integer", "description": "guard flags (bitset)"},
+            "flag_names": names("names of the set flags"),
+            "states": names("the state signals (message paths)"),
+            "outputs": names("the sensor signals (message paths)")
+        },
+        "required": ["x", "x_std", "y_pred", "innovation", "nis", "flags", "flag_names", "states", "outputs"]
+    })
+}
+
+impl VectorLogEstimate {
+    /// One JSON record per grid sample (the MCAP messages): arrays in the order of the model's
+    /// `--state` and `--output` signals, with their names.
+    pub fn records(&self, names: &SignalNames) -> Vec<Value> {
+        let e = &self.estimate;
+        let d = e.dims;
+        (0..e.len())
+            .map(|k| {
+                let f = e.flags.get(k).copied().unwrap_or(0);
+                let row = |v: &[f64], w: usize| v.get(k * w..(k + 1) * w).unwrap_or(&[]).to_vec();
+                json!({
+                    "x": row(&e.x, d.states),
+                    "x_std": row(&e.x_std, d.states),
+                    "y_pred": row(&e.y_pred, d.sensors),
+                    "innovation": row(&e.innovation, d.sensors),
+                    "nis": e.nis.get(k).copied().unwrap_or(f64::NAN),
+                    "flags": f,
+                    "flag_names": Flags(f).names().collect::<Vec<_>>(),
+                    "states": names.states,
+                    "outputs": names.outputs,
+                })
+            })
+            .collect()
+    }
+
+    /// Writes the estimate as an MCAP log on [`crate::ESTIMATE_TOPIC`] at the log's times,
+    /// atomically.
+    pub fn write_mcap(&self, file: &Path, names: &SignalNames) -> Result<(), PipelineError> {
+        hbn_io::write_json_log(
+            file,
+            crate::ESTIMATE_TOPIC,
+            VECTOR_ESTIMATE_SCHEMA,
+            &vector_estimate_schema(),
+            &self.log.times_ns(),
+            &self.records(names),
+        )
+        .map_err(|source| PipelineError::Write {
+            file: file.to_owned(),
+            source,
+        })
+    }
+}
+
+/// One state component's scores in one mode.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ComponentScore {
+    /// Root-mean-square error.
+    pub rmse: f64,
+    /// RMSE over the logged component's range.
+    pub nrmse: f64,
+    /// How well the standard deviation describes the error.
+    pub calibration: Calibration,
+}
+
+/// A vector model evaluated on a log in one mode.
+#[derive(Clone, Debug)]
+pub struct VectorModeRun {
+    /// The mode.
+    pub mode: Mode,
+    /// The estimate.
+    pub estimate: VectorEstimate,
+    /// One score per state component.
+    pub scores: Vec<ComponentScore>,
+}
+
+/// A vector model evaluated on a log: the logged state and each mode's run.
+#[derive(Clone, Debug)]
+pub struct VectorEvaluation {
+    /// The log at the model's rate: inputs, states, outputs.
+    pub log: LogData,
+    /// Each mode's run, in the order asked.
+    pub runs: Vec<VectorModeRun>,
+}
+
+impl VectorEvaluation {
+    /// The logged state component `i`.
+    pub fn state(&self, dims: Dims, i: usize) -> &[f64] {
+        self.log.column(dims.inputs + i)
+    }
+}
+
+/// Runs `model` over a log in each of `modes` and scores every state component against the
+/// logged state (`signals.states`).
+pub fn evaluate_vector_log(
+    model: &VectorModel,
+    file: &Path,
+    signals: &VectorSignals,
+    modes: &[Mode],
+    log_options: LogOptions,
+    observe: &mut Observer<'_>,
+) -> Result<VectorEvaluation, PipelineError> {
+    if modes.is_empty() {
+        return Err(PipelineError::NoModes);
+    }
+    let d = model.dims();
+    let opts = log_options.check()?;
+    let log = load_log(file, &signals.all(), Some(model.rate_hz()), &opts, observe)?;
+    let u = rows(&log, 0, d.inputs);
+    let mut y = rows(&log, d.inputs + d.states, d.sensors);
+    for (j, drop) in log.dropouts.iter().skip(d.inputs + d.states).enumerate() {
+        for (k, dropped) in drop.iter().enumerate() {
+            if *dropped && let Some(v) = y.get_mut(k * d.sensors + j) {
+                *v = f64::NAN;
+            }
+        }
+    }
+    let mut runs = Vec::with_capacity(modes.len());
+    for &mode in modes {
+        let estimate = model.estimate(&u, &y, mode)?;
+        let scores = (0..d.states)
+            .map(|i| {
+                let truth = log.column(d.inputs + i);
+                let (x, s) = (estimate.component(i), estimate.component_std(i));
+                ComponentScore {
+                    rmse: rmse(&x, truth),
+                    nrmse: nrmse(&x, truth),
+                    calibration: calibration(&x, &s, truth),
+                }
+            })
+            .collect();
+        runs.push(VectorModeRun {
+            mode,
+            estimate,
+            scores,
+        });
+    }
+    Ok(VectorEvaluation { log, runs })
 }
