@@ -9,7 +9,27 @@
 /**
  * Size of [`HbnFilter`] in 64-bit words.
  */
-#define HBN_FILTER_WORDS 192
+#define HBN_FILTER_WORDS 220
+
+/**
+ * Size of [`HbnVectorFilter`] in 64-bit words.
+ */
+#define HBN_VECTOR_FILTER_WORDS 664
+
+/**
+ * Most inputs a vector model reads (`HBN_MODEL_INPUTS` of an export is at most this).
+ */
+#define HBN_MAX_INPUTS 4
+
+/**
+ * Most state components a vector model estimates (the length of [`HbnVectorOutput::x`]).
+ */
+#define HBN_MAX_STATES 3
+
+/**
+ * Most sensors a vector model reads (the length of [`HbnVectorOutput::y_pred`]).
+ */
+#define HBN_MAX_SENSORS 4
 
 /**
  * What a call of this API returns.
@@ -107,6 +127,54 @@ typedef struct {
   uint32_t flags;
 } HbnOutput;
 
+/**
+ * The vector filter: its checked model, state and a pointer to its scratch memory, in a
+ * fixed-size block the caller allocates (statically or on the stack). Opaque: only
+ * `hbn_vector_filter_init` writes it. It holds no pointer into itself, so it may be copied
+ * once initialised (the model data and work memory it points to stay where they are).
+ */
+typedef struct {
+  /**
+   * Opaque storage.
+   */
+  uint64_t opaque[HBN_VECTOR_FILTER_WORDS];
+} HbnVectorFilter;
+
+/**
+ * One vector step's result. Entries past the model's sizes (`HBN_MODEL_STATES`,
+ * `HBN_MODEL_SENSORS`) are 0.
+ */
+typedef struct {
+  /**
+   * Estimate of each state component of `x_k`.
+   */
+  double x[HBN_MAX_STATES];
+  /**
+   * Standard deviation of each component (calibrated).
+   */
+  double x_std[HBN_MAX_STATES];
+  /**
+   * Covariance of `x_k`, calibrated like `x_std` (`x_cov[i][i] = x_std[i]^2`).
+   */
+  double x_cov[HBN_MAX_STATES][HBN_MAX_STATES];
+  /**
+   * Predicted measurement of each sensor before the update.
+   */
+  double y_pred[HBN_MAX_SENSORS];
+  /**
+   * Innovation of each sensor (0 where its sample was missing).
+   */
+  double innovation[HBN_MAX_SENSORS];
+  /**
+   * Normalised innovation squared of the update.
+   */
+  double nis;
+  /**
+   * Guards that fired, a bit set (as [`HbnOutput::flags`]).
+   */
+  uint32_t flags;
+} HbnVectorOutput;
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
@@ -155,6 +223,59 @@ HbnStatus hbn_filter_step(HbnFilter *filter, double u, double y, HbnOutput *out)
  * As [`hbn_filter_step`] for `filter`.
  */
 HbnStatus hbn_filter_reset(HbnFilter *filter);
+
+/**
+ * Doubles of work memory `hbn_vector_filter_init` needs for the vector `model`: the step's
+ * scratch, plus the reals widened to `f64` for an `f32` export. 0 if `model` is NULL or not
+ * valid tables of a vector model.
+ *
+ * # Safety
+ * `model` is NULL or points to an [`HbnModelData`] whose arrays hold the lengths it states.
+ */
+uintptr_t hbn_vector_work_len(const HbnModelData *model);
+
+/**
+ * Initialises `filter` over the vector `model` with `work_len` doubles of work memory at
+ * `work` (at least [`hbn_vector_work_len`]). Checks every table value once. The next step is
+ * the first sample (the filter initialises its state from it). A scalar model's tables are
+ * `HBN_STATUS_BAD_MODEL` here (they run with `hbn_filter_init`).
+ *
+ * # Safety
+ * `filter` points to writable memory for an [`HbnVectorFilter`]; `model` to an
+ * [`HbnModelData`] whose arrays hold the lengths it states; `work` to `work_len` writable
+ * doubles. The model arrays and the work memory must stay valid and unchanged as long as the
+ * filter is used (typically: `const` data and a static buffer).
+ */
+HbnStatus hbn_vector_filter_init(HbnVectorFilter *filter,
+                                 const HbnModelData *model,
+                                 double *work,
+                                 uintptr_t work_len);
+
+/**
+ * Processes one sample of a vector model: the inputs `u` (`HBN_MODEL_INPUTS` doubles) and
+ * the measurements `y` (`HBN_MODEL_SENSORS` doubles; a NaN or infinite one is left out of
+ * this step's update), writing the estimate to `out`. Allocation-free, panic-free and bounded
+ * in time; invalid samples are held or skipped and reported in `out->flags`.
+ *
+ * # Safety
+ * `filter` points to an [`HbnVectorFilter`] that `hbn_vector_filter_init` initialised (or
+ * that is zeroed: then `HBN_STATUS_NOT_INITIALISED`), whose model and work memory are still
+ * valid; `u` and `y` point to the model's number of inputs and of sensors of readable
+ * doubles; `out` points to a writable [`HbnVectorOutput`].
+ */
+HbnStatus hbn_vector_filter_step(HbnVectorFilter *filter,
+                                 const double *u,
+                                 const double *y,
+                                 HbnVectorOutput *out);
+
+/**
+ * Forgets the vector filter's state: the next step initialises again, as after
+ * `hbn_vector_filter_init`.
+ *
+ * # Safety
+ * As [`hbn_vector_filter_step`] for `filter`.
+ */
+HbnStatus hbn_vector_filter_reset(HbnVectorFilter *filter);
 
 /**
  * The name of a status, e.g. `"work memory too small"` (a static string).

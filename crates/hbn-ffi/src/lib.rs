@@ -20,6 +20,23 @@
 //! hbn_filter_step(&filter, u, y, &out);   /* out.x, out.x_std, out.flags */
 //! ```
 //!
+//! A vector model (several inputs, state components and sensors, `hbn export` of a model
+//! trained with repeated `--input`/`--state`/`--output`) runs through the same model data with
+//! its own filter, [`HbnVectorFilter`], and a step that reads `HBN_MODEL_INPUTS` inputs and
+//! `HBN_MODEL_SENSORS` measurements (the sizes `hbn_model.h` defines):
+//!
+//! ```c
+//! static HbnVectorFilter filter;
+//! static double work[HBN_MODEL_WORK_LEN];
+//! if (hbn_vector_filter_init(&filter, &hbn_model, work, HBN_MODEL_WORK_LEN) != HBN_STATUS_OK) { ... }
+//! double u[HBN_MODEL_INPUTS], y[HBN_MODEL_SENSORS];   /* NaN marks a missing sensor sample */
+//! HbnVectorOutput out;
+//! hbn_vector_filter_step(&filter, u, y, &out);   /* out.x[i], out.x_std[i], out.flags */
+//! ```
+//!
+//! The scalar functions (`hbn_filter_*`) neither call nor link the vector ones, so a scalar
+//! firmware's code and memory do not grow with them.
+//!
 //! The step is the one of `hbn estimate`: with an `f64` export its estimates are equal bit for
 //! bit. Without the default `std` feature the crate is `no_std` and brings its own panic
 //! handler (an endless loop; the step has no panic path, see `crates/hbn-core/nopanic`), for a
@@ -34,11 +51,27 @@
 
 use core::ffi::c_char;
 
-use hbn_core::tables::{self, Tables};
+use hbn_core::tables::{self, Tables, VectorTableModel, VectorTables};
+use hbn_core::vector::{MAX_INPUTS, MAX_SENSORS, MAX_STATES, VectorEkf, VectorState};
 use hbn_core::{CoreError, Ekf, EkfState};
 
 /// Size of [`HbnFilter`] in 64-bit words.
-pub const HBN_FILTER_WORDS: usize = 192;
+pub const HBN_FILTER_WORDS: usize = 220;
+
+/// Size of [`HbnVectorFilter`] in 64-bit words.
+pub const HBN_VECTOR_FILTER_WORDS: usize = 664;
+
+/// Most inputs a vector model reads (`HBN_MODEL_INPUTS` of an export is at most this).
+pub const HBN_MAX_INPUTS: usize = 4;
+/// Most state components a vector model estimates (the length of [`HbnVectorOutput::x`]).
+pub const HBN_MAX_STATES: usize = 3;
+/// Most sensors a vector model reads (the length of [`HbnVectorOutput::y_pred`]).
+pub const HBN_MAX_SENSORS: usize = 4;
+
+const _: () = assert!(
+    HBN_MAX_INPUTS == MAX_INPUTS && HBN_MAX_STATES == MAX_STATES && HBN_MAX_SENSORS == MAX_SENSORS,
+    "the C ABI's maxima are the core's"
+);
 
 /// What a call of this API returns.
 #[repr(C)]
@@ -339,6 +372,294 @@ pub unsafe extern "C" fn hbn_filter_step(
 pub unsafe extern "C" fn hbn_filter_reset(filter: *mut HbnFilter) -> HbnStatus {
     // SAFETY: forwarded from the caller.
     match unsafe { inner(filter) } {
+        Ok(f) => {
+            f.state = None;
+            HbnStatus::Ok
+        }
+        Err(s) => s,
+    }
+}
+
+// ---- vector models ----
+
+/// One vector step's result. Entries past the model's sizes (`HBN_MODEL_STATES`,
+/// `HBN_MODEL_SENSORS`) are 0.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HbnVectorOutput {
+    /// Estimate of each state component of `x_k`.
+    pub x: [f64; HBN_MAX_STATES],
+    /// Standard deviation of each component (calibrated).
+    pub x_std: [f64; HBN_MAX_STATES],
+    /// Covariance of `x_k`, calibrated like `x_std` (`x_cov[i][i] = x_std[i]^2`).
+    pub x_cov: [[f64; HBN_MAX_STATES]; HBN_MAX_STATES],
+    /// Predicted measurement of each sensor before the update.
+    pub y_pred: [f64; HBN_MAX_SENSORS],
+    /// Innovation of each sensor (0 where its sample was missing).
+    pub innovation: [f64; HBN_MAX_SENSORS],
+    /// Normalised innovation squared of the update.
+    pub nis: f64,
+    /// Guards that fired, a bit set (as [`HbnOutput::flags`]).
+    pub flags: u32,
+}
+
+/// The vector filter: its checked model, state and a pointer to its scratch memory, in a
+/// fixed-size block the caller allocates (statically or on the stack). Opaque: only
+/// `hbn_vector_filter_init` writes it. It holds no pointer into itself, so it may be copied
+/// once initialised (the model data and work memory it points to stay where they are).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct HbnVectorFilter {
+    /// Opaque storage.
+    pub opaque: [u64; HBN_VECTOR_FILTER_WORDS],
+}
+
+const VECTOR_INIT_MAGIC: u64 = u64::from_le_bytes(*b"hbnvectr");
+
+/// What [`HbnVectorFilter`] holds.
+#[repr(C)]
+struct VectorInner {
+    magic: u64,
+    model: VectorTableModel<'static>,
+    state: Option<VectorState>,
+    scratch: *mut f64,
+    scratch_len: usize,
+}
+
+const _: () = assert!(
+    core::mem::size_of::<VectorInner>() <= core::mem::size_of::<HbnVectorFilter>()
+        && core::mem::align_of::<VectorInner>() <= core::mem::align_of::<HbnVectorFilter>(),
+    "HbnVectorFilter is too small for the filter: raise HBN_VECTOR_FILTER_WORDS"
+);
+
+/// Doubles of work memory `hbn_vector_filter_init` needs for the vector `model`: the step's
+/// scratch, plus the reals widened to `f64` for an `f32` export. 0 if `model` is NULL or not
+/// valid tables of a vector model.
+///
+/// # Safety
+/// `model` is NULL or points to an [`HbnModelData`] whose arrays hold the lengths it states.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hbn_vector_work_len(model: *const HbnModelData) -> usize {
+    // SAFETY: forwarded from the caller.
+    unsafe { vector_work_len(model) }.unwrap_or(0)
+}
+
+/// # Safety
+/// As [`hbn_vector_work_len`].
+unsafe fn vector_work_len(model: *const HbnModelData) -> Result<usize, HbnStatus> {
+    // SAFETY: NULL is checked; otherwise the caller promises a valid struct.
+    let m = unsafe { model.as_ref() }.ok_or(HbnStatus::NullPointer)?;
+    // SAFETY: the caller promises `layout_len` values.
+    let layout = unsafe { slice(m.layout, m.layout_len) }?;
+    let scratch = tables::vector_scratch_len(layout).map_err(bad_model)?;
+    let widen = if m.reals_f32.is_null() {
+        0
+    } else {
+        tables::widen_scratch(layout, m.reals_len).map_err(bad_model)?
+    };
+    scratch.checked_add(widen).ok_or(HbnStatus::BadModel)
+}
+
+/// Initialises `filter` over the vector `model` with `work_len` doubles of work memory at
+/// `work` (at least [`hbn_vector_work_len`]). Checks every table value once. The next step is
+/// the first sample (the filter initialises its state from it). A scalar model's tables are
+/// `HBN_STATUS_BAD_MODEL` here (they run with `hbn_filter_init`).
+///
+/// # Safety
+/// `filter` points to writable memory for an [`HbnVectorFilter`]; `model` to an
+/// [`HbnModelData`] whose arrays hold the lengths it states; `work` to `work_len` writable
+/// doubles. The model arrays and the work memory must stay valid and unchanged as long as the
+/// filter is used (typically: `const` data and a static buffer).
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hbn_vector_filter_init(
+    filter: *mut HbnVectorFilter,
+    model: *const HbnModelData,
+    work: *mut f64,
+    work_len: usize,
+) -> HbnStatus {
+    if filter.is_null() || model.is_null() || work.is_null() {
+        return HbnStatus::NullPointer;
+    }
+    if !filter.is_aligned() || !work.is_aligned() {
+        return HbnStatus::Misaligned;
+    }
+    // SAFETY: all three pointers are checked non-NULL and aligned; the caller promises valid
+    // memory of the stated sizes for as long as the filter is used.
+    match unsafe { vector_init(filter, model, work, work_len) } {
+        Ok(()) => HbnStatus::Ok,
+        Err(status) => {
+            // A failed init leaves the filter unusable, not half-initialised.
+            // SAFETY: `filter` is non-NULL, aligned and writable (checked above / promised).
+            unsafe { (*filter).opaque[0] = 0 };
+            status
+        }
+    }
+}
+
+/// # Safety
+/// As [`hbn_vector_filter_init`], with the pointers checked non-NULL and aligned.
+unsafe fn vector_init(
+    filter: *mut HbnVectorFilter,
+    model: *const HbnModelData,
+    work: *mut f64,
+    work_count: usize,
+) -> Result<(), HbnStatus> {
+    // SAFETY: forwarded from the caller.
+    let needed = unsafe { vector_work_len(model) }?;
+    if work_count < needed {
+        return Err(HbnStatus::WorkTooSmall);
+    }
+    // SAFETY: checked non-NULL; the caller promises a valid struct.
+    let m = unsafe { &*model };
+    // SAFETY: the caller promises the stated lengths, valid while the filter is used.
+    let layout = unsafe { slice(m.layout, m.layout_len) }?;
+    if m.keys_len != 0 {
+        return Err(HbnStatus::BadModel);
+    }
+    // SAFETY: `work` is non-NULL and aligned, and the caller promises `work_count` writable
+    // doubles that only the filter uses from now on.
+    let work: &'static mut [f64] = unsafe { core::slice::from_raw_parts_mut(work, work_count) };
+    let (reals, scratch): (&'static [f64], &'static mut [f64]) =
+        match (m.reals_f64.is_null(), m.reals_f32.is_null()) {
+            (false, true) => {
+                // SAFETY: as for the layout.
+                (unsafe { slice(m.reals_f64, m.reals_len) }?, work)
+            }
+            (true, false) => {
+                // SAFETY: as for the layout.
+                let r32 = unsafe { slice(m.reals_f32, m.reals_len) }?;
+                let (wide, scratch) = work
+                    .split_at_mut_checked(
+                        tables::widen_scratch(layout, r32.len()).map_err(bad_model)?,
+                    )
+                    .ok_or(HbnStatus::WorkTooSmall)?;
+                let wide: &'static [f64] = tables::widen(layout, r32, wide).map_err(bad_model)?;
+                (wide, scratch)
+            }
+            _ => return Err(HbnStatus::BadModel),
+        };
+    let model = VectorTables { layout, reals }.model().map_err(bad_model)?;
+    let ekf = VectorEkf::new(model.view(), model.config).map_err(bad_model)?;
+    if scratch.len() < ekf.scratch_len() {
+        return Err(HbnStatus::WorkTooSmall);
+    }
+    let inner = VectorInner {
+        magic: VECTOR_INIT_MAGIC,
+        model,
+        state: None,
+        scratch: scratch.as_mut_ptr(),
+        scratch_len: scratch.len(),
+    };
+    // SAFETY: `filter` is non-NULL, aligned for `HbnVectorFilter` and so for `VectorInner`
+    // (checked at compile time), and large enough (idem).
+    unsafe { filter.cast::<VectorInner>().write(inner) };
+    Ok(())
+}
+
+/// The initialised vector filter behind `filter`.
+///
+/// # Safety
+/// `filter` is NULL or points to an [`HbnVectorFilter`] (initialised or zeroed).
+unsafe fn vector_inner<'f>(filter: *mut HbnVectorFilter) -> Result<&'f mut VectorInner, HbnStatus> {
+    if filter.is_null() {
+        return Err(HbnStatus::NullPointer);
+    }
+    if !filter.is_aligned() {
+        return Err(HbnStatus::Misaligned);
+    }
+    // SAFETY: non-NULL and aligned; the first word is the magic `vector_init` writes.
+    let magic = unsafe { (*filter).opaque[0] };
+    if magic != VECTOR_INIT_MAGIC {
+        return Err(HbnStatus::NotInitialised);
+    }
+    // SAFETY: the magic says `vector_init` wrote a `VectorInner` here.
+    Ok(unsafe { &mut *filter.cast::<VectorInner>() })
+}
+
+/// Processes one sample of a vector model: the inputs `u` (`HBN_MODEL_INPUTS` doubles) and
+/// the measurements `y` (`HBN_MODEL_SENSORS` doubles; a NaN or infinite one is left out of
+/// this step's update), writing the estimate to `out`. Allocation-free, panic-free and bounded
+/// in time; invalid samples are held or skipped and reported in `out->flags`.
+///
+/// # Safety
+/// `filter` points to an [`HbnVectorFilter`] that `hbn_vector_filter_init` initialised (or
+/// that is zeroed: then `HBN_STATUS_NOT_INITIALISED`), whose model and work memory are still
+/// valid; `u` and `y` point to the model's number of inputs and of sensors of readable
+/// doubles; `out` points to a writable [`HbnVectorOutput`].
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hbn_vector_filter_step(
+    filter: *mut HbnVectorFilter,
+    u: *const f64,
+    y: *const f64,
+    out: *mut HbnVectorOutput,
+) -> HbnStatus {
+    if out.is_null() || u.is_null() || y.is_null() {
+        return HbnStatus::NullPointer;
+    }
+    if !out.is_aligned() || !u.is_aligned() || !y.is_aligned() {
+        return HbnStatus::Misaligned;
+    }
+    // SAFETY: forwarded from the caller.
+    let f = match unsafe { vector_inner(filter) } {
+        Ok(f) => f,
+        Err(s) => return s,
+    };
+    let dims = f.model.dims;
+    // SAFETY: non-NULL and aligned; the caller promises the model's number of inputs and of
+    // sensors of readable doubles.
+    let (u, y) = unsafe {
+        (
+            core::slice::from_raw_parts(u, dims.inputs),
+            core::slice::from_raw_parts(y, dims.sensors),
+        )
+    };
+    // The model was checked by `vector_init`: this cannot fail for an initialised filter.
+    let Ok(ekf) = VectorEkf::new(f.model.view(), f.model.config) else {
+        return HbnStatus::BadModel;
+    };
+    // SAFETY: `vector_init` took this pointer and length from the caller's work memory, which
+    // the caller keeps valid and leaves to the filter.
+    let scratch = unsafe { core::slice::from_raw_parts_mut(f.scratch, f.scratch_len) };
+    let o = ekf.step(&mut f.state, scratch, u, y);
+    let mut r = HbnVectorOutput {
+        nis: o.nis,
+        flags: o.flags.0,
+        ..HbnVectorOutput::default()
+    };
+    for i in 0..dims.states.min(HBN_MAX_STATES) {
+        copy(&mut r.x, &o.x, i);
+        copy(&mut r.x_std, &o.x_std, i);
+        if let (Some(dst), Some(src)) = (r.x_cov.get_mut(i), o.x_cov.get(i)) {
+            for j in 0..dims.states {
+                copy(dst, src, j);
+            }
+        }
+    }
+    for j in 0..dims.sensors {
+        copy(&mut r.y_pred, &o.y_pred, j);
+        copy(&mut r.innovation, &o.innovation, j);
+    }
+    // SAFETY: checked non-NULL and aligned; the caller promises it is writable.
+    unsafe { out.write(r) };
+    HbnStatus::Ok
+}
+
+/// `dst[i] = src[i]` where both exist.
+fn copy(dst: &mut [f64], src: &[f64], i: usize) {
+    if let (Some(d), Some(s)) = (dst.get_mut(i), src.get(i)) {
+        *d = *s;
+    }
+}
+
+/// Forgets the vector filter's state: the next step initialises again, as after
+/// `hbn_vector_filter_init`.
+///
+/// # Safety
+/// As [`hbn_vector_filter_step`] for `filter`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hbn_vector_filter_reset(filter: *mut HbnVectorFilter) -> HbnStatus {
+    // SAFETY: forwarded from the caller.
+    match unsafe { vector_inner(filter) } {
         Ok(f) => {
             f.state = None;
             HbnStatus::Ok
