@@ -1650,8 +1650,8 @@ impl VectorModelCore {
 
 /// A scalar or a vector model, whichever the file's format tag names.
 enum AnyModel {
-    Scalar(HysteresisModel),
-    Vector(VectorModel),
+    Scalar(Box<HysteresisModel>),
+    Vector(Box<VectorModel>),
 }
 
 impl AnyModel {
@@ -1662,19 +1662,19 @@ impl AnyModel {
         vector: impl FnOnce() -> Result<VectorModel, ModelError>,
     ) -> Result<Self, ModelError> {
         match scalar {
-            Ok(m) => Ok(Self::Scalar(m)),
+            Ok(m) => Ok(Self::Scalar(Box::new(m))),
             Err(ModelError::ModelFile {
                 problem: ModelFileProblem::WrongFormat { tag },
                 ..
-            }) if tag == VECTOR_MODEL_FORMAT => Ok(Self::Vector(vector()?)),
+            }) if tag == VECTOR_MODEL_FORMAT => Ok(Self::Vector(Box::new(vector()?))),
             Err(e) => Err(e),
         }
     }
 
     fn into_py(self, py: Python<'_>) -> PyResult<Py<PyAny>> {
         Ok(match self {
-            Self::Scalar(m) => Py::new(py, HysteresisModelCore::wrap(m))?.into_any(),
-            Self::Vector(m) => Py::new(py, VectorModelCore::wrap(m))?.into_any(),
+            Self::Scalar(m) => Py::new(py, HysteresisModelCore::wrap(*m))?.into_any(),
+            Self::Vector(m) => Py::new(py, VectorModelCore::wrap(*m))?.into_any(),
         })
     }
 }
