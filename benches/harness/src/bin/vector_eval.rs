@@ -208,6 +208,8 @@ struct CaseResult {
     vector_seconds: f64,
     vector_mode: Mode,
     vector_warnings: Vec<String>,
+    /// The vector model's held-out table (`VectorSummary::validation`) as JSON rows.
+    vector_validation: Vec<Value>,
     scalar_seconds: f64,
     /// Scalar pairs read from `--scalar-cache` (their seconds are those of the original fit).
     scalar_cached: usize,
@@ -337,6 +339,29 @@ fn run_case(
         "  vector: {vector_seconds:.1} s, mode {mode}, warnings {:?}",
         model.summary().warnings
     );
+    let validation: Vec<Value> = model
+        .summary()
+        .validation
+        .iter()
+        .map(|row| {
+            eprintln!(
+                "    held out{} {}: NLPD {:.3}, nRMSE {:?}",
+                if row.chosen { " (kept)" } else { "" },
+                row.what,
+                row.nlpd,
+                row.nrmse
+                    .iter()
+                    .map(|v| (v * 1e4).round() / 1e4)
+                    .collect::<Vec<_>>()
+            );
+            json!({
+                "what": row.what,
+                "nlpd": finite(row.nlpd),
+                "nrmse": row.nrmse.iter().map(|v| finite(*v)).collect::<Vec<_>>(),
+                "chosen": row.chosen,
+            })
+        })
+        .collect();
     let mut components: Vec<ComponentResult> = (0..dims.states)
         .map(|i| {
             let (xi, si) = (est.component(i), est.component_std(i));
@@ -411,6 +436,7 @@ fn run_case(
         vector_seconds,
         vector_mode: mode,
         vector_warnings: model.summary().warnings.clone(),
+        vector_validation: validation,
         scalar_seconds: pairs.iter().map(|p| p.seconds).sum(),
         scalar_cached: cached,
         components,
@@ -476,6 +502,41 @@ fn passes(ratio: f64, coverage: f64) -> (bool, bool) {
     )
 }
 
+/// The Markdown rows of one case (one per component).
+fn case_rows(case: &CaseResult) -> String {
+    let mut s = String::new();
+    for c in &case.components {
+        let label = |p: Option<usize>| {
+            p.and_then(|p| case.pairs.get(p))
+                .map_or("-".to_string(), PairResult::label)
+        };
+        let ratio = case.ratio(c, c.chosen);
+        let (ok_ratio, ok_cov) = passes(ratio, c.vector_coverage);
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | x{} | {} | {} ({}) | {}{} | {} ({}) | {} | {}{} | {} | {:.1} / {:.1} |",
+            case.system,
+            case.gain,
+            case.seed,
+            c.component,
+            f4(c.vector_nrmse),
+            f4(case.pair_nrmse(c.chosen)),
+            label(c.chosen),
+            f2(ratio),
+            if ok_ratio { "" } else { " !" },
+            f4(case.pair_nrmse(c.oracle)),
+            label(c.oracle),
+            f2(case.ratio(c, c.oracle)),
+            f3(c.vector_coverage),
+            if ok_cov { "" } else { " !" },
+            f2(c.vector_nees),
+            case.vector_seconds,
+            case.scalar_seconds,
+        );
+    }
+    s
+}
+
 /// The Markdown report of `cases`.
 fn markdown(header: &[(String, String)], cases: &[CaseResult], pick: Pick) -> String {
     let mut s = String::new();
@@ -505,35 +566,7 @@ fn markdown(header: &[(String, String)], cases: &[CaseResult], pick: Pick) -> St
     );
     let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|");
     for case in cases {
-        for c in &case.components {
-            let label = |p: Option<usize>| {
-                p.and_then(|p| case.pairs.get(p))
-                    .map_or("-".to_string(), PairResult::label)
-            };
-            let ratio = case.ratio(c, c.chosen);
-            let (ok_ratio, ok_cov) = passes(ratio, c.vector_coverage);
-            let _ = writeln!(
-                s,
-                "| {} | {} | {} | x{} | {} | {} ({}) | {}{} | {} ({}) | {} | {}{} | {} | {:.1} / {:.1} |",
-                case.system,
-                case.gain,
-                case.seed,
-                c.component,
-                f4(c.vector_nrmse),
-                f4(case.pair_nrmse(c.chosen)),
-                label(c.chosen),
-                f2(ratio),
-                if ok_ratio { "" } else { " !" },
-                f4(case.pair_nrmse(c.oracle)),
-                label(c.oracle),
-                f2(case.ratio(c, c.oracle)),
-                f3(c.vector_coverage),
-                if ok_cov { "" } else { " !" },
-                f2(c.vector_nees),
-                case.vector_seconds,
-                case.scalar_seconds,
-            );
-        }
+        s.push_str(&case_rows(case));
     }
     let _ = writeln!(
         s,
@@ -640,6 +673,7 @@ fn to_json(header: &[(String, String)], cases: &[CaseResult], pick: Pick) -> Val
                 "vector_seconds": case.vector_seconds,
                 "vector_mode": case.vector_mode.to_string(),
                 "vector_warnings": case.vector_warnings,
+                "vector_validation": case.vector_validation,
                 "scalar_seconds_total": case.scalar_seconds,
                 "scalar_pairs_cached": case.scalar_cached,
                 "components": components,
@@ -705,7 +739,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 eprintln!("{system}, gain {gain}, seed {seed}:");
                 let t0 = Instant::now();
                 match run_case(system, gain, seed, &args) {
-                    Ok(c) => cases.push(c),
+                    Ok(c) => {
+                        eprint!("{}", case_rows(&c));
+                        cases.push(c);
+                        // The JSON so far, so that a run stopped early leaves its finished cases.
+                        if let Some(path) = &args.out {
+                            let mut partial = header.clone();
+                            partial.push(("finished".to_string(), "no: cases so far".to_string()));
+                            std::fs::write(
+                                path,
+                                serde_json::to_string_pretty(&to_json(
+                                    &partial, &cases, args.pick,
+                                ))?,
+                            )?;
+                        }
+                    }
                     Err(e) => {
                         eprintln!("  failed: {e}");
                         failures.push(format!("{system}, gain {gain}, seed {seed}: {e}"));
