@@ -1520,9 +1520,9 @@ impl VectorModelCore {
 
     /// Reads the inputs and outputs from a log at the model's rate (the model's message paths
     /// unless given, one per signal in order), runs the filter and optionally writes the CSV
-    /// of `hbn estimate --csv`; returns `(t, dict of per-sample arrays)`.
+    /// and MCAP of `hbn estimate --csv --out`; returns `(t, dict of per-sample arrays)`.
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (path, mode, inputs, outputs, csv, time_source, max_gap_s))]
+    #[pyo3(signature = (path, mode, inputs, outputs, csv, mcap, time_source, max_gap_s))]
     fn estimate_log<'py>(
         &self,
         py: Python<'py>,
@@ -1531,6 +1531,7 @@ impl VectorModelCore {
         inputs: Vec<String>,
         outputs: Vec<String>,
         csv: Option<PathBuf>,
+        mcap: Option<PathBuf>,
         time_source: Option<&str>,
         max_gap_s: Option<f64>,
     ) -> PyResult<(Arr<'py>, Bound<'py, PyDict>)> {
@@ -1555,8 +1556,13 @@ impl VectorModelCore {
             let signals = hbn_pipeline::model_signals(model, &inputs, &outputs)?;
             let run =
                 hbn_pipeline::estimate_vector_log(model, &path, &signals, mode, opts, &mut |_| {})?;
-            if let Some(csv) = &csv {
-                hbn_fs::write_atomic(csv, hbn_pipeline::vector_csv(&run, false).as_bytes())
+            // Both outputs are rendered before either is written, as `hbn estimate` does.
+            let csv_text = csv.as_ref().map(|_| hbn_pipeline::vector_csv(&run, false));
+            if let Some(mcap) = &mcap {
+                run.write_mcap(mcap, model.signal_names())?;
+            }
+            if let (Some(csv), Some(text)) = (&csv, csv_text) {
+                hbn_fs::write_atomic(csv, text.as_bytes())
                     .map_err(|e| Fail::new(Kind::Io(e.source.kind()), e.to_string()))?;
             }
             Ok(run)

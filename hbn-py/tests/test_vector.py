@@ -2,6 +2,7 @@
 (T, d) arrays or lists of message paths, estimated in batch and by the streaming filter, and
 carried through files, bytes and pickle bit for bit."""
 
+import json
 import pickle
 import subprocess
 
@@ -248,18 +249,42 @@ def test_from_logs_with_lists_of_paths_trains_on_the_finger(finger_logs, tmp_pat
         assert nrmse(est.x[:, i], truth[f"x{i}"]) < 0.1, i
     header = csv.read_text().splitlines()[0].split(",")
     assert header[:5] == ["t", "x0", "x0_std", "x1", "x1_std"]
-    with pytest.raises(ValueError, match="MCAP output.*takes scalar models"):
-        model.estimate_log(test, mcap=tmp_path / "out.mcap")
+    out = tmp_path / "finger_estimate.mcap"
+    again = model.estimate_log(test, mcap=out)
+    assert np.array_equal(bits(again.x), bits(est.x))
+    topics = hbn.list_topics(out)
+    assert len(topics) == 1 and topics[0]["message_count"] == 300
 
     # The CLI estimates with the file Python wrote, and writes the same CSV.
     path = tmp_path / "finger.hbn"
     model.save(path)
-    cli_csv = tmp_path / "cli.csv"
+    cli_csv, cli_mcap = tmp_path / "cli.csv", tmp_path / "cli.mcap"
     subprocess.run(
-        [exe, "estimate", "--model", str(path), "--log", str(test), "--csv", str(cli_csv)],
+        [exe, "estimate", "--model", str(path), "--log", str(test), "--csv", str(cli_csv),
+         "--out", str(cli_mcap)],
         check=True, capture_output=True,
     )
     assert cli_csv.read_bytes() == csv.read_bytes()
+    assert cli_mcap.read_bytes() == out.read_bytes()
+
+    # hbn train with the same flags trains the same model (the files differ only in the
+    # wall-clock seconds they record).
+    cli_model = tmp_path / "cli.hbn"
+    flags = [f"--{kind}={p}" for kind, ps in (("input", inputs), ("state", states),
+                                              ("output", outputs)) for p in ps]
+    subprocess.run(
+        [exe, "train", "--log", str(train), *flags, "--max-points", "80", "--starts", "1",
+         "--max-iters", "40", "--seed", "0", "--out", str(cli_model)],
+        check=True, capture_output=True,
+    )
+
+    def timeless(v):
+        if isinstance(v, dict):
+            return {k: timeless(x) for k, x in v.items() if k != "seconds"}
+        return [timeless(x) for x in v] if isinstance(v, list) else v
+
+    assert timeless(json.loads(cli_model.read_bytes())) == timeless(json.loads(model.to_bytes()))
+    assert hbn.HysteresisModel.load(cli_model).is_vector
 
     # One path per kind stays a scalar model (here: one input, one state, one sensor).
     scalar = hbn.HysteresisModel.from_logs(

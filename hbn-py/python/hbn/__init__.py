@@ -1222,18 +1222,17 @@ class HysteresisModel:
 
         A vector model reads its recorded message paths, or ``input`` and ``output`` given as
         lists (one path per signal, in the model's order); its ``csv`` has the columns of
-        ``hbn estimate --csv`` (``x0``, ``x0_std``, ...), and ``mcap`` output takes scalar
-        models only.
+        ``hbn estimate --csv`` (``x0``, ``x0_std``, ...) and its ``mcap`` the messages of
+        ``hbn estimate --out`` (arrays per sample, with the signals' names).
         """
         if isinstance(self._core, _hbn.VectorModelCore):
-            if mcap is not None:
-                raise _scalar_only("estimate_log(mcap=) (MCAP output)", self.dims)
             t, fields = self._core.estimate_log(
                 _fspath(path),
                 _opt_str(mode),
                 [] if input is None else _paths(input, "input"),
                 [] if output is None else _paths(output, "output"),
                 None if csv is None else _fspath(csv),
+                None if mcap is None else _fspath(mcap),
                 _opt_str(time_source),
                 _opt_float(max_gap_s, "max_gap_s"),
             )

@@ -245,6 +245,7 @@ class VectorModelCore:
         inputs: List[str],
         outputs: List[str],
         csv: Optional[str],
+        mcap: Optional[str],
         time_source: Optional[str],
         max_gap_s: Optional[float],
     ) -> Tuple[npt.NDArray[np.float64], Dict[str, np.ndarray]]: ...
