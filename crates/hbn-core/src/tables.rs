@@ -59,6 +59,10 @@ pub const END: u32 = u32::from_le_bytes(*b"END1");
 const NONE: u32 = u32::MAX;
 
 const TRUNCATED: CoreError = CoreError::InvalidSpec("model tables are truncated or corrupt");
+const NOT_TABLES: CoreError =
+    CoreError::InvalidSpec("not hbn model tables (the magic number differs)");
+const OTHER_VERSION: CoreError =
+    CoreError::InvalidSpec("model tables of another format version: export the model again");
 
 /// Where [`encode`] writes: three growable arrays (the exporter's `Vec`s).
 pub trait TableSink {
@@ -578,15 +582,11 @@ impl<'a> Reader<'a> {
     /// readable version.
     fn header(&mut self) -> Result<u32, CoreError> {
         if self.int()? != MAGIC {
-            return Err(CoreError::InvalidSpec(
-                "not hbn model tables (the magic number differs)",
-            ));
+            return Err(NOT_TABLES);
         }
         let version = self.int()?;
         if !(OLDEST_VERSION..=VERSION).contains(&version) {
-            return Err(CoreError::InvalidSpec(
-                "model tables of another format version: export the model again",
-            ));
+            return Err(OTHER_VERSION);
         }
         Ok(version)
     }
@@ -602,15 +602,13 @@ impl<'a> Reader<'a> {
 
     /// Reads the magic number and the version of a vector model's tables.
     fn vector_header(&mut self) -> Result<(), CoreError> {
+        // The scalar tables' messages: a scalar firmware, which reads this through
+        // `split_ranges`, then holds no text of its own for vector tables.
         if self.int()? != VECTOR_MAGIC {
-            return Err(CoreError::InvalidSpec(
-                "not hbn vector model tables (the magic number differs)",
-            ));
+            return Err(NOT_TABLES);
         }
         if self.int()? != VECTOR_VERSION {
-            return Err(CoreError::InvalidSpec(
-                "vector model tables of another format version: export the model again",
-            ));
+            return Err(OTHER_VERSION);
         }
         Ok(())
     }
