@@ -425,8 +425,10 @@ pub struct Kernel<'a> {
     /// `s_f^2 = exp(theta_0)`, computed once: every prediction needs it.
     signal_variance: f64,
     /// The metric's per-input factor of `u = L p`, computed once from `theta`: `exp(-ln l)`
-    /// (isotropic, every input), `exp(-ln l_j)` (ARD), `exp(-ln c / 2)` (Mahalanobis).
-    metric_scale: [f64; MAX_DIM],
+    /// (isotropic, every input), `exp(-ln l_j)` (ARD), `exp(-ln c / 2)` (Mahalanobis), for
+    /// the first [`MAX_DENSE_DIM`] inputs ([`Kernel::scale`] computes the rest): a scalar
+    /// model's kernels keep their size, and with them its firmware's memory.
+    metric_scale: [f64; MAX_DENSE_DIM],
 }
 
 impl<'a> Kernel<'a> {
@@ -443,7 +445,7 @@ impl<'a> Kernel<'a> {
         if theta.iter().chain(whiten.iter()).any(|v| !v.is_finite()) {
             return Err(CoreError::NonFinite);
         }
-        let mut metric_scale = [0.0; MAX_DIM];
+        let mut metric_scale = [0.0; MAX_DENSE_DIM];
         for (j, s) in metric_scale.iter_mut().enumerate().take(spec.dim) {
             *s = match spec.metric {
                 Metric::Isotropic => libm::exp(-at(theta, 1)),
@@ -458,6 +460,19 @@ impl<'a> Kernel<'a> {
             signal_variance: libm::exp(at(theta, 0)),
             metric_scale,
         })
+    }
+
+    /// The metric's factor of input `j` in `u = L p` (ARD and isotropic metrics).
+    #[inline(always)]
+    fn scale(&self, j: usize) -> f64 {
+        if j < MAX_DENSE_DIM {
+            at(&self.metric_scale, j)
+        } else {
+            match self.spec.metric {
+                Metric::Ard => libm::exp(-at(self.theta, 1 + j)),
+                Metric::Isotropic | Metric::Mahalanobis => at(&self.metric_scale, 0),
+            }
+        }
     }
 
     /// The structure of this kernel.
@@ -531,8 +546,8 @@ impl<'a> Kernel<'a> {
         let d = self.spec.dim;
         match self.spec.metric {
             Metric::Isotropic | Metric::Ard => {
-                for ((uj, pj), s) in u.iter_mut().zip(p).zip(&self.metric_scale).take(d) {
-                    *uj = pj * s;
+                for (j, (uj, pj)) in u.iter_mut().zip(p).enumerate().take(d) {
+                    *uj = pj * self.scale(j);
                 }
             }
             Metric::Mahalanobis => {
@@ -604,15 +619,16 @@ impl<'a> Kernel<'a> {
         let d = self.spec.dim;
         if d > MAX_DENSE_DIM {
             // Diagonal metric, no warping: `u_j = s_j x_j`.
-            for (((uj, jac), x), s) in u
+            for (j, ((uj, jac), x)) in u
                 .iter_mut()
                 .zip(du_dx.iter_mut())
                 .zip(x_std)
-                .zip(&self.metric_scale)
+                .enumerate()
                 .take(d)
             {
+                let s = self.scale(j);
                 *uj = x * s;
-                *jac = *s;
+                *jac = s;
             }
             return;
         }
