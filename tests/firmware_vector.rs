@@ -1,8 +1,9 @@
 //! A vector model on firmware, end to end: `hbn simulate --system finger`, `hbn train` a
 //! sparse (m = 32) model of 2 inputs, 2 state components and 3 sensors, `hbn estimate --csv`,
-//! `hbn export --format c` in f64 and f32, build `examples/firmware-c-vector` (cc and the
-//! hbn-ffi static library; skipped when there is no C compiler), feed it the inputs and sensor
-//! samples `hbn estimate` ran on, and compare with the CSV's estimate:
+//! `hbn export --format c` and `--format rust` in f64 and f32, build `examples/firmware-c-vector`
+//! (cc and the hbn-ffi static library; skipped when there is no C compiler) and
+//! `examples/firmware-rust --features vector` (its no_std library, and its CSV runner), feed them
+//! the inputs and sensor samples `hbn estimate` ran on, and compare with the CSV's estimate:
 //!
 //! - f64: x{i}, x{i}_std and flags equal bit for bit;
 //! - f32: max |dx{i}| at most [`F32_BOUND`] (2%) of the range of component i's estimate.
@@ -92,6 +93,63 @@ fn run_with_stdin(program: &mut Command, input: &str) -> String {
 fn target_dir() -> PathBuf {
     let exe = std::env::current_exe().expect("test executable");
     exe.ancestors().nth(3).expect("target dir").to_path_buf()
+}
+
+fn build_rust(model_rs: &Path, no_std_lib: bool) -> PathBuf {
+    let manifest = root().join("examples/firmware-rust/Cargo.toml");
+    let target = target_dir().join("firmware-rust");
+    let mut cmd = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
+    cmd.args(["build", "--release", "--quiet", "--manifest-path"])
+        .arg(&manifest)
+        .arg("--target-dir")
+        .arg(&target)
+        .args(["--features", "vector"])
+        .env("HBN_MODEL_RS", model_rs);
+    if no_std_lib {
+        cmd.args(["--no-default-features", "--lib"]);
+    }
+    let status = cmd.status().expect("cargo build examples/firmware-rust");
+    assert!(status.success(), "building examples/firmware-rust failed");
+    target.join("release/hbn-firmware-rust")
+}
+
+/// Checks `got` against `reference` (rows of `names`): bit for bit in f64, each component
+/// within [`F32_BOUND`] of its range in f32.
+fn compare(
+    what: &str,
+    precision: &str,
+    got: &[Vec<f64>],
+    reference: &[Vec<f64>],
+    names: &[String],
+) {
+    assert_eq!(got.len(), reference.len(), "{what} {precision}");
+    if precision == "f64" {
+        for (k, (g, r)) in got.iter().zip(reference).enumerate() {
+            for (c, name) in names.iter().enumerate() {
+                assert_eq!(g[c].to_bits(), r[c].to_bits(), "{what}: {name} at {k}");
+            }
+        }
+        return;
+    }
+    for i in 0..(names.len() - 1) / 2 {
+        let col = |rows: &[Vec<f64>]| -> Vec<f64> { rows.iter().map(|r| r[2 * i]).collect() };
+        let (g, r) = (col(got), col(reference));
+        let span =
+            r.iter().cloned().fold(f64::MIN, f64::max) - r.iter().cloned().fold(f64::MAX, f64::min);
+        let worst = g
+            .iter()
+            .zip(&r)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        eprintln!(
+            "{what} f32 x{i}: max |dx| = {worst:.3e} = {:.2e} of its range",
+            worst / span
+        );
+        assert!(
+            worst <= F32_BOUND * span,
+            "{what} f32 x{i}: max |dx| {worst} > {F32_BOUND} of {span}"
+        );
+    }
 }
 
 fn c_compiler() -> bool {
@@ -269,41 +327,35 @@ fn a_finger_model_on_firmware_equals_hbn_estimate() {
         ] {
             assert!(header.contains(line), "{header}");
         }
+        let rs_dir = dir.path().join(format!("rust-{precision}"));
+        ok(&[
+            "export",
+            "--model",
+            &model_file,
+            "--out",
+            &rs_dir.to_string_lossy(),
+            "--format",
+            "rust",
+            "--precision",
+            precision,
+        ]);
+        let model_rs = rs_dir.join("hbn_model.rs");
+        if precision == "f32" {
+            build_rust(&model_rs, true); // the library alone, no_std
+        }
+        let rs_bin = build_rust(&model_rs, false);
+        let got = numbers(
+            &run_with_stdin(&mut Command::new(&rs_bin), &samples),
+            &names,
+        );
+        compare("Rust", precision, &got, &reference, &names);
         if !c_compiler() {
             eprintln!("no C compiler (cc): the C firmware example is not built");
             continue;
         }
         let bin = build_c(&c_dir, &dir.path().join(format!("c-{precision}-build")));
         let got = numbers(&run_with_stdin(&mut Command::new(&bin), &samples), &names);
-        assert_eq!(got.len(), reference.len(), "{precision}");
-        if precision == "f64" {
-            for (k, (g, r)) in got.iter().zip(&reference).enumerate() {
-                for (c, name) in names.iter().enumerate() {
-                    assert_eq!(g[c].to_bits(), r[c].to_bits(), "{name} at {k}");
-                }
-            }
-        } else {
-            for i in 0..d.states {
-                let col =
-                    |rows: &[Vec<f64>]| -> Vec<f64> { rows.iter().map(|r| r[2 * i]).collect() };
-                let (g, r) = (col(&got), col(&reference));
-                let span = r.iter().cloned().fold(f64::MIN, f64::max)
-                    - r.iter().cloned().fold(f64::MAX, f64::min);
-                let worst = g
-                    .iter()
-                    .zip(&r)
-                    .map(|(a, b)| (a - b).abs())
-                    .fold(0.0, f64::max);
-                eprintln!(
-                    "f32 x{i}: max |dx| = {worst:.3e} = {:.2e} of its range",
-                    worst / span
-                );
-                assert!(
-                    worst <= F32_BOUND * span,
-                    "f32 x{i}: max |dx| {worst} > {F32_BOUND} of {span}"
-                );
-            }
-        }
+        compare("C", precision, &got, &reference, &names);
     }
     // A vector model exports with the EKF or the UKF; EKF+BLR is for scalar models.
     let e = run_err(&[
