@@ -9,12 +9,12 @@
 /**
  * Size of [`HbnFilter`] in 64-bit words.
  */
-#define HBN_FILTER_WORDS 220
+#define HBN_FILTER_WORDS 192
 
 /**
  * Size of [`HbnVectorFilter`] in 64-bit words.
  */
-#define HBN_VECTOR_FILTER_WORDS 664
+#define HBN_VECTOR_FILTER_WORDS 496
 
 /**
  * Most inputs a vector model reads (`HBN_MODEL_INPUTS` of an export is at most this).

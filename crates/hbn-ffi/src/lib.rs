@@ -56,10 +56,10 @@ use hbn_core::vector::{MAX_INPUTS, MAX_SENSORS, MAX_STATES, VectorEkf, VectorSta
 use hbn_core::{CoreError, Ekf, EkfState};
 
 /// Size of [`HbnFilter`] in 64-bit words.
-pub const HBN_FILTER_WORDS: usize = 220;
+pub const HBN_FILTER_WORDS: usize = 192;
 
 /// Size of [`HbnVectorFilter`] in 64-bit words.
-pub const HBN_VECTOR_FILTER_WORDS: usize = 664;
+pub const HBN_VECTOR_FILTER_WORDS: usize = 496;
 
 /// Most inputs a vector model reads (`HBN_MODEL_INPUTS` of an export is at most this).
 pub const HBN_MAX_INPUTS: usize = 4;
