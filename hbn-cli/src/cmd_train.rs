@@ -91,6 +91,22 @@ fn signals(args: &TrainArgs) -> anyhow::Result<VectorSignals> {
 /// sensors, a vector model.
 pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<()> {
     crate::check_output(&args.out, "model file")?;
+    // Every option is checked before a log is opened (finding the default signals opens one).
+    let opts = hbn_pipeline::LogOptions {
+        min_state_samples: args.min_state_samples,
+        ..args.read.options(args.rate)
+    };
+    let checked = opts
+        .check()
+        .map(|_| ())
+        .map_err(hbn_pipeline::PipelineError::from)
+        .and_then(|()| {
+            args.params()
+                .check()
+                .map(|_| ())
+                .map_err(hbn_pipeline::PipelineError::from)
+        });
+    checked.map_err(|e| report::error(e, opts.time_source))?;
     let all = signals(args)?;
     if !all.is_scalar() {
         return run_vector(ui, args, &all);
