@@ -96,17 +96,12 @@ pub fn run(ui: &mut Ui<'_>, args: &TrainArgs) -> anyhow::Result<()> {
         min_state_samples: args.min_state_samples,
         ..args.read.options(args.rate)
     };
-    let checked = opts
-        .check()
-        .map(|_| ())
-        .map_err(hbn_pipeline::PipelineError::from)
-        .and_then(|()| {
-            args.params()
-                .check()
-                .map(|_| ())
-                .map_err(hbn_pipeline::PipelineError::from)
-        });
-    checked.map_err(|e| report::error(e, opts.time_source))?;
+    if let Err(e) = opts.check() {
+        return Err(report::error(e.into(), opts.time_source));
+    }
+    if let Err(e) = args.params().check() {
+        return Err(report::error(e.into(), opts.time_source));
+    }
     let all = signals(args)?;
     if !all.is_scalar() {
         return run_vector(ui, args, &all);
