@@ -145,7 +145,7 @@ pub struct VectorEstimate {
     pub nis: Vec<f64>,
     /// Guard flags of each step ([`hbn_core::Flags`]).
     pub flags: Vec<u32>,
-    /// Per state component, the fraction of windows of [`OBSERVABILITY_WINDOW`] steps in which
+    /// Per state component, the fraction of windows of 20 steps in which
     /// the measurements said (next to) nothing about it (module docs of
     /// [`hbn_core::vector::vector_state_information`]).
     pub unobservable: Vec<f64>,
