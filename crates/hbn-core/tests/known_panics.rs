@@ -1,5 +1,4 @@
-//! Regression tests for the two panics a review reproduced through `hbn-core`'s public API
-//! (issue 12): both now return values or errors instead of panicking.
+//! Two inputs that could make `hbn-core`'s public API panic: both return values or errors.
 
 use hbn_core::CoreError;
 use hbn_core::blr::{BLR_MAX_NEIGHBOURS, LocalRegression, Neighbourhood, NeighbourhoodParts};
