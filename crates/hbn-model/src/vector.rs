@@ -575,14 +575,7 @@ impl VectorModel {
         self.std_scale = best
             .normalised
             .iter()
-            .map(|z| {
-                let q = quantile(z, 0.95) / 2.0;
-                if q.is_finite() && q > 0.0 {
-                    q.clamp(0.2, 10.0)
-                } else {
-                    1.0
-                }
-            })
+            .map(|z| calibration_scale(z))
             .collect();
         Ok(())
     }
@@ -612,6 +605,7 @@ impl VectorModel {
         let (mut nlpd, mut count) = (0.0, 0usize);
         let mut sq = vec![0.0; dx];
         let mut normalised = vec![Vec::new(); dx];
+        let mut log_std_sum = 0.0;
         for (parts, fit) in held.iter().zip(fits) {
             let model = self.on_fold(fit);
             for t in parts.iter() {
@@ -623,6 +617,7 @@ impl VectorModel {
                         let var = sd * sd;
                         nlpd +=
                             0.5 * (2.0 * std::f64::consts::PI * var).ln() + err * err / (2.0 * var);
+                        log_std_sum += sd.ln();
                         sq[i] += err * err;
                         normalised[i].push(err.abs() / sd);
                     }
@@ -636,6 +631,18 @@ impl VectorModel {
             .zip(&self.x_stats)
             .map(|(s, st)| (s / n).sqrt() / st.span().max(1e-12))
             .collect();
+        // Scored as the model will report: each component's band scaled as training scales it
+        // ([`calibration_scale`]), so that a setting is not chosen for widening an
+        // overconfident band, which the scale does anyway. With the scale `c`, a sample's NLPD
+        // gains `ln c` and its squared term is divided by `c^2`.
+        let _uncalibrated = nlpd;
+        let mut nlpd = log_std_sum + 0.5 * (2.0 * std::f64::consts::PI).ln() * (count * dx) as f64;
+        for z in &normalised {
+            let c = calibration_scale(z);
+            for v in z {
+                nlpd += c.ln() + 0.5 * (v / c) * (v / c);
+            }
+        }
         let nlpd = nlpd / n;
         Ok(HeldOut {
             nlpd: if nlpd.is_finite() {
@@ -1040,6 +1047,17 @@ struct HeldOut {
     nrmse: Vec<f64>,
     /// Per component, `|error| / std` of every held-out sample.
     normalised: Vec<Vec<f64>>,
+}
+
+/// The scale of a component's band from its held-out `|error| / std`: the 95% quantile over
+/// 2 (so that 95% of the held-out states fall inside +-2 std), within `[0.2, 10]`.
+fn calibration_scale(normalised: &[f64]) -> f64 {
+    let q = quantile(normalised, 0.95) / 2.0;
+    if q.is_finite() && q > 0.0 {
+        q.clamp(0.2, 10.0)
+    } else {
+        1.0
+    }
 }
 
 /// The `p` quantile of `values` (NaN when empty; non-finite values sort last).
