@@ -15,7 +15,9 @@ use std::hint::black_box;
 /// Row-major `(T, d)` from component-major signals.
 fn rows(signals: &[Vec<f64>]) -> Vec<f64> {
     let t = signals[0].len();
-    (0..t).flat_map(|k| signals.iter().map(move |s| s[k])).collect()
+    (0..t)
+        .flat_map(|k| signals.iter().map(move |s| s[k]))
+        .collect()
 }
 
 fn bench_vector_step(c: &mut Criterion) {
