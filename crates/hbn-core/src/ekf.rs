@@ -534,6 +534,24 @@ pub struct StepOutput {
     pub flags: Flags,
 }
 
+/// The prediction phase of one step, as [`Ekf::predict`] returns it: what an offline smoother
+/// records beside the filtered state (the Rauch-Tung-Striebel smoother of `hbn_model` needs the
+/// predicted moments and the cross-covariance of the previous state with the predicted one).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepPrediction {
+    /// Predicted mean `z_k^- = [x_k^-, x_{k-1}, s_k^-]` (before the update with `y_k`).
+    pub z: Vector3<f64>,
+    /// Predicted covariance `P_k^-`, bounded as the step bounds it.
+    pub p: Matrix3<f64>,
+    /// Cross-covariance `C_k = cov(z_{k-1}, z_k^-)` of the filtered previous state with the
+    /// predicted one: `P_{k-1} F_k^T` when the prediction is linearised (EKF, EKF+BLR, and the
+    /// random walk the step falls back to), the sigma points' cross-covariance in the
+    /// unscented mode.
+    pub cross: Matrix3<f64>,
+    /// Guards that fired during the prediction (those of the step's prediction phase).
+    pub flags: Flags,
+}
+
 /// The filter's memory between steps.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EkfState {
@@ -677,7 +695,10 @@ impl<'m> Ekf<'m> {
 
         // ---- predict ----
         let pred = match cfg.mode {
-            Mode::Ukf => self.predict_unscented(&mut st, scratch, &mut flags),
+            Mode::Ukf => {
+                self.predict_unscented::<false>(&mut st, scratch, &mut flags)
+                    .0
+            }
             Mode::Ekf | Mode::EkfBlr => self.predict_linearised(&mut st, scratch, &mut flags),
         };
         st.p = bound_covariance(st.p, cfg.p_min, cfg.p_max, &mut flags);
@@ -707,6 +728,32 @@ impl<'m> Ekf<'m> {
             q_x: pred.q_x,
             r: pred.r,
             jacobian: pred.jacobian,
+            flags: Flags(flags),
+        }
+    }
+
+    /// The prediction phase of the next step from `state` (the filtered state after the last
+    /// step), exactly as [`Ekf::step`] computes it, without updating anything: the predicted
+    /// mean and covariance and the cross-covariance with `state` ([`StepPrediction`]). The next
+    /// step does not depend on it, so a filter that records nothing does not pay for it; an
+    /// offline smoother calls it before each step (it costs one more prediction per sample).
+    /// Allocation-free, panic-free, bounded time; `scratch` as for [`Ekf::step`].
+    pub fn predict(&self, state: &EkfState, scratch: &mut [f64]) -> StepPrediction {
+        let cfg = self.config;
+        let mut st = *state;
+        let mut flags = 0u32;
+        let (pred, cross) = match cfg.mode {
+            Mode::Ukf => self.predict_unscented::<true>(&mut st, scratch, &mut flags),
+            Mode::Ekf | Mode::EkfBlr => {
+                (self.predict_linearised(&mut st, scratch, &mut flags), None)
+            }
+        };
+        let cross = cross.unwrap_or_else(|| state.p * pred.jacobian.transpose());
+        let p = bound_covariance(st.p, cfg.p_min, cfg.p_max, &mut flags);
+        StepPrediction {
+            z: st.z,
+            p,
+            cross,
             flags: Flags(flags),
         }
     }
@@ -908,12 +955,16 @@ impl<'m> Ekf<'m> {
     /// `s_k = H_S(x_{k-1}, s_{k-1}, x_k)` (GP means). `P` is their covariance plus `q_s`
     /// on `s`. `q_x`, `q_s` and `R` come from the GP variances at the mean, as in the EKF; the
     /// reported Jacobian is the EKF's at the mean (a diagnostic: the UKF does not use it).
-    fn predict_unscented(
+    ///
+    /// With `CROSS`, it also returns the sigma points' cross-covariance `cov(z_{k-1}, z_k^-)`
+    /// ([`Ekf::predict`]); `None` when it fell back to the random walk. Without it (the step)
+    /// nothing more is computed.
+    fn predict_unscented<const CROSS: bool>(
         &self,
         st: &mut EkfState,
         scratch: &mut [f64],
         flags: &mut u32,
-    ) -> Predicted {
+    ) -> (Predicted, Option<Matrix3<f64>>) {
         let cfg = self.config;
         let (x1, x2, s1) = (st.z.x, st.z.y, st.z.z);
         let Some(t) = self.linearise(
@@ -922,7 +973,7 @@ impl<'m> Ekf<'m> {
             scratch,
             flags,
         ) else {
-            return self.random_walk(st);
+            return (self.random_walk(st), None);
         };
         let xk_mean = clamp_to(t.mean, cfg.x_bounds.0, cfg.x_bounds.1);
         let Some(s) = self.linearise(
@@ -932,12 +983,12 @@ impl<'m> Ekf<'m> {
             flags,
         ) else {
             *flags |= Flags::MODEL_INVALID;
-            return self.random_walk(st);
+            return (self.random_walk(st), None);
         };
         let (q_x, q_s, r) = self.noises(&t, &s, flags);
         let Some(l) = cholesky3(&st.p) else {
             *flags |= Flags::MODEL_INVALID;
-            return self.random_walk(st);
+            return (self.random_walk(st), None);
         };
         // sqrt(n) with n = 4 augmented dimensions.
         let spread = 2.0;
@@ -946,6 +997,8 @@ impl<'m> Ekf<'m> {
         let mut free_sum = Vector3::zeros();
         let mut points = [Vector3::zeros(); 8];
         let mut boxed_points = [Vector3::zeros(); 8];
+        // The state deviation of each point (the cross-covariance's left factor).
+        let mut deviations = [Vector3::zeros(); 8];
         let mut ok = true;
         for (i, (point, boxed)) in points.iter_mut().zip(&mut boxed_points).enumerate() {
             let sign = if i % 2 == 0 { spread } else { -spread };
@@ -960,6 +1013,9 @@ impl<'m> Ekf<'m> {
                 Some(col) => (col * sign, 0.0),
                 None => (Vector3::zeros(), if i % 2 == 0 { w_dev } else { -w_dev }),
             };
+            if CROSS && let Some(d) = deviations.get_mut(i) {
+                *d = dz;
+            }
             let (a, b, c) = (x1 + dz.x, x2 + dz.y, s1 + dz.z);
             let xk = if dz.x == 0.0 && dz.y == 0.0 {
                 Some(t.mean)
@@ -994,7 +1050,7 @@ impl<'m> Ekf<'m> {
         }
         if !ok {
             *flags |= Flags::MODEL_INVALID;
-            return self.random_walk(st);
+            return (self.random_walk(st), None);
         }
         let mean = sum / 8.0;
         let free_mean = free_sum / 8.0;
@@ -1005,6 +1061,13 @@ impl<'m> Ekf<'m> {
         }
         p /= 8.0;
         p.m33 += q_s;
+        let cross = CROSS.then(|| {
+            let mut c = Matrix3::zeros();
+            for (dev, point) in deviations.iter().zip(&points) {
+                c += dev * (point - free_mean).transpose();
+            }
+            c / 8.0
+        });
         let cj = |v: f64| {
             if v.is_finite() {
                 clamp_to(v, -cfg.jac_max, cfg.jac_max)
@@ -1025,13 +1088,14 @@ impl<'m> Ekf<'m> {
             clamp_flag(mean.z, cfg.y_bounds, flags),
         );
         st.p = p;
-        Predicted {
+        let pred = Predicted {
             q_x,
             r,
             s_pred: st.z.z,
             jacobian,
             left_box: outside(t.mean, cfg.x_bounds),
-        }
+        };
+        (pred, cross)
     }
 
     /// The transition's input at states `x_{k-1} = x1`, `x_{k-2} = x2`: the inputs and plays
@@ -1617,6 +1681,78 @@ mod tests {
         assert!((j.m31 - (-0.6 + 1.4 * 0.8)).abs() < 1e-9, "{j}");
         assert!((j.m32 - 1.4 * 0.1).abs() < 1e-9, "{j}");
         assert!(j.m33.abs() < 1e-12, "{j}");
+    }
+
+    /// [`Ekf::predict`] is the step's prediction phase: the step's update applied to it gives
+    /// the step's state bit for bit, in both modes that run without local data, and its
+    /// predicted measurement is the step's. On a linear model the unscented cross-covariance
+    /// is the linearised one, `P F^T` (the cubature rule is exact for linear maps).
+    #[test]
+    fn predict_is_the_steps_prediction() {
+        let (zeros, ones) = ([0.0; 4], [1.0; 4]);
+        let theta = [0.0, 3.0, 3.0, 3.0, 3.0];
+        let slopes_t = [0.8, 0.1, 0.3, -0.2];
+        let slopes_s = [-0.6, 0.2, 1.4];
+        let view = HbnView {
+            transition: linear_gp(&theta, &zeros, &ones, &slopes_t),
+            sensor: linear_gp(&theta[..4], &zeros, &ones, &slopes_s),
+            transition_local: None,
+            sensor_local: None,
+            blr: LocalRegression::default(),
+            init: None,
+            plays: Plays::NONE,
+        };
+        for mode in [Mode::Ekf, Mode::Ukf] {
+            let cfg = EkfConfig {
+                mode,
+                ..gate_config(0.0)
+            };
+            let ekf = Ekf::new(view, cfg).unwrap();
+            let mut scratch = [0.0; 64];
+            let mut state = None;
+            ekf.step(&mut state, &mut scratch, 0.1, 0.2);
+            for k in 0..40 {
+                let u = (k as f64 * 0.3).sin();
+                let y = 0.5 * (k as f64 * 0.2).cos();
+                let before = state.unwrap();
+                let pred = ekf.predict(&before, &mut scratch);
+                let out = ekf.step(&mut state, &mut scratch, u, y);
+                assert_eq!(pred.z.z, out.y_pred, "{mode:?} {k}");
+                assert_eq!(pred.flags.0 & !out.flags.0, 0, "{mode:?} {k}");
+                let mut st = EkfState {
+                    z: pred.z,
+                    p: pred.p,
+                    ..before
+                };
+                let mut flags = 0;
+                update(&mut st, y, out.r, &cfg, &mut flags);
+                let after = state.unwrap();
+                assert_eq!((st.z, st.p), (after.z, after.p), "{mode:?} {k}");
+                if mode == Mode::Ekf {
+                    assert_eq!(pred.cross, before.p * out.jacobian.transpose());
+                }
+            }
+        }
+        // The unscented cross-covariance against `P F^T` at the UKF's own states.
+        let cfg = EkfConfig {
+            mode: Mode::Ukf,
+            ..gate_config(0.0)
+        };
+        let ukf = Ekf::new(view, cfg).unwrap();
+        let mut scratch = [0.0; 64];
+        let mut state = None;
+        ukf.step(&mut state, &mut scratch, 0.1, 0.2);
+        for k in 0..40 {
+            let before = state.unwrap();
+            let pred = ukf.predict(&before, &mut scratch);
+            let out = ukf.step(&mut state, &mut scratch, 0.3, 0.1 * k as f64);
+            let linear = before.p * out.jacobian.transpose();
+            assert!(
+                (pred.cross - linear).abs().max() < 1e-9 * (1.0 + linear.abs().max()),
+                "{k}: {} vs {linear}",
+                pred.cross
+            );
+        }
     }
 
     /// A sensor GP of neither 3 nor 2 inputs is refused, and so is a sensor's local data of

@@ -11,7 +11,9 @@
 //! - [`explore::Explorer`]: which input to apply next while collecting training data
 //!   (thesis Sec. 3.4);
 //! - [`Filter`]: the owned streaming estimator (model, state and scratch in one value), whose
-//!   per-sample step batch estimation loops over.
+//!   per-sample step batch estimation loops over;
+//! - [`smooth`]: offline smoothing ([`HysteresisModel::smooth`]), each state estimated from the
+//!   whole sequence.
 //!
 //! ```
 //! use hbn_model::{Filter, HysteresisModel, HbnParams, Sequence, metrics::nrmse};
@@ -47,6 +49,7 @@ mod local;
 pub mod metrics;
 mod model;
 mod params;
+pub mod smooth;
 pub mod tuning;
 pub mod vector;
 mod vector_filter;
@@ -71,6 +74,7 @@ pub use params::{
     MIN_FIRMWARE_BUDGET, Param, ParamValue, Problem, Selection, SensorInputs, SignalInfo, Signals,
     UnknownKernel, parse_bytes,
 };
+pub use smooth::Smoothing;
 pub use tuning::{CandidateRow, FilterTuning, NoiseScales, ValidationReport};
 pub use vector::{
     SignalNames, VectorEstimate, VectorModel, VectorSequence, VectorSummary, VectorValidationRow,
