@@ -704,6 +704,12 @@ pub struct EstimateArgs {
     /// Write the estimate as CSV.
     #[arg(long)]
     pub csv: Option<PathBuf>,
+    /// Smooth: estimate each sample from the whole log (the filter forward, then a
+    /// Rauch-Tung-Striebel pass backward) instead of from the samples up to it. x and x_std
+    /// in the outputs are the smoothed ones, the other columns the filter's. Offline, scalar
+    /// models only; docs/smoothing.md.
+    #[arg(long)]
+    pub smooth: bool,
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
@@ -746,6 +752,10 @@ pub struct EvalArgs {
     /// (nRMSE and 2-sigma coverage in the legend), and the hysteresis loops.
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Also score each mode's smoothed estimate (each sample estimated from the whole log): a
+    /// row `<mode> smoothed` after the mode's. Scalar models only; docs/smoothing.md.
+    #[arg(long)]
+    pub smooth: bool,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,

@@ -6,7 +6,7 @@ use std::path::Path;
 use anyhow::Context;
 use hbn_core::Mode;
 use hbn_model::{Estimate, HysteresisModel, VectorModel};
-use hbn_pipeline::{LogEstimate, Outputs, SignalChoice, estimate_log_modes};
+use hbn_pipeline::{LogData, LogEstimate, LogOption, Outputs, SignalChoice, estimate_log_modes};
 use serde_json::{Value, json};
 
 use crate::Ui;
@@ -131,6 +131,76 @@ fn run_vector(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The error of `--smooth` with a vector model.
+pub const SMOOTH_SCALAR_ONLY: &str = "--smooth takes scalar models: smoothing a vector model is \
+     not built; run without --smooth for the filter's estimate";
+
+/// The smoother over each piece of a log (`u` and `y` in columns `u_col` and `y_col`),
+/// restarted at each piece as the filter is, the estimates one after the other; sensor values
+/// inside a dropout are not fed to it (NaN), as for the filter
+/// ([`HysteresisModel::smooth`]).
+pub fn smooth_pieces(
+    model: &HysteresisModel,
+    pieces: &[LogData],
+    u_col: usize,
+    y_col: usize,
+    mode: Mode,
+) -> anyhow::Result<Estimate> {
+    let mut all = Estimate::default();
+    for piece in pieces {
+        let mut y = piece.column(y_col).to_vec();
+        if let Some(mask) = piece.dropouts.get(y_col) {
+            for (v, &dropped) in y.iter_mut().zip(mask) {
+                if dropped {
+                    *v = f64::NAN;
+                }
+            }
+        }
+        let e = model.smooth(piece.column(u_col), &y, mode)?;
+        for (to, from) in [
+            (&mut all.x, e.x),
+            (&mut all.x_std, e.x_std),
+            (&mut all.y_pred, e.y_pred),
+            (&mut all.innovation, e.innovation),
+            (&mut all.nis, e.nis),
+            (&mut all.q_x, e.q_x),
+            (&mut all.r, e.r),
+            (&mut all.obs_min, e.obs_min),
+            (&mut all.obs_max, e.obs_max),
+            (&mut all.obs_x, e.obs_x),
+        ] {
+            to.extend(from);
+        }
+        all.flags.extend(e.flags);
+    }
+    Ok(all)
+}
+
+/// Writes each run to `outputs` (one run) or to its mode's files ([`Outputs::for_mode`]),
+/// removing the files already written if one fails.
+fn write_runs(
+    runs: &[LogEstimate],
+    outputs: &Outputs,
+    time_source: hbn_io::TimeSource,
+) -> anyhow::Result<()> {
+    let mut written: Vec<std::path::PathBuf> = Vec::new();
+    for r in runs {
+        let files = if runs.len() == 1 {
+            outputs.clone()
+        } else {
+            outputs.for_mode(r.mode)
+        };
+        if let Err(err) = r.write(&files) {
+            for f in &written {
+                let _ = std::fs::remove_file(f);
+            }
+            return Err(report::error(err, time_source));
+        }
+        written.extend(files.files().map(Path::to_path_buf));
+    }
+    Ok(())
+}
+
 /// Loads a model, naming the file in errors.
 pub fn load_model(file: &Path) -> anyhow::Result<HysteresisModel> {
     if is_vector_model(file) {
@@ -197,7 +267,7 @@ pub fn summary_json(args: &EstimateArgs, model: &HysteresisModel, runs: &[LogEst
                 .into_iter()
                 .map(|(n, c)| (n.to_owned(), json!(c)))
                 .collect();
-            json!({
+            let mut v = json!({
                 "mode": r.mode.name(),
                 "default_mode": r.mode == model.default_mode(),
                 "mean_nis": mean_nis(&r.estimate),
@@ -206,7 +276,11 @@ pub fn summary_json(args: &EstimateArgs, model: &HysteresisModel, runs: &[LogEst
                 "csv": files.csv,
                 "mcap": files.mcap,
                 "warnings": r.warnings().iter().map(ToString::to_string).collect::<Vec<_>>(),
-            })
+            });
+            if args.smooth {
+                v["smoothed"] = json!(true);
+            }
+            v
         })
         .collect();
     json!({
@@ -228,6 +302,9 @@ pub fn run(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<Vec<LogEstima
         }
     }
     if is_vector_model(&args.model) {
+        if args.smooth {
+            anyhow::bail!("{SMOOTH_SCALAR_ONLY}");
+        }
         run_vector(ui, args)?;
         return Ok(Vec::new());
     }
@@ -247,19 +324,44 @@ pub fn run(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<Vec<LogEstima
         .map_or_else(|| vec![model.default_mode()], |m| m.modes());
     let opts = args.read.options(&model);
     let mut render = Renderer::default();
+    // Smoothing writes the files itself, after replacing the filter's estimates.
+    let filter_outputs = if args.smooth {
+        Outputs::default()
+    } else {
+        outputs.clone()
+    };
     let result = estimate_log_modes(
         &model,
         &args.log,
         &signals,
         &modes,
         opts,
-        &outputs,
+        &filter_outputs,
         &mut |e| render.event(ui, e),
     );
     render.finish();
-    let runs = result
+    let mut runs = result
         .map_err(|e| report::error(e, opts.time_source))
         .with_context(|| format!("estimation on `{}` failed", args.log.display()))?;
+    if args.smooth {
+        let which = [LogOption::Input, LogOption::Output];
+        let pieces = hbn_pipeline::read_pieces_at_model_rate(
+            &model,
+            &args.log,
+            &signals,
+            &which,
+            opts,
+            &mut |_| {},
+        )
+        .map_err(|e| report::error(e, opts.time_source))?;
+        for r in &mut runs {
+            r.estimate =
+                smooth_pieces(&model, &pieces.pieces, 0, 1, r.mode).with_context(|| {
+                    format!("smoothing `{}` with {} failed", args.log.display(), r.mode)
+                })?;
+        }
+        write_runs(&runs, &outputs, opts.time_source)?;
+    }
     if args.json {
         let v = summary_json(args, &model, &runs);
         ui.line(serde_json::to_string_pretty(&v).context("cannot format JSON")?)?;
@@ -319,7 +421,8 @@ pub fn summary_text(
         } else {
             format!("wrote {}", wrote.join(" and "))
         };
-        text.push_str(&format!("  {}{default}: {wrote}\n", r.mode));
+        let smoothed = if args.smooth { " smoothed" } else { "" };
+        text.push_str(&format!("  {}{smoothed}{default}: {wrote}\n", r.mode));
         if verbose {
             text.push_str(&diagnostics(&r.estimate, r.mode));
         }

@@ -4,8 +4,9 @@
 use std::path::Path;
 
 use anyhow::Context;
+use hbn_model::metrics::{calibration, nrmse, rmse};
 use hbn_model::{HysteresisModel, VectorModel};
-use hbn_pipeline::{Evaluation, Method, SignalChoice, evaluate_log};
+use hbn_pipeline::{Evaluation, LogOption, Method, Score, SignalChoice, evaluate_log};
 
 use crate::Ui;
 use crate::cli::EvalArgs;
@@ -15,12 +16,31 @@ use crate::plot::{self, EvalPlot, ModeSeries};
 use crate::report::{self, Renderer};
 
 /// An aligned text table of the scores, one row per method, the model's default mode marked
-/// `*`. Always RMSE, nRMSE and the share of samples within 2 standard deviations (about 95%
-/// when the uncertainty is honest); with `verbose` also within 1 (about 68%), the mean NEES
-/// (about 1) and the NLPD.
-pub fn table(ev: &Evaluation, default_mode: hbn_core::Mode, verbose: bool) -> String {
+/// `*`; each mode's smoothed score (`smoothed`, from `--smooth`) in a row `<mode> smoothed`
+/// after the mode's. Always RMSE, nRMSE and the share of samples within 2 standard deviations
+/// (about 95% when the uncertainty is honest); with `verbose` also within 1 (about 68%), the
+/// mean NEES (about 1) and the NLPD.
+pub fn table(
+    ev: &Evaluation,
+    smoothed: &[Score],
+    default_mode: hbn_core::Mode,
+    verbose: bool,
+) -> String {
+    let mut rows: Vec<(String, &Score)> = Vec::new();
+    for sc in &ev.scores {
+        let star = if sc.method == Method::Filter(default_mode) {
+            "*"
+        } else {
+            ""
+        };
+        rows.push((format!("{}{star}", sc.method.name()), sc));
+        for sm in smoothed.iter().filter(|sm| sm.method == sc.method) {
+            rows.push((format!("{} smoothed{star}", sm.method.name()), sm));
+        }
+    }
+    let width = rows.iter().map(|(l, _)| l.len()).max().unwrap_or(0).max(11);
     let mut s = format!(
-        "{:<11} {:>10} {:>8} {:>8}",
+        "{:<width$} {:>10} {:>8} {:>8}",
         "method", "RMSE", "nRMSE", "in 2 sd"
     );
     if verbose {
@@ -30,17 +50,10 @@ pub fn table(ev: &Evaluation, default_mode: hbn_core::Mode, verbose: bool) -> St
         ));
     }
     s.push('\n');
-    for sc in &ev.scores {
-        let star = if sc.method == Method::Filter(default_mode) {
-            "*"
-        } else {
-            ""
-        };
+    for (label, sc) in rows {
         s.push_str(&format!(
-            "{:<11} {:>10.6} {:>8.4}",
-            format!("{}{star}", sc.method.name()),
-            sc.rmse,
-            sc.nrmse
+            "{label:<width$} {:>10.6} {:>8.4}",
+            sc.rmse, sc.nrmse
         ));
         match &sc.calibration {
             Some(c) => {
@@ -70,7 +83,63 @@ pub fn table(ev: &Evaluation, default_mode: hbn_core::Mode, verbose: bool) -> St
     {
         s.push_str("* the model's default mode\n");
     }
+    if !smoothed.is_empty() {
+        s.push_str("smoothed: each sample estimated from the whole log (docs/smoothing.md)\n");
+    }
     s
+}
+
+/// The smoothed estimate of each mode of `ev` ([`HysteresisModel::smooth`] over the pieces of
+/// the log the evaluation read), scored against the logged state.
+fn smoothed_scores(
+    model: &HysteresisModel,
+    args: &EvalArgs,
+    signals: &SignalChoice,
+    opts: hbn_pipeline::LogOptions,
+    ev: &Evaluation,
+) -> anyhow::Result<Vec<Score>> {
+    let which = [LogOption::Input, LogOption::State, LogOption::Output];
+    let split = hbn_pipeline::read_pieces_at_model_rate(
+        model,
+        &args.log,
+        signals,
+        &which,
+        opts,
+        &mut |_| {},
+    )
+    .map_err(|e| report::error(e, opts.time_source))?;
+    let x_ref = ev.log.column(1);
+    ev.estimates
+        .iter()
+        .map(|(mode, _)| {
+            let est = crate::cmd_estimate::smooth_pieces(model, &split.pieces, 0, 2, *mode)
+                .with_context(|| {
+                    format!("smoothing `{}` with {mode} failed", args.log.display())
+                })?;
+            Ok(Score {
+                method: Method::Filter(*mode),
+                rmse: rmse(&est.x, x_ref),
+                nrmse: nrmse(&est.x, x_ref),
+                calibration: Some(calibration(&est.x, &est.x_std, x_ref)),
+            })
+        })
+        .collect()
+}
+
+/// The JSON of `hbn eval --smooth`'s smoothed scores: `{"rmse": {..}, "nrmse": {..},
+/// "calibration": {..}}` keyed by mode, as the evaluation's own.
+fn smoothed_json(smoothed: &[Score]) -> serde_json::Value {
+    let mut r = serde_json::Map::new();
+    let mut n = serde_json::Map::new();
+    let mut c = serde_json::Map::new();
+    for s in smoothed {
+        r.insert(s.method.key().into(), serde_json::json!(s.rmse));
+        n.insert(s.method.key().into(), serde_json::json!(s.nrmse));
+        if let Some(cal) = &s.calibration {
+            c.insert(s.method.key().into(), serde_json::json!(cal));
+        }
+    }
+    serde_json::json!({"rmse": r, "nrmse": n, "calibration": c})
 }
 
 /// The lines after the table: what the columns mean, with glossary links.
@@ -170,6 +239,9 @@ pub fn run(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<()> {
         crate::check_output(p, "plot")?;
     }
     if crate::cmd_estimate::is_vector_model(&args.model) {
+        if args.smooth {
+            anyhow::bail!("{}", crate::cmd_estimate::SMOOTH_SCALAR_ONLY);
+        }
         return run_vector(ui, args);
     }
     run_scalar(ui, args).map(|_| ())
@@ -217,11 +289,20 @@ pub fn run_scalar(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<Evaluation
             }
         })
         .with_context(|| format!("evaluation on `{}` failed", args.log.display()))?;
+    let smoothed = if args.smooth {
+        smoothed_scores(&model, args, &signals, opts, &ev)?
+    } else {
+        Vec::new()
+    };
     if let Some(p) = &args.plot {
         plot::eval_plot(p, &plot_data(&ev, &model, &args.model, &args.log))?;
     }
     if args.json {
-        ui.line(serde_json::to_string_pretty(&ev.to_json()).context("cannot format JSON")?)?;
+        let mut v = ev.to_json();
+        if args.smooth {
+            v["smoothed"] = smoothed_json(&smoothed);
+        }
+        ui.line(serde_json::to_string_pretty(&v).context("cannot format JSON")?)?;
     } else {
         ui.print(format!(
             "scored `{}` on `{}`: {}\n",
@@ -229,7 +310,7 @@ pub fn run_scalar(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<Evaluation
             args.log.display(),
             report::grid_text(&ev.log)
         ))?;
-        ui.print(table(&ev, model.default_mode(), ui.verbose))?;
+        ui.print(table(&ev, &smoothed, model.default_mode(), ui.verbose))?;
         ui.print(legend(ui.verbose))?;
         if let Some(p) = &args.plot {
             ui.line(format!("wrote plot `{}`", p.display()))?;
