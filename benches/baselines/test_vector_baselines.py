@@ -243,8 +243,9 @@ def test_one_dimension_is_the_scalar_baseline() -> None:
 # Tracking the linear-Gaussian system with fitted GPs
 # ------------------------------------------------------------------------------------------------
 
-#: The 2-sigma coverage the GP-EKF reaches on the linear system: the Gaussian 0.954 within the
-#: spread of 600 correlated samples and of 300-row GPs' variances.
+#: The 2-sigma coverage the GP-EKF reaches on the linear system (0.94-0.96 for GP seeds 0 and
+#: 5): the Gaussian 0.954 within the spread of 600 correlated samples and of 300-row GPs'
+#: variances. The nRMSE is 0.16-0.19 of the open loop's.
 COVERAGE_BAND = (0.85, 0.995)
 
 
