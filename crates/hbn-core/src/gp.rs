@@ -813,7 +813,7 @@ impl Accum<'_> {
     }
 
     /// [`Accum::run`] for `d` (9..=[`MAX_DIM`]) inputs: one compiled pass for every width.
-    #[inline(never)]
+    #[inline(always)]
     fn run_wide<const GRAD: bool>(
         &self,
         d: usize,

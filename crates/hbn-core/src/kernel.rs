@@ -545,6 +545,11 @@ impl<'a> Kernel<'a> {
     fn apply_metric(&self, p: &[f64; MAX_DIM], u: &mut [f64; MAX_DIM]) {
         let d = self.spec.dim;
         match self.spec.metric {
+            Metric::Isotropic | Metric::Ard if d <= MAX_DENSE_DIM => {
+                for ((uj, pj), s) in u.iter_mut().zip(p).zip(&self.metric_scale).take(d) {
+                    *uj = pj * s;
+                }
+            }
             Metric::Isotropic | Metric::Ard => {
                 for (j, (uj, pj)) in u.iter_mut().zip(p).enumerate().take(d) {
                     *uj = pj * self.scale(j);
@@ -610,6 +615,7 @@ impl<'a> Kernel<'a> {
     /// [`feature_jacobian_entry`] reads it: row-major `d x d` for `d <= MAX_DENSE_DIM`, its
     /// diagonal above (where [`KernelSpec::validate`] allows only diagonal metrics without
     /// warping).
+    #[inline]
     pub fn features(
         &self,
         x_std: &[f64],
@@ -618,31 +624,58 @@ impl<'a> Kernel<'a> {
     ) {
         let d = self.spec.dim;
         if d > MAX_DENSE_DIM {
-            // Diagonal metric, no warping: `u_j = s_j x_j`.
-            for (j, ((uj, jac), x)) in u
-                .iter_mut()
-                .zip(du_dx.iter_mut())
-                .zip(x_std)
-                .enumerate()
-                .take(d)
-            {
-                let s = self.scale(j);
-                *uj = x * s;
-                *jac = s;
-            }
+            self.features_wide(x_std, u, du_dx);
             return;
         }
         let prep = self.prepare(x_std, 0.0);
         self.apply_metric(&prep.p, u);
-        // du/dx = L diag(phi'(x)): column c of L scaled by phi'_c.
-        for (c, &dp) in prep.dp_dx.iter().take(d).enumerate() {
-            let mut e = [0.0; MAX_DIM];
-            set(&mut e, c, dp);
-            let mut col = [0.0; MAX_DIM];
-            self.apply_metric(&e, &mut col);
-            for (r, &v) in col.iter().take(d).enumerate() {
-                set(du_dx, r * d + c, v);
+        // du/dx = L diag(phi'(x)), entry by entry: `L` is diagonal (isotropic, ARD) or
+        // `sqrt(1/c) W` (Mahalanobis).
+        match self.spec.metric {
+            Metric::Isotropic | Metric::Ard => {
+                for r in 0..d {
+                    for c in 0..d {
+                        let v = if r == c {
+                            at(&prep.dp_dx, c) * at(&self.metric_scale, c)
+                        } else {
+                            0.0
+                        };
+                        set(du_dx, r * d + c, v);
+                    }
+                }
             }
+            Metric::Mahalanobis => {
+                let s = at(&self.metric_scale, 0);
+                for r in 0..d {
+                    for c in 0..d {
+                        let v = at(self.whiten, r * d + c) * at(&prep.dp_dx, c) * s;
+                        set(du_dx, r * d + c, v);
+                    }
+                }
+            }
+        }
+    }
+
+    /// [`Kernel::features`] above [`MAX_DENSE_DIM`] inputs, where the metric is diagonal and
+    /// nothing is warped: `u_j = s_j x_j`, and the Jacobian is the diagonal `s_j`.
+    #[inline(never)]
+    fn features_wide(
+        &self,
+        x_std: &[f64],
+        u: &mut [f64; MAX_DIM],
+        du_dx: &mut [f64; FEATURE_JACOBIAN_LEN],
+    ) {
+        let d = self.spec.dim;
+        for (j, ((uj, jac), x)) in u
+            .iter_mut()
+            .zip(du_dx.iter_mut())
+            .zip(x_std)
+            .enumerate()
+            .take(d)
+        {
+            let s = self.scale(j);
+            *uj = x * s;
+            *jac = s;
         }
     }
 

@@ -561,7 +561,7 @@ impl<'m> VectorEkf<'m> {
         let d = self.model.dims;
         let mut flags = 0u32;
         let y = padded::<MAX_SENSORS>(y_k, d.sensors);
-        let Some(mut st) = *state else {
+        let Some(st) = state.as_mut() else {
             let (st, out) = self.initialise(u_k, &y);
             *state = Some(st);
             return out;
@@ -576,8 +576,8 @@ impl<'m> VectorEkf<'m> {
             }
         }
         let pred = match self.config.mode {
-            Mode::Ukf => self.predict_unscented(&mut st, scratch, &mut flags),
-            Mode::Ekf | Mode::EkfBlr => self.predict_linearised(&mut st, scratch, &mut flags),
+            Mode::Ukf => self.predict_unscented(st, scratch, &mut flags),
+            Mode::Ekf | Mode::EkfBlr => self.predict_linearised(st, scratch, &mut flags),
         };
         st.p = self.bound_covariance(&st.p, &mut flags);
         st.u_prev = st.u_last;
@@ -585,18 +585,17 @@ impl<'m> VectorEkf<'m> {
         for (a, ps) in st.plays.iter_mut().enumerate().take(d.inputs) {
             self.model.plays.advance(ps, at1(&u, a));
         }
-        let upd = self.update(&mut st, &y, &pred.r, &mut flags);
+        let upd = self.update(st, &y, &pred.r, &mut flags);
         st.steps = st.steps.saturating_add(1);
         if pred.left_box {
             st.lost_run = st.lost_run.saturating_add(1);
             if st.lost_run >= LOST_AFTER {
-                self.relocalise(&mut st, &y, &mut flags);
+                self.relocalise(st, &y, &mut flags);
             }
         } else {
             st.lost_run = 0;
         }
-        *state = Some(st);
-        self.output(&st, &pred, &upd, flags)
+        self.output(st, &pred, &upd, flags)
     }
 
     /// The step's report from the state after the update.
