@@ -1073,6 +1073,23 @@ impl HysteresisModelCore {
         estimate_dict(py, est)
     }
 
+    /// Smooths a sequence (the filter forward, the Rauch-Tung-Striebel pass backward,
+    /// `HysteresisModel::smooth`); returns the dict of `estimate` with the smoothed `x` and
+    /// `x_std`.
+    #[pyo3(signature = (u, y, mode))]
+    fn smooth<'py>(
+        &self,
+        py: Python<'py>,
+        u: PyReadonlyArray1<'_, f64>,
+        y: PyReadonlyArray1<'_, f64>,
+        mode: Option<&str>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let mode = parse_mode(py, mode, self.inner.default_mode())?;
+        let (u, y) = (slice(&u, "u")?.to_vec(), slice(&y, "y")?.to_vec());
+        let est = detached(py, || Ok(self.inner.smooth(&u, &y, mode)?))?;
+        estimate_dict(py, est)
+    }
+
     /// Reads `u` and `y` from a log at the model's rate, runs the filter, optionally writes
     /// CSV and MCAP (like `hbn estimate`); returns `(t, dict of per-sample arrays)`.
     #[allow(clippy::too_many_arguments)]

@@ -1186,6 +1186,40 @@ class HysteresisModel:
                 fields[k] = fields[k].reshape(-1, 1)
         return Estimate(fields, self._mode_name(mode))
 
+    def smooth(self, u: Any, y: Any, mode: Optional[str] = None) -> Estimate:
+        """Smooths: estimates each sample's state from the whole sequence, where
+        :meth:`estimate` uses the samples up to it. The filter runs forward, then a
+        Rauch-Tung-Striebel pass runs backward (extended for ``"ekf"`` and ``"ekf-blr"``,
+        unscented for ``"ukf"``); offline, about twice the cost of :meth:`estimate`. Arguments
+        as for :meth:`estimate` (scalar models only).
+
+        Returns what :meth:`estimate` returns, with the smoothed ``x`` and ``x_std``; the other
+        fields (``y_pred``, ``innovation``, ``nis``, ``flags``, ...) are the forward filter's.
+        The smoothed ``x_std`` is at most the filter's. docs/smoothing.md says when smoothing
+        gains much and when little.
+
+        >>> import hbn
+        >>> tr = hbn.simulate("duhem", 300, seed=1)
+        >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_starts=1)
+        >>> est, smo = m.estimate(tr["u"], tr["y"]), m.smooth(tr["u"], tr["y"])
+        >>> bool((smo.x_std <= est.x_std + 1e-12).all() and smo.x[-1] == est.x[-1])
+        True
+        """
+        if isinstance(self._core, _hbn.VectorModelCore):
+            raise ConfigError(
+                "smooth takes scalar models: smoothing a vector model is not built; "
+                "use estimate for the filter's estimate"
+            )
+        ua, ya = _signal(u, "u"), _signal(y, "y")
+        columns = ua.ndim == 2 or ya.ndim == 2
+        if columns:
+            ua, ya = self._columns(ua, "u", 1)[:, 0], self._columns(ya, "y", 1)[:, 0]
+        fields = self._core.smooth(_native(ua), _native(ya), _opt_str(mode))
+        if columns:
+            for k in ("x", "x_std", "y_pred", "innovation"):
+                fields[k] = fields[k].reshape(-1, 1)
+        return Estimate(fields, self._mode_name(mode))
+
     def _columns(self, a: Any, name: str, width: int) -> np.ndarray:
         """``a`` as a ``(T, width)`` array (a 1-D array is one column); :class:`DataError`
         naming the model's sizes otherwise."""
