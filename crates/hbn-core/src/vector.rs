@@ -447,7 +447,8 @@ pub struct VectorState {
     pub plays: [PlayState; MAX_INPUTS],
     /// Steps taken.
     pub steps: u64,
-    /// Steps in a row whose transition prediction left the state box ([`LOST_AFTER`]).
+    /// Steps in a row that were lost: the transition prediction left the state box, or a value
+    /// was clamped to its box ([`LOST_AFTER`] of them relocalise).
     pub lost_run: u32,
 }
 
@@ -587,7 +588,10 @@ impl<'m> VectorEkf<'m> {
         }
         let upd = self.update(st, &y, &pred.r, &mut flags);
         st.steps = st.steps.saturating_add(1);
-        if pred.left_box {
+        // Lost: the prediction left the state box, or a state or sensor value had to be
+        // clamped to its box (a filter stuck at the box's edge, where every GP extrapolates,
+        // is as lost as one outside it).
+        if pred.left_box || flags & Flags::STATE_CLAMPED != 0 {
             st.lost_run = st.lost_run.saturating_add(1);
             if st.lost_run >= LOST_AFTER {
                 self.relocalise(st, &y, &mut flags);

@@ -4,9 +4,11 @@
 
 mod vector_common;
 
-use hbn_core::vector::{Dims, MAX_AUGMENTED, VectorEkf, VectorState, vector_state_information};
+use hbn_core::vector::{
+    Dims, MAX_AUGMENTED, VectorEkf, VectorInitPrior, VectorState, vector_state_information,
+};
 use hbn_core::{Ekf, EkfConfig, Flags, HbnView, LocalRegression, Mode, Plays};
-use vector_common::{OwnedGp, config, model, scalar_config};
+use vector_common::{OwnedGp, config, model, model_with_sensor, scalar_config};
 
 /// The EKF's `F` is the derivative of its prediction: a step without measurements (every
 /// sensor missing) moves `z` exactly to the prediction, so finite differences of that map
@@ -260,4 +262,53 @@ fn bad_settings_and_shapes_are_refused() {
 fn scalar_config_is_valid() {
     let c: EkfConfig = scalar_config(Mode::Ekf);
     c.validate().unwrap();
+}
+
+/// A filter held at the state box's edge by measurements the box cannot explain is lost, even
+/// though each prediction from the edge stays inside the box: after `LOST_AFTER` clamped steps
+/// it relocalises from the first-measurement prior. Measurements the box explains never
+/// relocalise it.
+#[test]
+fn a_filter_held_at_the_box_edge_relocalises() {
+    let dims = Dims::new(1, 2, 1).unwrap();
+    let plays = Plays::new(&[]).unwrap();
+    // The sensor reads x_0 + 0.5 x_1; the prior maps y to x_0 = x_1 = y / 1.5.
+    let m = model_with_sensor(dims, true, 5);
+    let views = m.views();
+    let rows: Vec<f64> = (0..=20)
+        .flat_map(|i| {
+            let y = 0.1 * f64::from(i);
+            [y, y / 1.5, y / 1.5]
+        })
+        .collect();
+    let init = VectorInitPrior::new(&rows, dims, &[1.0], 3, &[1e-4, 1e-4]).unwrap();
+    let mut view = views.view(dims, plays);
+    view.init = Some(init);
+    for mode in [Mode::Ekf, Mode::Ukf] {
+        let mut cfg = config(dims, mode);
+        cfg.x_bounds[0] = (0.0, 1.0);
+        cfg.x_bounds[1] = (0.0, 1.0);
+        // No outlier gate: every measurement pushes.
+        cfg.nis_gate = 1e12;
+        let ekf = VectorEkf::new(view, cfg).unwrap();
+        let run = |y: f64| {
+            let mut scratch = vec![0.0; ekf.scratch_len()];
+            let mut state = None;
+            let mut clamped = 0;
+            let mut relocalised = 0;
+            for _ in 0..60 {
+                let out = ekf.step(&mut state, &mut scratch, &[0.2], &[y]);
+                assert!(out.x.iter().all(|v| v.is_finite()));
+                clamped += usize::from(out.flags.has(Flags::STATE_CLAMPED));
+                relocalised += usize::from(out.flags.has(Flags::RELOCALISED));
+            }
+            (clamped, relocalised)
+        };
+        // 1.8 needs x_0 + 0.5 x_1 = 1.8 > 1.5, the most the box allows.
+        let (clamped, relocalised) = run(1.8);
+        assert!(clamped >= 10, "{mode:?}: clamped {clamped} times");
+        assert!(relocalised >= 1, "{mode:?}: never relocalised");
+        // 0.6 is inside: no clamping, no relocalisation.
+        assert_eq!(run(0.6), (0, 0), "{mode:?}");
+    }
 }
