@@ -617,8 +617,10 @@ mod tests {
     }
 
     /// On a simulated hysteretic system (Bouc-Wen, noise gain 1) the smoother of every mode
-    /// is more accurate than its filter, and its 2-sigma band holds the state about as often
-    /// as the filter's (measured: docs/smoothing.md).
+    /// is more accurate than its filter (measured here: 0.91 to 0.93 of the filter's nRMSE),
+    /// its 2-sigma band holds the state (measured: 99.8% to 100%), and it is never less certain
+    /// than the filter. Smoothing does not gain on every log: where the filter's error is the
+    /// model's bias rather than noise it gains nothing or loses (docs/smoothing.md).
     #[test]
     fn smoothing_a_hysteretic_system_beats_the_filter() {
         let cfg = SimConfig {
@@ -653,8 +655,8 @@ mod tests {
             assert_eq!(s.estimate.nis, filtered.nis);
             let (f, sm) = (nrmse(&s.filtered.x, &test.x), nrmse(&s.estimate.x, &test.x));
             let cov = calibration(&s.estimate.x, &s.estimate.x_std, &test.x).coverage_2sigma;
-            assert!(sm < 0.95 * f, "{mode}: smoothed {sm} vs filtered {f}");
-            assert!((0.8..=1.0).contains(&cov), "{mode}: coverage {cov}");
+            assert!(sm < 0.97 * f, "{mode}: smoothed {sm} vs filtered {f}");
+            assert!((0.95..=1.0).contains(&cov), "{mode}: coverage {cov}");
             assert!(
                 s.estimate
                     .x_std
