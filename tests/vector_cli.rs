@@ -84,6 +84,32 @@ fn a_finger_trains_and_estimates_through_the_cli() {
         out.contains("estimated 2 state components over 1200 samples"),
         "{out}"
     );
+    // `--json`: the same run's summary as JSON, with the sizes and the mode.
+    let (r, out) = hbn(&[
+        "-q",
+        "estimate",
+        "--model",
+        s(&model),
+        "--log",
+        s(&test),
+        "--json",
+    ]);
+    r.expect("estimate --json");
+    let v: serde_json::Value = serde_json::from_str(&out).expect("JSON summary");
+    assert_eq!(v["samples"], 1200, "{out}");
+    assert_eq!(
+        (
+            v["inputs"].clone(),
+            v["states"].clone(),
+            v["sensors"].clone()
+        ),
+        (2.into(), 2.into(), 3.into())
+    );
+    assert_eq!(
+        v["estimates"][0]["unobservable"].as_array().map(Vec::len),
+        Some(2)
+    );
+    assert!(v["estimates"][0]["mode"].is_string(), "{out}");
     let text = std::fs::read_to_string(&csv).expect("csv");
     let mut lines = text.lines();
     assert_eq!(

@@ -127,8 +127,51 @@ fn run_vector(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<()> {
             ));
         }
     }
-    ui.print(text)?;
+    if args.json {
+        let v = vector_summary_json(args, &model, &run);
+        ui.line(serde_json::to_string_pretty(&v).context("cannot format JSON")?)?;
+    } else {
+        ui.print(text)?;
+    }
     Ok(())
+}
+
+/// The summary of a vector model's run as JSON (`--json`): the log, the sizes, the mode, the
+/// mean NIS, how often each guard flag was raised, each component's unobservable share of
+/// windows and the files written.
+fn vector_summary_json(
+    args: &EstimateArgs,
+    model: &VectorModel,
+    run: &hbn_pipeline::VectorLogEstimate,
+) -> Value {
+    let e = &run.estimate;
+    let flags: serde_json::Map<String, Value> = e
+        .flag_counts()
+        .into_iter()
+        .map(|(n, c)| (n.to_owned(), json!(c)))
+        .collect();
+    let finite: Vec<f64> = e.nis.iter().copied().filter(|v| v.is_finite()).collect();
+    let mean_nis = (!finite.is_empty()).then(|| finite.iter().sum::<f64>() / finite.len() as f64);
+    json!({
+        "log": args.log,
+        "model": args.model,
+        "samples": run.log.len(),
+        "rate_hz": model.rate_hz(),
+        "duration_s": run.log.duration_s(),
+        "signals": run.log.paths.iter().map(|p| p.to_string()).collect::<Vec<_>>(),
+        "inputs": e.dims.inputs,
+        "states": e.dims.states,
+        "sensors": e.dims.sensors,
+        "estimates": [{
+            "mode": e.mode.name(),
+            "default_mode": e.mode == model.default_mode(),
+            "mean_nis": mean_nis,
+            "flags": flags,
+            "unobservable": e.unobservable,
+            "csv": args.csv,
+            "mcap": args.out,
+        }],
+    })
 }
 
 /// The error of `--smooth` with a vector model.

@@ -102,16 +102,7 @@ impl Estimate {
 
     /// Counts of each guard flag over the run, by name.
     pub fn flag_counts(&self) -> Vec<(&'static str, usize)> {
-        let mut counts: Vec<(&'static str, usize)> = Vec::new();
-        for &f in &self.flags {
-            for name in Flags(f).names() {
-                match counts.iter_mut().find(|(n, _)| *n == name) {
-                    Some((_, c)) => *c += 1,
-                    None => counts.push((name, 1)),
-                }
-            }
-        }
-        counts
+        count_flags(&self.flags)
     }
 
     /// Observability summary (`None` if the run was too short).
@@ -198,4 +189,18 @@ impl HysteresisModel {
         }
         Ok(x)
     }
+}
+
+/// Counts of each guard flag over per-sample flag words, by name, in order of first appearance.
+pub(crate) fn count_flags(flags: &[u32]) -> Vec<(&'static str, usize)> {
+    let mut counts: Vec<(&'static str, usize)> = Vec::new();
+    for &f in flags {
+        for name in Flags(f).names() {
+            match counts.iter_mut().find(|(n, _)| *n == name) {
+                Some((_, c)) => *c += 1,
+                None => counts.push((name, 1)),
+            }
+        }
+    }
+    counts
 }

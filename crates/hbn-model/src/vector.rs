@@ -162,6 +162,11 @@ impl VectorEstimate {
         self.nis.is_empty()
     }
 
+    /// Counts of each guard flag over the run, by name.
+    pub fn flag_counts(&self) -> Vec<(&'static str, usize)> {
+        crate::estimate::count_flags(&self.flags)
+    }
+
     /// Component `i` of the state over time.
     pub fn component(&self, i: usize) -> Vec<f64> {
         let dx = self.dims.states;
