@@ -647,6 +647,20 @@ def performance(plan: Plan, raw: Path, hbn: Path, ctx: Context) -> Tuple[List[st
     steps = [json.loads(line) for line in run(step_cmd).stdout.splitlines() if line.strip()]
     out["step_time"] = steps
 
+    # Vector step: the simulated finger (2 inputs, 2 state components, 3 sensors).
+    say("vector step time (Rust, finger)")
+    v_train = wd / "finger-train.mcap"
+    v_test = wd / "finger-test.mcap"
+    run([hbn, "-q", "simulate", "--system", "finger", "--steps", "3000", "--seed", "1", "--out", v_train])
+    run([hbn, "-q", "simulate", "--system", "finger", "--steps", str(plan.step_log), "--seed", "2", "--out", v_test])
+    v_models = {"exact": wd / "finger-exact.hbn", "m64": wd / "finger-m64.hbn"}
+    for name, path in v_models.items():
+        train(hbn, [v_train], path, ["--inducing", "exact" if name == "exact" else "64"])
+    v_cmd = [exe("step_time"), "--model", v_models["exact"], "--model", v_models["m64"], "--log", v_test,
+             "--passes", str(plan.step_passes)]  # fmt: skip
+    v_steps = [json.loads(line) for line in run(v_cmd).stdout.splitlines() if line.strip()]
+    out["vector_step_time"] = v_steps
+
     # numpy EKF and the Python step on the same models and log.
     say("numpy filter and the Python step")
     numpy_rows = {}
@@ -719,6 +733,26 @@ def performance(plan: Plan, raw: Path, hbn: Path, ctx: Context) -> Tuple[List[st
             f"| {labels.get(k, k)} | {s['transition_points']} / {s['sensor_points']} | {s['mode']} "
             f"| {s['fastest_us']:.2f} | {s['median_us']:.2f} | {fmt(base, '.0f')} "
             f"| {fmt(base / s['fastest_us'] if base else None, '.0f')}x | {100 * s['fastest_us'] / 10_000:.3f}% |"
+        )
+    v_name = {str(p): k for k, p in v_models.items()}
+    body += [
+        "",
+        "## Vector step (Rust)",
+        "",
+        "One step of the vector filter ([vector.md](vector.md)) on the simulated finger (2 inputs,",
+        "2 state components, 3 sensors: 5 GPs, an augmented state of 7), trained by `hbn train`",
+        f"on 3000 samples, timed like the scalar step on a finger log of {plan.step_log} samples. The",
+        "CPU columns count only the time the step's thread ran (Linux schedstat), so they hold on a",
+        "busy machine where the wall clock does not.",
+        "",
+        "| model | mode | fastest pass (us) | median pass (us) | fastest pass, CPU (us) | median pass, CPU (us) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for s in v_steps:
+        k = v_name.get(s["model"], s["model"])
+        body.append(
+            f"| {labels.get(k, k)} | {s['mode']} | {s['fastest_us']:.2f} | {s['median_us']:.2f} "
+            f"| {fmt(s.get('fastest_cpu_us'), '.2f')} | {fmt(s.get('median_cpu_us'), '.2f')} |"
         )
     body += [
         "",
