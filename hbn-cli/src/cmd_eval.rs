@@ -519,3 +519,142 @@ fn vector_plot(
         .collect();
     plot::components_plot(file, &panels)
 }
+
+#[cfg(test)]
+mod tests {
+    /// Runs `hbn args...` in-process; returns the result and what it printed to stdout.
+    fn hbn(args: &[&str]) -> (anyhow::Result<()>, String) {
+        let (mut out, mut err) = (Vec::new(), Vec::new());
+        let all = std::iter::once("hbn").chain(args.iter().copied());
+        let r = crate::run_with(all, &mut out, &mut err);
+        (r, String::from_utf8_lossy(&out).into_owned())
+    }
+
+    /// The `x` column of an estimate CSV.
+    fn xs(csv: &std::path::Path) -> Vec<f64> {
+        let text = std::fs::read_to_string(csv).unwrap();
+        text.lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(3).unwrap().parse().unwrap())
+            .collect()
+    }
+
+    #[test]
+    fn smooth_adds_a_row_per_mode_and_writes_the_smoothed_estimate() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = |n: &str| dir.path().join(n).to_str().unwrap().to_owned();
+        let sim = |seed: &str, steps: &str, out: &str| {
+            let (r, _) = hbn(&[
+                "-q",
+                "simulate",
+                "--system",
+                "duhem",
+                "--steps",
+                steps,
+                "--input-seed",
+                seed,
+                "--seed",
+                seed,
+                "--noise-gain",
+                "1",
+                "--out",
+                out,
+            ]);
+            r.unwrap();
+        };
+        sim("1", "500", &p("train.mcap"));
+        sim("2", "300", &p("test.mcap"));
+        let (r, _) = hbn(&[
+            "-q",
+            "train",
+            "--log",
+            &p("train.mcap"),
+            "--inducing",
+            "exact",
+            "--max-points",
+            "120",
+            "--starts",
+            "1",
+            "--validation",
+            "0",
+            "--out",
+            &p("model.hbn"),
+        ]);
+        r.unwrap();
+        let (model, log) = (p("model.hbn"), p("test.mcap"));
+        let eval = |extra: &[&str]| {
+            let mut args = vec!["-q", "eval", "--model", &model, "--log", &log];
+            args.extend(extra);
+            let (r, out) = hbn(&args);
+            r.unwrap();
+            out
+        };
+        let plain = eval(&[]);
+        assert!(!plain.contains("smoothed"), "{plain}");
+        assert!(plain.contains("\nmethod            RMSE"), "{plain}");
+        let smoothed = eval(&["--smooth"]);
+        for mode in hbn_core::Mode::ALL {
+            assert!(
+                smoothed.contains(&format!("\n{mode} smoothed")),
+                "{smoothed}"
+            );
+        }
+        // The filter's rows are the same with and without the flag.
+        let rows = |t: &str| -> Vec<String> {
+            t.lines()
+                .filter(|l| l.starts_with("ekf") || l.starts_with("ukf"))
+                .filter(|l| !l.contains("smoothed"))
+                .map(|l| l.split_whitespace().skip(1).collect::<Vec<_>>().join(" "))
+                .collect()
+        };
+        assert_eq!(rows(&plain), rows(&smoothed));
+        let (r, _) = hbn(&[
+            "-q",
+            "estimate",
+            "--model",
+            &p("model.hbn"),
+            "--log",
+            &p("test.mcap"),
+            "--csv",
+            &p("filtered.csv"),
+        ]);
+        r.unwrap();
+        let (r, out) = hbn(&[
+            "-q",
+            "estimate",
+            "--model",
+            &p("model.hbn"),
+            "--log",
+            &p("test.mcap"),
+            "--smooth",
+            "--csv",
+            &p("smoothed.csv"),
+            "--out",
+            &p("smoothed.mcap"),
+        ]);
+        r.unwrap();
+        assert!(out.contains("smoothed"), "{out}");
+        assert!(std::fs::metadata(p("smoothed.mcap")).unwrap().len() > 0);
+        let (f, s) = (
+            xs(&dir.path().join("filtered.csv")),
+            xs(&dir.path().join("smoothed.csv")),
+        );
+        assert_eq!(f.len(), s.len());
+        assert_eq!(f.last(), s.last());
+        assert!(f.iter().zip(&s).filter(|(a, b)| a != b).count() > f.len() / 2);
+    }
+
+    #[test]
+    fn smooth_with_a_vector_model_names_the_flag() {
+        let dir = tempfile::tempdir().unwrap();
+        let model = dir.path().join("vector.hbn");
+        let tag = hbn_model::vector::VECTOR_MODEL_FORMAT;
+        std::fs::write(&model, format!("{{\"format\": \"{tag}\"}}")).unwrap();
+        let model = model.to_str().unwrap();
+        for cmd in ["estimate", "eval"] {
+            let (r, _) = hbn(&[cmd, "--model", model, "--log", "none.mcap", "--smooth"]);
+            let msg = format!("{:#}", r.unwrap_err());
+            assert!(msg.contains("--smooth takes scalar models"), "{cmd}: {msg}");
+        }
+    }
+}

@@ -348,7 +348,8 @@ impl HysteresisModel {
     }
 }
 
-/// The smoothed states of the scalar model's augmented state, as plain arrays (for bindings).
+/// The smoothed states of the scalar model's augmented state as plain arrays (no nalgebra types
+/// in the caller's code).
 impl Smoothing {
     /// Smoothed covariance of `z_k` as a row-major 3x3 array.
     pub fn covariance(&self, k: usize) -> Option<[[f64; 3]; 3]> {
