@@ -6,7 +6,7 @@ use std::path::Path;
 use anyhow::Context;
 use hbn_core::Mode;
 use hbn_model::{Estimate, HysteresisModel, VectorModel};
-use hbn_pipeline::{LogData, LogEstimate, LogOption, Outputs, SignalChoice, estimate_log_modes};
+use hbn_pipeline::{LogEstimate, LogOption, Outputs, SignalChoice, estimate_log_modes};
 use serde_json::{Value, json};
 
 use crate::Ui;
@@ -177,47 +177,6 @@ fn vector_summary_json(
 /// The error of `--smooth` with a vector model.
 pub const SMOOTH_SCALAR_ONLY: &str = "--smooth takes scalar models: smoothing a vector model is \
      not built; run without --smooth for the filter's estimate";
-
-/// The smoother over each piece of a log (`u` and `y` in columns `u_col` and `y_col`),
-/// restarted at each piece as the filter is, the estimates one after the other; sensor values
-/// inside a dropout are not fed to it (NaN), as for the filter
-/// ([`HysteresisModel::smooth`]).
-pub fn smooth_pieces(
-    model: &HysteresisModel,
-    pieces: &[LogData],
-    u_col: usize,
-    y_col: usize,
-    mode: Mode,
-) -> anyhow::Result<Estimate> {
-    let mut all = Estimate::default();
-    for piece in pieces {
-        let mut y = piece.column(y_col).to_vec();
-        if let Some(mask) = piece.dropouts.get(y_col) {
-            for (v, &dropped) in y.iter_mut().zip(mask) {
-                if dropped {
-                    *v = f64::NAN;
-                }
-            }
-        }
-        let e = model.smooth(piece.column(u_col), &y, mode)?;
-        for (to, from) in [
-            (&mut all.x, e.x),
-            (&mut all.x_std, e.x_std),
-            (&mut all.y_pred, e.y_pred),
-            (&mut all.innovation, e.innovation),
-            (&mut all.nis, e.nis),
-            (&mut all.q_x, e.q_x),
-            (&mut all.r, e.r),
-            (&mut all.obs_min, e.obs_min),
-            (&mut all.obs_max, e.obs_max),
-            (&mut all.obs_x, e.obs_x),
-        ] {
-            to.extend(from);
-        }
-        all.flags.extend(e.flags);
-    }
-    Ok(all)
-}
 
 /// Writes each run to `outputs` (one run) or to its mode's files ([`Outputs::for_mode`]),
 /// removing the files already written if one fails.
@@ -398,8 +357,8 @@ pub fn run(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<Vec<LogEstima
         )
         .map_err(|e| report::error(e, opts.time_source))?;
         for r in &mut runs {
-            r.estimate =
-                smooth_pieces(&model, &pieces.pieces, 0, 1, r.mode).with_context(|| {
+            r.estimate = hbn_pipeline::smooth_pieces(&model, &pieces.pieces, 0, 1, r.mode)
+                .with_context(|| {
                     format!("smoothing `{}` with {} failed", args.log.display(), r.mode)
                 })?;
         }

@@ -112,10 +112,9 @@ fn smoothed_scores(
     ev.estimates
         .iter()
         .map(|(mode, _)| {
-            let est = crate::cmd_estimate::smooth_pieces(model, &split.pieces, 0, 2, *mode)
-                .with_context(|| {
-                    format!("smoothing `{}` with {mode} failed", args.log.display())
-                })?;
+            let est = hbn_pipeline::smooth_pieces(model, &split.pieces, 0, 2, *mode).with_context(
+                || format!("smoothing `{}` with {mode} failed", args.log.display()),
+            )?;
             Ok(Score {
                 method: Method::Filter(*mode),
                 rmse: rmse(&est.x, x_ref),

@@ -432,6 +432,29 @@ pub(crate) fn estimate_pieces(
     y_col: usize,
     mode: Mode,
 ) -> Result<Estimate, PipelineError> {
+    over_pieces(pieces, u_col, y_col, |u, y| model.estimate(u, y, mode))
+}
+
+/// The smoother ([`HysteresisModel::smooth`]) over each piece of a log, as
+/// [`estimate_pieces`] runs the filter: restarted at each piece, sensor values inside a
+/// dropout left out, the estimates one after the other.
+pub fn smooth_pieces(
+    model: &HysteresisModel,
+    pieces: &[LogData],
+    u_col: usize,
+    y_col: usize,
+    mode: Mode,
+) -> Result<Estimate, PipelineError> {
+    over_pieces(pieces, u_col, y_col, |u, y| model.smooth(u, y, mode))
+}
+
+/// `run` on each piece's `u` and `y` (NaN inside a sensor dropout), the estimates joined.
+fn over_pieces(
+    pieces: &[LogData],
+    u_col: usize,
+    y_col: usize,
+    run: impl Fn(&[f64], &[f64]) -> Result<Estimate, hbn_model::ModelError>,
+) -> Result<Estimate, PipelineError> {
     let mut all = Estimate::default();
     for piece in pieces {
         let mut y = piece.column(y_col).to_vec();
@@ -442,7 +465,7 @@ pub(crate) fn estimate_pieces(
                 }
             }
         }
-        let e = model.estimate(piece.column(u_col), &y, mode)?;
+        let e = run(piece.column(u_col), &y)?;
         for (to, from) in [
             (&mut all.x, e.x),
             (&mut all.x_std, e.x_std),

@@ -38,7 +38,7 @@ pub use error::{LogOption, OptionError, PipelineError, Setting};
 pub use estimate::{
     CSV_HEADER, ESTIMATE_SCHEMA, ESTIMATE_TOPIC, EXTRAPOLATION_WARNING, EstimateWarning,
     LogEstimate, OUTLIER_WARNING, Outputs, SignalChoice, estimate_log, estimate_log_modes,
-    estimate_schema, file_for_mode, read_at_model_rate, read_pieces_at_model_rate,
+    estimate_schema, file_for_mode, read_at_model_rate, read_pieces_at_model_rate, smooth_pieces,
 };
 pub use eval::{Evaluation, Method, Score, evaluate_log};
 pub use log::{
