@@ -42,9 +42,6 @@ const OBSERVABILITY_WINDOW: usize = 20;
 const UNOBSERVABLE_RATIO: f64 = 1e-6;
 /// Process-noise scales tried on the held-out quarters.
 const Q_SCALES: [f64; 3] = [0.25, 1.0, 4.0];
-/// Further steps (each a factor of 4) past an edge of [`Q_SCALES`] that wins, while the
-/// held-out score keeps falling.
-const Q_EXTEND_STEPS: usize = 2;
 
 /// One trajectory of a vector system: row-major `(T, d)` arrays (sample `k` of input `a` is
 /// `u[k * du + a]`).
@@ -576,24 +573,6 @@ impl VectorModel {
             let mut candidate = self.clone();
             candidate.q_scale = q;
             consider(self, candidate, format!("process noise x{q}"), &mut best)?;
-        }
-        // An edge of the grid that wins is not yet an optimum: step on in its direction.
-        let (lowest, highest) = (Q_SCALES[0], Q_SCALES[Q_SCALES.len() - 1]);
-        for _ in 0..Q_EXTEND_STEPS {
-            let q = self.q_scale;
-            let next = if q >= highest {
-                4.0 * q
-            } else if q <= lowest {
-                q / 4.0
-            } else {
-                break;
-            };
-            let mut candidate = self.clone();
-            candidate.q_scale = next;
-            consider(self, candidate, format!("process noise x{next}"), &mut best)?;
-            if self.q_scale != next {
-                break;
-            }
         }
         // The band is scaled so that 95% of the held-out states fall inside +-2 std: the 95th
         // percentile of |error| / std over 2 (robust where a few stretches, such as a filter
