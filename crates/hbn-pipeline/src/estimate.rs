@@ -435,9 +435,9 @@ pub(crate) fn estimate_pieces(
     over_pieces(pieces, u_col, y_col, |u, y| model.estimate(u, y, mode))
 }
 
-/// The smoother ([`HysteresisModel::smooth`]) over each piece of a log, as
-/// [`estimate_pieces`] runs the filter: restarted at each piece, sensor values inside a
-/// dropout left out, the estimates one after the other.
+/// The smoother ([`HysteresisModel::smooth`]) over each piece of a log (`u` and `y` in columns
+/// `u_col` and `y_col`), as [`estimate_log`] runs the filter: restarted at each piece, sensor
+/// values inside a dropout left out, the estimates one after the other.
 pub fn smooth_pieces(
     model: &HysteresisModel,
     pieces: &[LogData],
