@@ -1121,9 +1121,8 @@ impl<'m> Ekf<'m> {
             Relation::Sensor => &self.model.sensor,
         };
         let input = input.get(..gp.dim())?;
-        gp.predict(input, Want::default(), scratch)
+        gp.predict_mean(input, scratch)
             .ok()
-            .map(|p| p.mean)
             .filter(|m| m.is_finite())
     }
 

@@ -436,6 +436,19 @@ impl<'a> GpView<'a> {
         )
     }
 
+    /// The predictive mean alone at the raw input `x_raw`: [`GpView::predict`] with
+    /// [`Want::default`], the same bits, without building the gradients' arrays of a
+    /// [`Prediction`] (the unscented mode asks this for every sigma point).
+    pub fn predict_mean(&self, x_raw: &[f64], scratch: &mut [f64]) -> Result<f64, CoreError> {
+        crate::simd::vectorised(
+            #[inline(always)]
+            || {
+                self.predict_inline(x_raw, Want::default(), scratch)
+                    .map(|p| p.mean)
+            },
+        )
+    }
+
     /// [`GpView::predict`], inlined where it is called ([`crate::simd::vectorised`]).
     #[inline(always)]
     fn predict_inline(
@@ -1685,6 +1698,8 @@ mod tests {
             // Without gradients the mean is bit-identical.
             let q = gp.predict(&x0, Want::default(), &mut scratch).unwrap();
             assert_eq!(q.mean.to_bits(), p.mean.to_bits());
+            let m = gp.predict_mean(&x0, &mut scratch).unwrap();
+            assert_eq!(m.to_bits(), p.mean.to_bits());
         }
     }
 

@@ -851,9 +851,8 @@ impl<'m> VectorEkf<'m> {
     /// The mean of `gp` at `input` (`None` on failure).
     fn mean_of(gp: &GpView<'_>, input: &[f64; MAX_DIM], scratch: &mut [f64]) -> Option<f64> {
         let input = input.get(..gp.dim())?;
-        gp.predict(input, Want::default(), scratch)
+        gp.predict_mean(input, scratch)
             .ok()
-            .map(|p| p.mean)
             .filter(|m| m.is_finite())
     }
 
