@@ -88,22 +88,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 }
                 times.push(t, u.len());
             }
-            println!(
-                "{}",
-                serde_json::json!({
-                    "model": path.display().to_string(),
-                    "mode": mode.name(),
-                    "transition_points": model.transition().n_support(),
-                    "sensor_points": model.sensor().n_support(),
-                    "sparse": model.transition().is_sparse(),
-                    "steps": u.len(),
-                    "passes": passes,
-                    "fastest_us": times.fastest(&times.wall),
-                    "median_us": times.median(&times.wall),
-                    "fastest_cpu_us": times.fastest(&times.cpu),
-                    "median_cpu_us": times.median(&times.cpu),
-                })
-            );
+            times.print(serde_json::json!({
+                "model": path.display().to_string(),
+                "mode": mode.name(),
+                "transition_points": model.transition().n_support(),
+                "sensor_points": model.sensor().n_support(),
+                "sparse": model.transition().is_sparse(),
+                "steps": u.len(),
+                "passes": passes,
+            }));
         }
     }
     Ok(())
@@ -180,24 +173,17 @@ fn time_vector(
             }
             times.push(t, n);
         }
-        println!(
-            "{}",
-            serde_json::json!({
-                "model": path.display().to_string(),
-                "mode": mode.name(),
-                "inputs": d.inputs,
-                "states": d.states,
-                "sensors": d.sensors,
-                "transition_points": model.transition(0).map(|g| g.n_support()),
-                "sparse": model.transition(0).is_some_and(|g| g.is_sparse()),
-                "steps": n,
-                "passes": passes,
-                "fastest_us": times.fastest(&times.wall),
-                "median_us": times.median(&times.wall),
-                "fastest_cpu_us": times.fastest(&times.cpu),
-                "median_cpu_us": times.median(&times.cpu),
-            })
-        );
+        times.print(serde_json::json!({
+            "model": path.display().to_string(),
+            "mode": mode.name(),
+            "inputs": d.inputs,
+            "states": d.states,
+            "sensors": d.sensors,
+            "transition_points": model.transition(0).map(|g| g.n_support()),
+            "sparse": model.transition(0).is_some_and(|g| g.is_sparse()),
+            "steps": n,
+            "passes": passes,
+        }));
     }
     Ok(())
 }
@@ -244,18 +230,23 @@ impl Times {
         }
     }
 
-    fn sorted(v: &[f64]) -> Vec<f64> {
-        let mut v = v.to_vec();
-        v.sort_by(f64::total_cmp);
-        v
-    }
-
-    fn fastest(&self, v: &[f64]) -> Option<f64> {
-        Self::sorted(v).first().copied()
-    }
-
-    fn median(&self, v: &[f64]) -> Option<f64> {
-        let s = Self::sorted(v);
-        s.get(s.len() / 2).copied()
+    /// Prints `fields` as one JSON line with the fastest and median pass of each clock.
+    fn print(&self, mut fields: serde_json::Value) {
+        let pick = |v: &[f64], median: bool| {
+            let mut v = v.to_vec();
+            v.sort_by(f64::total_cmp);
+            v.get(if median { v.len() / 2 } else { 0 }).copied()
+        };
+        if let Some(o) = fields.as_object_mut() {
+            for (key, v, median) in [
+                ("fastest_us", &self.wall, false),
+                ("median_us", &self.wall, true),
+                ("fastest_cpu_us", &self.cpu, false),
+                ("median_cpu_us", &self.cpu, true),
+            ] {
+                o.insert(key.to_owned(), serde_json::json!(pick(v, median)));
+            }
+        }
+        println!("{fields}");
     }
 }
