@@ -4,7 +4,7 @@
 //! schemas) or the Foxglove SDK (JSON messages), addressed by Foxglove-style message paths
 //! ([`SignalPath`], e.g. `/joint_states.position[1]`); aligns them on one uniform time grid
 //! ([`resample`]); and writes logs and other files atomically ([`write_log`],
-//! [`write_scalar_log`], [`write_json_log`], [`write_atomic`]).
+//! [`write_timed_log`], [`write_scalar_log`], [`write_json_log`], [`write_atomic`]).
 //!
 //! All times are `u64` nanoseconds. Nothing here panics on any input bytes: malformed files,
 //! schemas and messages are [`IoError`]s whose messages name the file, topic or field and say
@@ -38,9 +38,10 @@ pub use resample::{
     window,
 };
 pub use write::{
-    Encoding, STAMPED_SCALAR_NAME, ScalarTopic, Topic, stamped_cdr, stamped_jsonschema,
+    Encoding, STAMPED_SCALAR_NAME, ScalarTopic, TimedTopic, Topic, stamped_cdr, stamped_jsonschema,
     stamped_ros2msg, stamped_scalar_cdr, stamped_scalar_jsonschema, stamped_scalar_ros2msg,
     stamped_schema_name, write_atomic, write_json_log, write_log, write_scalar_log,
+    write_timed_log,
 };
 
 /// Decodes the value at `path` (fields inside the message, no topic) of one CDR message with a

@@ -38,6 +38,20 @@ pub struct Topic<'a> {
     pub fields: &'a [(&'a str, &'a [f64])],
 }
 
+/// One topic of stamped messages with its own time stamps, for [`write_timed_log`]: a topic
+/// recorded at its own rate (a camera slower than the other sensors, a topic with dropped
+/// messages).
+#[derive(Clone, Copy, Debug)]
+pub struct TimedTopic<'a> {
+    /// The topic name (e.g. `/state`).
+    pub topic: &'a str,
+    /// The log time of each message (ns), not decreasing.
+    pub t_ns: &'a [u64],
+    /// The message's fields in order, as in [`Topic::fields`]: one value per time stamp of
+    /// this topic.
+    pub fields: &'a [(&'a str, &'a [f64])],
+}
+
 /// Schema name of the messages [`write_scalar_log`] writes.
 pub const STAMPED_SCALAR_NAME: &str = "hbn_msgs/msg/StampedScalar";
 
@@ -188,11 +202,20 @@ fn invalid(file: &Path, reason: String) -> IoError {
 }
 
 fn check_times(file: &Path, t_ns: &[u64]) -> Result<(), IoError> {
+    check_topic_times(file, None, t_ns)
+}
+
+/// Checks that `t_ns` does not decrease; the message names `topic` when given.
+fn check_topic_times(file: &Path, topic: Option<&str>, t_ns: &[u64]) -> Result<(), IoError> {
     for w in t_ns.windows(2) {
         if w[1] < w[0] {
+            let whose = match topic {
+                Some(topic) => format!("times of topic `{topic}`"),
+                None => "times".to_owned(),
+            };
             return Err(invalid(
                 file,
-                format!("times must not decrease ({} ns then {} ns)", w[0], w[1]),
+                format!("{whose} must not decrease ({} ns then {} ns)", w[0], w[1]),
             ));
         }
     }
@@ -252,12 +275,11 @@ pub fn write_scalar_log(
 /// A schema of [`write_log`]: its name and its fields.
 type Schema<'a> = (String, Vec<&'a str>);
 
-/// Checks every topic of [`write_log`] against the time stamps; returns each topic's
-/// schema index and the schemas, in order of first use.
+/// Checks every topic of [`write_log`] and [`write_timed_log`] against its time stamps;
+/// returns each topic's schema index and the schemas, in order of first use.
 fn plan_schemas<'a>(
     file: &Path,
-    t_ns: &[u64],
-    topics: &[Topic<'a>],
+    topics: &[TimedTopic<'a>],
 ) -> Result<(Vec<usize>, Vec<Schema<'a>>), IoError> {
     let mut schemas: Vec<Schema<'a>> = Vec::new();
     let mut of_topic = Vec::with_capacity(topics.len());
@@ -274,6 +296,7 @@ fn plan_schemas<'a>(
         if tp.fields.is_empty() {
             return Err(invalid(file, format!("topic `{}` has no fields", tp.topic)));
         }
+        let t_ns = tp.t_ns;
         for (i, &(name, values)) in tp.fields.iter().enumerate() {
             if !valid_field_name(name) {
                 return Err(invalid(
@@ -343,6 +366,7 @@ fn plan_schemas<'a>(
 /// distinct and not empty, every topic needs at least one field, field names must be valid
 /// ROS 2 field names (see [`Topic::fields`]) and distinct within a topic, values must be
 /// finite (one per time stamp), times must not decrease and must fit int32 seconds.
+/// [`write_timed_log`] writes topics with their own time stamps.
 pub fn write_log(
     file: &Path,
     t_ns: &[u64],
@@ -350,10 +374,61 @@ pub fn write_log(
     encoding: Encoding,
 ) -> Result<(), IoError> {
     check_times(file, t_ns)?;
-    let (of_topic, schemas) = plan_schemas(file, t_ns, topics)?;
-    let stamps = t_ns
+    let timed: Vec<TimedTopic<'_>> = topics
         .iter()
-        .map(|&t| split_stamp(file, t))
+        .map(|tp| TimedTopic {
+            topic: tp.topic,
+            t_ns,
+            fields: tp.fields,
+        })
+        .collect();
+    // Sample by sample, each topic in turn.
+    let order = (0..t_ns.len()).flat_map(|k| (0..topics.len()).map(move |c| (c, k)));
+    write_messages(file, &timed, order, encoding)
+}
+
+/// Writes topics of stamped messages whose time stamps differ from topic to topic, atomically.
+///
+/// The messages, schemas and requirements are those of [`write_log`], with each topic's
+/// times its own ([`TimedTopic::t_ns`], not decreasing; a topic may hold no message). The
+/// messages are written in order of time, a tie in the order the topics are given. Topics
+/// sharing one set of time stamps give the same file as [`write_log`].
+pub fn write_timed_log(
+    file: &Path,
+    topics: &[TimedTopic<'_>],
+    encoding: Encoding,
+) -> Result<(), IoError> {
+    for tp in topics {
+        check_topic_times(file, Some(tp.topic), tp.t_ns)?;
+    }
+    // Every (topic, message) pair, merged by time; the sort is stable, so a tie keeps the
+    // topics' order, and a topic's messages keep theirs.
+    let mut order: Vec<(usize, usize)> = topics
+        .iter()
+        .enumerate()
+        .flat_map(|(c, tp)| (0..tp.t_ns.len()).map(move |k| (c, k)))
+        .collect();
+    order.sort_by_key(|&(c, k)| topics[c].t_ns[k]);
+    write_messages(file, topics, order.into_iter(), encoding)
+}
+
+/// Writes the messages `order` names (topic index, message index), in that order, after
+/// checking the topics; the one writer of [`write_log`] and [`write_timed_log`].
+fn write_messages(
+    file: &Path,
+    topics: &[TimedTopic<'_>],
+    order: impl Iterator<Item = (usize, usize)>,
+    encoding: Encoding,
+) -> Result<(), IoError> {
+    let (of_topic, schemas) = plan_schemas(file, topics)?;
+    let stamps = topics
+        .iter()
+        .map(|tp| {
+            tp.t_ns
+                .iter()
+                .map(|&t| split_stamp(file, t))
+                .collect::<Result<Vec<_>, _>>()
+        })
         .collect::<Result<Vec<_>, _>>()?;
     atomic(file, |w| {
         let opts = mcap::WriteOptions::new()
@@ -393,39 +468,39 @@ pub fn write_log(
         let mut seq = vec![0u32; topics.len()];
         let mut buf = Vec::new();
         let mut values = Vec::new();
-        for (k, &t) in t_ns.iter().enumerate() {
-            let (sec, nsec) = stamps[k];
-            for (c, tp) in topics.iter().enumerate() {
-                values.clear();
-                values.extend(tp.fields.iter().map(|(_, v)| v[k]));
-                match encoding {
-                    Encoding::Json => {
-                        buf.clear();
-                        let mut msg = serde_json::Map::new();
-                        msg.insert(
-                            "header".into(),
-                            json!({"stamp": {"sec": sec, "nanosec": nsec}, "frame_id": ""}),
-                        );
-                        for ((name, _), &v) in tp.fields.iter().zip(&values) {
-                            msg.insert((*name).to_owned(), json!(v));
-                        }
-                        serde_json::to_writer(&mut buf, &msg)
-                            .map_err(|e| invalid(file, e.to_string()))?;
+        for (c, k) in order {
+            let tp = &topics[c];
+            let t = tp.t_ns[k];
+            let (sec, nsec) = stamps[c][k];
+            values.clear();
+            values.extend(tp.fields.iter().map(|(_, v)| v[k]));
+            match encoding {
+                Encoding::Json => {
+                    buf.clear();
+                    let mut msg = serde_json::Map::new();
+                    msg.insert(
+                        "header".into(),
+                        json!({"stamp": {"sec": sec, "nanosec": nsec}, "frame_id": ""}),
+                    );
+                    for ((name, _), &v) in tp.fields.iter().zip(&values) {
+                        msg.insert((*name).to_owned(), json!(v));
                     }
-                    Encoding::Ros2 => buf = stamped_cdr(sec, nsec, "", &values),
+                    serde_json::to_writer(&mut buf, &msg)
+                        .map_err(|e| invalid(file, e.to_string()))?;
                 }
-                out.write_to_known_channel(
-                    &mcap::records::MessageHeader {
-                        channel_id: ids[c],
-                        sequence: seq[c],
-                        log_time: t,
-                        publish_time: t,
-                    },
-                    &buf,
-                )
-                .map_err(|e| mcap_err(file, e))?;
-                seq[c] = seq[c].wrapping_add(1);
+                Encoding::Ros2 => buf = stamped_cdr(sec, nsec, "", &values),
             }
+            out.write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id: ids[c],
+                    sequence: seq[c],
+                    log_time: t,
+                    publish_time: t,
+                },
+                &buf,
+            )
+            .map_err(|e| mcap_err(file, e))?;
+            seq[c] = seq[c].wrapping_add(1);
         }
         out.finish().map_err(|e| mcap_err(file, e))?;
         drop(out);
@@ -608,6 +683,131 @@ mod tests {
             write_log(&g, &t, &general, enc).unwrap();
             assert_eq!(std::fs::read(&f).unwrap(), std::fs::read(&g).unwrap());
         }
+    }
+
+    #[test]
+    fn topics_with_their_own_times_read_back_in_time_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let fast: Vec<u64> = (0..100).map(|k| T0 + k * 10_000_000).collect();
+        // A slower topic on its own clock, with gaps, and one message at a fast topic's time.
+        let slow: Vec<u64> = [0u64, 1, 2, 4, 7, 9, 10, 12, 28]
+            .iter()
+            .map(|j| T0 + 3_333_333 + j * 33_333_333)
+            .chain(std::iter::once(fast[99]))
+            .collect();
+        let u = series(fast.len(), |k| k as f64 * 0.5);
+        let x0 = series(slow.len(), |j| -(j as f64));
+        let x1 = series(slow.len(), |j| j as f64 / 3.0);
+        for enc in [Encoding::Json, Encoding::Ros2] {
+            let f = dir.path().join(format!("timed_{enc:?}.mcap"));
+            let topics = [
+                TimedTopic {
+                    topic: "/input",
+                    t_ns: &fast,
+                    fields: &[("data", &u)],
+                },
+                TimedTopic {
+                    topic: "/state",
+                    t_ns: &slow,
+                    fields: &[("x0", &x0), ("x1", &x1)],
+                },
+                TimedTopic {
+                    topic: "/empty",
+                    t_ns: &[],
+                    fields: &[("data", &[])],
+                },
+            ];
+            write_timed_log(&f, &topics, enc).unwrap();
+            let s = read_signals(
+                &f,
+                &paths(&["/input.data", "/state.x0", "/state.x1"]),
+                &ReadOptions::default(),
+            )
+            .unwrap();
+            assert_eq!((&s[0].t_ns, &s[0].value), (&fast, &u), "{enc:?}");
+            assert_eq!((&s[1].t_ns, &s[1].value), (&slow, &x0), "{enc:?}");
+            assert_eq!((&s[2].t_ns, &s[2].value), (&slow, &x1), "{enc:?}");
+            let counts: Vec<(String, u64)> = list_topics(&f)
+                .unwrap()
+                .into_iter()
+                .map(|t| (t.topic, t.message_count))
+                .collect();
+            assert!(counts.contains(&("/state".into(), slow.len() as u64)));
+            assert!(counts.contains(&("/empty".into(), 0)));
+            // The file's messages are in time order; a tie keeps the topics' order.
+            let bytes = std::fs::read(&f).unwrap();
+            let mut seen = Vec::new();
+            for m in mcap::MessageStream::new(&bytes).unwrap() {
+                let m = m.unwrap();
+                seen.push((m.log_time, m.channel.topic.clone()));
+            }
+            assert_eq!(seen.len(), fast.len() + slow.len());
+            assert!(seen.windows(2).all(|w| w[0].0 <= w[1].0), "{enc:?}");
+            let last: Vec<&str> = seen[seen.len() - 2..]
+                .iter()
+                .map(|(_, t)| t.as_str())
+                .collect();
+            assert_eq!(last, ["/input", "/state"]);
+        }
+    }
+
+    #[test]
+    fn timed_topics_on_one_clock_give_the_file_of_write_log() {
+        let dir = tempfile::tempdir().unwrap();
+        let t: Vec<u64> = (0..80).map(|k| T0 + k * 10_000_000).collect();
+        let a = series(80, |k| (k as f64).sin());
+        let b = series(80, |k| k as f64 - 40.0);
+        for enc in [Encoding::Json, Encoding::Ros2] {
+            let (f, g) = (dir.path().join("one.mcap"), dir.path().join("timed.mcap"));
+            let topics = [
+                Topic {
+                    topic: "/a",
+                    fields: &[("data", &a)],
+                },
+                Topic {
+                    topic: "/s",
+                    fields: &[("x0", &b), ("x1", &a)],
+                },
+            ];
+            write_log(&f, &t, &topics, enc).unwrap();
+            let timed = topics.map(|tp| TimedTopic {
+                topic: tp.topic,
+                t_ns: &t,
+                fields: tp.fields,
+            });
+            write_timed_log(&g, &timed, enc).unwrap();
+            assert_eq!(std::fs::read(&f).unwrap(), std::fs::read(&g).unwrap());
+        }
+    }
+
+    #[test]
+    fn timed_topics_that_go_back_in_time_or_miscount_are_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join("bad_timed.mcap");
+        let v = [1.0, 2.0, 3.0];
+        let back = [TimedTopic {
+            topic: "/cam",
+            t_ns: &[5, 7, 6],
+            fields: &[("data", &v)],
+        }];
+        let e = write_timed_log(&f, &back, Encoding::Json).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("times of topic `/cam` must not decrease (7 ns then 6 ns)"),
+            "{e}"
+        );
+        let short = [TimedTopic {
+            topic: "/cam",
+            t_ns: &[5, 6],
+            fields: &[("data", &v)],
+        }];
+        let e = write_timed_log(&f, &short, Encoding::Ros2).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("`/cam.data` has 3 values for 2 time stamps"),
+            "{e}"
+        );
+        assert!(!f.exists());
     }
 
     #[test]
