@@ -47,9 +47,10 @@ pub use log::{
     load_log_pieces, model_log_options, parse_signal, parse_time_source, round_rate,
 };
 pub use sim::{
-    MULTI_STATE_TOPIC, MultiSimLog, START_NS, SimLog, log_times, multi_input_path,
-    multi_input_topic, multi_output_path, multi_output_topic, multi_state_field, multi_state_path,
-    sequences, simulate_log, simulate_multi_log,
+    CameraFrames, MULTI_STATE_TOPIC, MultiSimLog, START_NS, SimLog, StateCamera, log_times,
+    multi_input_path, multi_input_topic, multi_output_path, multi_output_topic, multi_state_field,
+    multi_state_path, sequences, simulate_camera_log, simulate_log, simulate_multi_camera_log,
+    simulate_multi_log,
 };
 pub use train::{
     DEFAULT_INPUT, DEFAULT_OUTPUT, DEFAULT_STATE, MIN_LOG_SAMPLES, MIN_PIECE_SAMPLES, TrainSignals,
