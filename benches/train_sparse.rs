@@ -47,11 +47,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .collect::<Result<Vec<_>, Box<dyn std::error::Error>>>()?;
     let seqs: Vec<Sequence<'_>> = runs
         .iter()
-        .map(|t| Sequence {
-            u: &t.u,
-            x: &t.x,
-            y: &t.y,
-        })
+        .map(|t| Sequence::new(&t.u, &t.x, &t.y))
         .collect();
     let params = HbnParams {
         n_inducing: Some(m),

@@ -34,8 +34,8 @@ pub use read::{
     read_signals, read_signals_observed,
 };
 pub use resample::{
-    Aligned, ResampleOptions, SignalGap, dropouts_on_grid, native_rate_hz, resample, split_at_gaps,
-    window,
+    Aligned, GridSample, ResampleOptions, SignalGap, dropouts_on_grid, native_rate_hz, resample,
+    samples_on_grid, split_at_gaps, window,
 };
 pub use write::{
     Encoding, STAMPED_SCALAR_NAME, ScalarTopic, TimedTopic, Topic, stamped_cdr, stamped_jsonschema,

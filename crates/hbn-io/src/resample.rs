@@ -130,6 +130,57 @@ pub fn dropouts_on_grid(signal: &RawSignal, aligned: &Aligned, factor: f64) -> V
         .collect()
 }
 
+/// A sample of a signal placed on a grid: it lies between grid points `k - 1` and `k` (at `k`
+/// itself when `weight` is 1), and `weight` is its distance from grid point `k - 1` in grid
+/// steps, so that linear interpolation between the grid points gives its value at
+/// `weight * v_k + (1 - weight) * v_{k-1}`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GridSample {
+    /// The grid point at or after the sample.
+    pub k: usize,
+    /// Position between grid points `k - 1` (0) and `k` (1).
+    pub weight: f64,
+    /// The value recorded.
+    pub value: f64,
+}
+
+/// The samples of `signal` inside the grid's span of `aligned`, each placed between the grid
+/// points around it ([`GridSample`]), in time order. A sample at the grid's first point is at
+/// `k = 0` with weight 1.
+pub fn samples_on_grid(signal: &RawSignal, aligned: &Aligned) -> Vec<GridSample> {
+    let n = aligned.t_s.len();
+    if n == 0 || aligned.rate_hz.is_nan() || aligned.rate_hz <= 0.0 {
+        return Vec::new();
+    }
+    let step_ns = 1e9 / aligned.rate_hz;
+    let t0 = aligned.t0_ns as f64;
+    let last = (n - 1) as f64;
+    signal
+        .t_ns
+        .iter()
+        .zip(&signal.value)
+        .filter_map(|(&t, &value)| {
+            let pos = (t as f64 - t0) / step_ns;
+            // Within a nanosecond of a grid point counts as on it.
+            let tol = 1.0 / step_ns;
+            if !(pos >= -tol && pos <= last + tol && value.is_finite()) {
+                return None;
+            }
+            let k = (pos - tol).ceil().max(0.0);
+            let weight = if k == 0.0 {
+                1.0
+            } else {
+                (pos - (k - 1.0)).clamp(0.0, 1.0)
+            };
+            Some(GridSample {
+                k: k as usize,
+                weight,
+                value,
+            })
+        })
+        .collect()
+}
+
 /// The samples of `signal` at times in `[start_ns, end_ns]`.
 pub fn window(signal: &RawSignal, start_ns: u64, end_ns: u64) -> RawSignal {
     let (t_ns, value) = signal
@@ -310,4 +361,63 @@ pub fn native_rate_hz(signal: &RawSignal) -> Option<f64> {
         (d[m / 2 - 1] as f64 + d[m / 2] as f64) / 2.0
     };
     (med > 0.0).then(|| 1e9 / med)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid(n: usize, rate_hz: f64, t0_ns: u64) -> Aligned {
+        Aligned {
+            rate_hz,
+            t0_ns,
+            t_s: (0..n).map(|k| k as f64 / rate_hz).collect(),
+            columns: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn samples_between_grid_points_get_their_interpolation_weights() {
+        // Grid at 100 Hz from 1 s; samples at 30 Hz from 1 s.
+        let t0 = 1_000_000_000u64;
+        let a = grid(11, 100.0, t0);
+        let signal = RawSignal {
+            path: "/state.data".parse().unwrap(),
+            t_ns: (0..5).map(|j| t0 + j * 33_333_333).collect(),
+            value: vec![0.0, 1.0, 2.0, 3.0, 4.0],
+        };
+        let s = samples_on_grid(&signal, &a);
+        // The fourth sample (t = 0.1 s) is at grid point 10; the fifth is past the grid.
+        assert_eq!(s.len(), 4);
+        assert_eq!((s[0].k, s[0].weight), (0, 1.0));
+        assert_eq!(s[1].k, 4);
+        assert!((s[1].weight - 0.3333333).abs() < 1e-6);
+        assert_eq!(s[2].k, 7);
+        assert!((s[2].weight - 0.6666666).abs() < 1e-6);
+        // 99,999,999 ns: a nanosecond before grid point 10.
+        assert_eq!(s[3].k, 10);
+        assert!((s[3].weight - 1.0).abs() < 1e-6);
+        assert_eq!(s[3].value, 3.0);
+    }
+
+    #[test]
+    fn samples_outside_the_grid_or_not_finite_are_left_out() {
+        let t0 = 1_000_000_000u64;
+        let a = grid(5, 100.0, t0);
+        let signal = RawSignal {
+            path: "/x.data".parse().unwrap(),
+            t_ns: vec![
+                t0 - 5_000_000,
+                t0 + 15_000_000,
+                t0 + 25_000_000,
+                t0 + 60_000_000,
+            ],
+            value: vec![1.0, 2.0, f64::NAN, 4.0],
+        };
+        let s = samples_on_grid(&signal, &a);
+        assert_eq!(s.len(), 1);
+        assert_eq!(s[0].k, 2);
+        assert!((s[0].weight - 0.5).abs() < 1e-9);
+        assert!(samples_on_grid(&signal, &grid(0, 100.0, t0)).is_empty());
+    }
 }

@@ -38,12 +38,49 @@ pub struct Sequence<'a> {
     pub x: &'a [f64],
     /// Sensor output `y`.
     pub y: &'a [f64],
+    /// Where `x` was measured, one flag per sample; `None` when it was measured at every
+    /// sample. Elsewhere `x` holds a stand-in (interpolated between the measurements, or a
+    /// smoothed estimate): the GPs train on it, but held-out scores
+    /// ([`crate::tuning`]) compare the filter with measured samples only.
+    pub observed: Option<&'a [bool]>,
 }
 
 impl<'a> Sequence<'a> {
-    /// The three signals of one trajectory.
+    /// The three signals of one trajectory, the state measured at every sample.
     pub fn new(u: &'a [f64], x: &'a [f64], y: &'a [f64]) -> Self {
-        Self { u, x, y }
+        Self {
+            u,
+            x,
+            y,
+            observed: None,
+        }
+    }
+
+    /// The same trajectory with the state measured only where `observed` is true
+    /// ([`Sequence::observed`]).
+    pub fn with_observed(self, observed: &'a [bool]) -> Self {
+        Self {
+            observed: Some(observed),
+            ..self
+        }
+    }
+
+    /// Samples `a..b` of every signal (and of the mask). The range must lie inside the
+    /// sequence: callers slice within [`Sequence::validate`]d lengths.
+    pub(crate) fn slice(&self, a: usize, b: usize) -> Self {
+        let cut = |s: &'a [f64]| s.get(a..b).unwrap_or(&[]);
+        Self {
+            u: cut(self.u),
+            x: cut(self.x),
+            y: cut(self.y),
+            observed: self.observed.map(|o| o.get(a..b).unwrap_or(&[])),
+        }
+    }
+
+    /// Whether `x_k` was measured.
+    pub fn is_observed(&self, k: usize) -> bool {
+        self.observed
+            .is_none_or(|o| o.get(k).copied().unwrap_or(false))
     }
 
     /// Checks lengths (equal, at least [`MIN_SAMPLES`]) and values (finite). `index` names the
@@ -56,6 +93,15 @@ impl<'a> Sequence<'a> {
                 u: n,
                 x: self.x.len(),
                 y: self.y.len(),
+            });
+        }
+        if let Some(o) = self.observed
+            && o.len() != n
+        {
+            return Err(DataError::ObservedLength {
+                trajectory: index,
+                observed: o.len(),
+                samples: n,
             });
         }
         if n < MIN_SAMPLES {
@@ -201,18 +247,7 @@ mod tests {
         let x2 = [15.0, 16.0, 17.0];
         let y2 = [25.0, 26.0, 27.0];
         let d = build_dataset(
-            &[
-                Sequence {
-                    u: &u1,
-                    x: &x1,
-                    y: &y1,
-                },
-                Sequence {
-                    u: &u2,
-                    x: &x2,
-                    y: &y2,
-                },
-            ],
+            &[Sequence::new(&u1, &x1, &y1), Sequence::new(&u2, &x2, &y2)],
             &Plays::NONE,
         )
         .unwrap();
@@ -255,39 +290,14 @@ mod tests {
     fn bad_trajectories_are_rejected() {
         assert!(build_dataset(&[], &Plays::NONE).is_err());
         let ok = [0.0, 1.0, 2.0];
+        assert!(build_dataset(&[Sequence::new(&ok, &ok[..2], &ok)], &Plays::NONE).is_err());
         assert!(
-            build_dataset(
-                &[Sequence {
-                    u: &ok,
-                    x: &ok[..2],
-                    y: &ok
-                }],
-                &Plays::NONE
-            )
-            .is_err()
-        );
-        assert!(
-            build_dataset(
-                &[Sequence {
-                    u: &ok[..2],
-                    x: &ok[..2],
-                    y: &ok[..2]
-                }],
-                &Plays::NONE
-            )
-            .is_err()
+            build_dataset(&[Sequence::new(&ok[..2], &ok[..2], &ok[..2])], &Plays::NONE).is_err()
         );
         let nan = [0.0, f64::NAN, 2.0];
-        let e = build_dataset(
-            &[Sequence {
-                u: &ok,
-                x: &nan,
-                y: &ok,
-            }],
-            &Plays::NONE,
-        )
-        .unwrap_err()
-        .to_string();
+        let e = build_dataset(&[Sequence::new(&ok, &nan, &ok)], &Plays::NONE)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("x[1]"), "{e}");
     }
 }

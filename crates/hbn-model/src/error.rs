@@ -37,6 +37,19 @@ pub enum DataError {
     /// No trajectories at all.
     #[error("no trajectories given; train from at least one")]
     NoTrajectories,
+    /// The mask of measured states ([`crate::Sequence::observed`]) is not as long as the
+    /// trajectory.
+    #[error(
+        "trajectory {trajectory}: the mask of measured states has {observed} entries for {samples} samples"
+    )]
+    ObservedLength {
+        /// Index of the trajectory.
+        trajectory: usize,
+        /// Entries of the mask.
+        observed: usize,
+        /// Samples of the trajectory.
+        samples: usize,
+    },
     /// `u`, `x` and `y` of a trajectory differ in length.
     #[error("trajectory {trajectory}: u, x and y must have equal lengths (got {u}, {x}, {y})")]
     LengthMismatch {

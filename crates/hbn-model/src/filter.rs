@@ -91,6 +91,11 @@ impl Tracker {
     pub(crate) fn state(&self) -> Option<&EkfState> {
         self.state.as_ref()
     }
+
+    /// The state, to update with a measurement of it (offline smoothing of training logs).
+    pub(crate) fn state_mut(&mut self) -> Option<&mut EkfState> {
+        self.state.as_mut()
+    }
 }
 
 // The owner is the model (shared, so several filters and the caller can hold one copy); the

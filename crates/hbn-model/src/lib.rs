@@ -45,6 +45,7 @@ mod evidence;
 pub mod explore;
 mod filter;
 pub mod firmware;
+pub mod latent;
 mod local;
 pub mod metrics;
 mod model;
@@ -61,6 +62,7 @@ pub use evidence::KernelEvidence;
 pub use filter::{Filter, FilterOutput};
 /// A GP's prior mean ([`HbnParams::linear_mean`]).
 pub use hbn_gp::MeanFunction;
+pub use latent::{EmRound, LatentReport, LatentRun};
 pub use local::LocalData;
 #[allow(deprecated)]
 pub use model::HbnModel;
@@ -74,7 +76,7 @@ pub use params::{
     MIN_FIRMWARE_BUDGET, Param, ParamValue, Problem, Selection, SensorInputs, SignalInfo, Signals,
     UnknownKernel, parse_bytes,
 };
-pub use smooth::Smoothing;
+pub use smooth::{Smoothing, StateFrame};
 pub use tuning::{CandidateRow, FilterTuning, NoiseScales, ValidationReport};
 pub use vector::{
     SignalNames, VectorEstimate, VectorModel, VectorSequence, VectorSummary, VectorValidationRow,

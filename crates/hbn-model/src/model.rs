@@ -135,6 +135,11 @@ pub struct TrainingSummary {
     /// empty when the kernels were set).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub kernel_evidence: Vec<KernelEvidence>,
+    /// How much of the state was measured, and the rounds of expectation-maximisation over
+    /// the rest ([`HysteresisModel::fit_latent`]); `None` when the state was measured at every
+    /// sample.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub latent: Option<crate::latent::LatentReport>,
 }
 
 /// The former name of [`HysteresisModel`].
@@ -1082,6 +1087,7 @@ impl HysteresisModel {
                 starts,
                 validation: None,
                 kernel_evidence: Vec::new(),
+                latent: None,
             },
         };
         // Observability diagnostic (Sec. 4.2) along the first training trajectory. A fold's
@@ -1260,6 +1266,11 @@ impl HysteresisModel {
     pub fn stats(&self) -> (SignalStats, SignalStats, SignalStats) {
         (self.u_stats, self.x_stats, self.y_stats)
     }
+    /// What training did.
+    pub(crate) fn summary_mut(&mut self) -> &mut TrainingSummary {
+        &mut self.summary
+    }
+
     /// What training did.
     pub fn summary(&self) -> &TrainingSummary {
         &self.summary

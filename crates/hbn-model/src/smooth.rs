@@ -244,16 +244,61 @@ pub fn smooth<const N: usize, F: RecordingFilter<N> + ?Sized>(
 /// [`HysteresisModel::smooth`].
 impl RecordingFilter<3> for Ekf<'_> {
     fn record(&self, u: &[f64], y: &[f64]) -> Result<Vec<FilterRecord<3>>, ModelError> {
-        record_run(self, u, y).map(|(_, records)| records)
+        record_run(self, u, y, &[], 0.0).map(|(_, records)| records)
+    }
+}
+
+/// A measurement of the state at its own time, between two grid samples: `value` measures
+/// `weight x_k + (1 - weight) x_{k-1}` (the linear interpolation between the grid samples
+/// around it), both in the augmented state `z_k = [x_k, x_{k-1}, s_k]`. A camera frame taken
+/// at `t` with `t_{k-1} < t <= t_k` has `weight = (t - t_{k-1}) / (t_k - t_{k-1})`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StateFrame {
+    /// The grid sample at or after the frame.
+    pub k: usize,
+    /// Weight of `x_k` in `[0, 1]` (that of `x_{k-1}` is `1 - weight`).
+    pub weight: f64,
+    /// The measured state.
+    pub value: f64,
+}
+
+/// Updates `z ~ N(m, P)` with a frame: `value = h^T z + e`, `e ~ N(0, var)`, `h = [w, 1 - w, 0]`
+/// (Joseph form, symmetric). A frame with a non-finite value or weight, or an update that is
+/// not finite, leaves the state as it was.
+fn frame_update(m: &mut Vector3<f64>, p: &mut Matrix3<f64>, frame: &StateFrame, var: f64) {
+    let w = frame.weight;
+    if !(w.is_finite() && frame.value.is_finite() && var.is_finite() && var > 0.0) {
+        return;
+    }
+    let w = w.clamp(0.0, 1.0);
+    let h = Vector3::new(w, 1.0 - w, 0.0);
+    let ph = *p * h;
+    let s = h.dot(&ph) + var;
+    if !(s.is_finite() && s > 0.0) {
+        return;
+    }
+    let gain = ph / s;
+    let innovation = frame.value - h.dot(m);
+    let i_kh = Matrix3::identity() - gain * h.transpose();
+    let p_new = i_kh * *p * i_kh.transpose() + gain * gain.transpose() * var;
+    let p_new = 0.5 * (p_new + p_new.transpose());
+    let m_new = *m + gain * innovation;
+    if m_new.iter().chain(p_new.iter()).all(|v| v.is_finite()) {
+        *m = m_new;
+        *p = p_new;
     }
 }
 
 /// The batch filter ([`crate::filter::run`], the same per-sample code) with a record per
-/// sample: the estimate and the records.
+/// sample: the estimate and the records. `frames` (sorted by `k`) are measurements of the state
+/// with noise variance `frame_var`, applied after each step's update with `y_k`; the records
+/// hold the filtered state after them (the estimate, the filter's own output, does not).
 fn record_run(
     ekf: &Ekf<'_>,
     u: &[f64],
     y: &[f64],
+    frames: &[StateFrame],
+    frame_var: f64,
 ) -> Result<(Estimate, Vec<FilterRecord<3>>), ModelError> {
     if u.len() != y.len() {
         return Err(crate::DataError::InputOutputLength {
@@ -266,10 +311,17 @@ fn record_run(
     let mut scratch = vec![0.0; ekf.scratch_len()];
     let mut estimate = Estimate::with_capacity(u.len());
     let mut records = Vec::with_capacity(u.len());
-    for (&u_k, &y_k) in u.iter().zip(y) {
+    let mut frames = frames.iter().peekable();
+    for (k, (&u_k, &y_k)) in u.iter().zip(y).enumerate() {
         let prediction = tracker.state().map(|st| ekf.predict(st, &mut scratch));
         let out = tracker.step(ekf, u_k, y_k);
         estimate.push(&out);
+        while frames.next_if(|f| f.k < k).is_some() {}
+        while let Some(frame) = frames.next_if(|f| f.k == k) {
+            if let Some(st) = tracker.state_mut() {
+                frame_update(&mut st.z, &mut st.p, frame, frame_var);
+            }
+        }
         let Some(st) = tracker.state() else {
             return Err(CoreError::InvalidSpec("the filter has no state after a step").into());
         };
@@ -324,8 +376,23 @@ impl HysteresisModel {
         y: &[f64],
         config: &EkfConfig,
     ) -> Result<Smoothing, ModelError> {
+        self.smooth_frames(u, y, &[], 0.0, config)
+    }
+
+    /// [`HysteresisModel::smooth_with`] given measurements of the state as well (`frames`,
+    /// sorted by grid sample, each with noise variance `frame_var`): the smoothed states of a
+    /// training log whose state was recorded at its own rate, with gaps (the E-step of
+    /// [`HysteresisModel::fit_latent`]). [`Smoothing::filtered`] is the filter without them.
+    pub fn smooth_frames(
+        &self,
+        u: &[f64],
+        y: &[f64],
+        frames: &[StateFrame],
+        frame_var: f64,
+        config: &EkfConfig,
+    ) -> Result<Smoothing, ModelError> {
         let ekf = Ekf::new(self.view()?, *config)?;
-        let (filtered, records) = record_run(&ekf, u, y)?;
+        let (filtered, records) = record_run(&ekf, u, y, frames, frame_var)?;
         let states = rts(
             &records,
             CovarianceBounds {

@@ -260,7 +260,7 @@ impl<'a> Block<'a> {
         let end = (self.burn_in + keep).min(self.seq.u.len());
         let s = &self.seq;
         Self {
-            seq: Sequence::new(&s.u[..end], &s.x[..end], &s.y[..end]),
+            seq: s.slice(0, end),
             burn_in: self.burn_in,
         }
     }
@@ -302,7 +302,7 @@ pub(crate) fn split<'a>(runs: &[Sequence<'a>], fraction: f64) -> Option<Split<'a
             } else {
                 at(1.0 - j as f64 * fraction)
             };
-            let part = |a: usize, b: usize| Sequence::new(&r.u[a..b], &r.x[a..b], &r.y[a..b]);
+            let part = |a: usize, b: usize| r.slice(a, b);
             if from >= 3 {
                 train.push(part(0, from));
             }
@@ -483,7 +483,13 @@ impl Run {
                     .min(s.x.len());
                 out.x.extend_from_slice(&est.x[k..]);
                 out.sd.extend_from_slice(&est.x_std[k..]);
-                out.reference.extend_from_slice(&s.x[k..]);
+                // Only measured states are scored: elsewhere the recorded state is a stand-in.
+                out.reference.extend(
+                    s.x.iter()
+                        .enumerate()
+                        .skip(k)
+                        .map(|(i, &x)| if s.is_observed(i) { x } else { f64::NAN }),
+                );
             }
         }
         Ok(out)

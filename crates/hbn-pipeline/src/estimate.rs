@@ -629,6 +629,7 @@ mod tests {
                 samples_in_grid: Vec::new(),
                 samples_recorded: Vec::new(),
                 dropouts: Vec::new(),
+                sparse: Vec::new(),
                 aligned: hbn_io::Aligned {
                     rate_hz: 100.0,
                     t0_ns: 0,

@@ -251,6 +251,12 @@ pub struct LogData {
     /// its value is interpolated, not measured. Estimation does not feed such sensor values to
     /// the filter, which predicts through the dropout.
     pub dropouts: Vec<Vec<bool>>,
+    /// Per signal measured at fewer than [`SPARSE_BELOW`] of the grid's points (a camera
+    /// slower than the grid, or dropping many frames), its samples as recorded, placed on the
+    /// grid ([`hbn_io::GridSample`]); `None` for a signal measured about as often as the grid
+    /// runs. Training treats such a state as latent between its samples
+    /// ([`hbn_model::HysteresisModel::fit_latent`]).
+    pub sparse: Vec<Option<Vec<hbn_io::GridSample>>>,
     /// The aligned samples.
     pub aligned: Aligned,
 }
@@ -519,6 +525,13 @@ fn align(
         .iter()
         .map(|s| hbn_io::dropouts_on_grid(s, &aligned, DROPOUT_FACTOR))
         .collect();
+    let sparse = raw
+        .iter()
+        .map(|s| {
+            let on_grid = hbn_io::samples_on_grid(s, &aligned);
+            ((on_grid.len() as f64) < SPARSE_BELOW * aligned.t_s.len() as f64).then_some(on_grid)
+        })
+        .collect();
     Ok(LogData {
         file: file.to_owned(),
         paths: paths.to_vec(),
@@ -526,9 +539,16 @@ fn align(
         samples_in_grid,
         samples_recorded,
         dropouts,
+        sparse,
         aligned,
     })
 }
+
+/// A signal with samples at fewer than this fraction of the grid's points is measured sparsely
+/// ([`LogData::sparse`]): a camera at 30 Hz on a 100 Hz grid has 0.3, one at the grid's rate
+/// that drops a tenth of its frames 0.9 (its gaps are a sample or two, and interpolating over
+/// them is harmless).
+pub const SPARSE_BELOW: f64 = 0.8;
 
 /// Pieces of one log as one [`LogData`]: columns and grid times one after the other, the grid
 /// times (seconds since the first piece's start) jumping over the gaps. `None` without pieces.
@@ -536,6 +556,17 @@ pub fn join_pieces(pieces: &[LogData]) -> Option<LogData> {
     let first = pieces.first()?;
     let mut joined = first.clone();
     for piece in pieces.iter().skip(1) {
+        let offset_k = joined.len();
+        for (mine, theirs) in joined.sparse.iter_mut().zip(&piece.sparse) {
+            match (mine.as_mut(), theirs) {
+                (Some(m), Some(t)) => m.extend(t.iter().map(|g| hbn_io::GridSample {
+                    k: g.k + offset_k,
+                    ..*g
+                })),
+                // Sparse in one piece only: interpolated where it is not.
+                _ => *mine = None,
+            }
+        }
         let offset_s = piece.aligned.t0_ns.saturating_sub(first.aligned.t0_ns) as f64 * 1e-9;
         joined
             .aligned

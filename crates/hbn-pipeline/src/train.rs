@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use hbn_io::SignalPath;
-use hbn_model::{HbnParams, HysteresisModel, Problem, Sequence};
+use hbn_model::{HbnParams, HysteresisModel, LatentRun, Problem, Sequence, StateFrame};
 
 use crate::error::{LogOption, OptionError, PipelineError};
 use crate::log::{Event, LogData, LogOptions, Observer, load_log_pieces};
@@ -168,14 +168,88 @@ pub fn train_from_logs(
         None => params,
     }
     .with_signals(described);
-    let seqs: Vec<Sequence<'_>> = data
-        .iter()
-        .map(|d| Sequence::new(d.column(0), d.column(1), d.column(2)))
-        .collect();
-    let model = HysteresisModel::fit_checked(&seqs, &params, &mut |gp, progress| {
-        observe(Event::Training { gp, progress })
-    })?;
+    let mut on_training =
+        |gp, progress: &hbn_gp::FitProgress| observe(Event::Training { gp, progress });
+    let model = if data.iter().any(|d| state_frames(d).is_some()) {
+        // The state is latent between its measurements: expectation-maximisation.
+        let measured: Vec<(Vec<StateFrame>, Option<Vec<bool>>)> = data
+            .iter()
+            .map(|d| match state_frames(d) {
+                Some(frames) => {
+                    let mask = observed_mask(&frames, d.len());
+                    (frames, Some(mask))
+                }
+                None => (
+                    d.column(1)
+                        .iter()
+                        .enumerate()
+                        .map(|(k, &value)| StateFrame {
+                            k,
+                            weight: 1.0,
+                            value,
+                        })
+                        .collect(),
+                    None,
+                ),
+            })
+            .collect();
+        let runs: Vec<LatentRun<'_>> = data
+            .iter()
+            .zip(&measured)
+            .map(|(d, (frames, mask))| {
+                let seq = Sequence::new(d.column(0), d.column(1), d.column(2));
+                LatentRun {
+                    seq: match mask {
+                        Some(m) => seq.with_observed(m),
+                        None => seq,
+                    },
+                    frames,
+                }
+            })
+            .collect();
+        HysteresisModel::fit_latent(&runs, &params, &mut on_training)?
+    } else {
+        let seqs: Vec<Sequence<'_>> = data
+            .iter()
+            .map(|d| Sequence::new(d.column(0), d.column(1), d.column(2)))
+            .collect();
+        HysteresisModel::fit_checked(&seqs, &params, &mut on_training)?
+    };
     Ok(Trained { model, logs: data })
+}
+
+/// The state's measurements of a log whose state is measured sparsely
+/// ([`LogData::sparse`]), as frames of the smoother; `None` when it is measured about as often
+/// as the grid runs.
+fn state_frames(log: &LogData) -> Option<Vec<StateFrame>> {
+    let samples = log.sparse.get(1)?.as_ref()?;
+    Some(
+        samples
+            .iter()
+            .map(|g| StateFrame {
+                k: g.k,
+                weight: g.weight,
+                value: g.value,
+            })
+            .collect(),
+    )
+}
+
+/// The grid samples next to a frame (the nearer grid point of the two around it): where the
+/// interpolated state is, within half a grid step, a measurement.
+fn observed_mask(frames: &[StateFrame], len: usize) -> Vec<bool> {
+    let mut mask = vec![false; len];
+    for f in frames {
+        let k = if f.weight >= 0.5 || f.k == 0 {
+            f.k
+        } else {
+            f.k - 1
+        };
+        if let Some(m) = mask.get_mut(k) {
+            *m = true;
+        }
+    }
+    mask
 }
 
 #[cfg(test)]
