@@ -81,6 +81,49 @@ fn held_out(model: &HysteresisModel) -> Option<(f64, f64)> {
     (s.calibration.nlpd.is_finite() && s.nrmse.is_finite()).then_some((s.calibration.nlpd, s.nrmse))
 }
 
+/// How much of the state was measured.
+fn sparse_note(report: &LatentReport) -> String {
+    format!(
+        "the state was measured at {:.0}% of the grid's samples ({} frames), so the samples \
+         between them are latent",
+        100.0 * report.observed,
+        report.frames
+    )
+}
+
+/// What expectation-maximisation did ([`sparse_note`] first).
+fn em_note(report: &LatentReport) -> String {
+    let first = report.rounds.first();
+    let best = report
+        .rounds
+        .iter()
+        .filter(|r| r.improved)
+        .next_back()
+        .or(first);
+    let refits = report.rounds.len().saturating_sub(1);
+    match (first, best) {
+        (Some(first), Some(best)) if best.round > 0 => format!(
+            "{}: expectation-maximisation refitted the model on the smoothed states {refits} \
+             time{}, and round {} is kept (held-out NLPD at the measured samples {:.3} -> \
+             {:.3}, nRMSE {:.4} -> {:.4})",
+            sparse_note(report),
+            if refits == 1 { "" } else { "s" },
+            best.round,
+            first.nlpd,
+            best.nlpd,
+            first.nrmse,
+            best.nrmse
+        ),
+        _ => format!(
+            "{}: expectation-maximisation refitted the model on the smoothed states {refits} \
+             time{} without improving the held-out score, so the model trained on the state \
+             interpolated between the frames is kept",
+            sparse_note(report),
+            if refits == 1 { "" } else { "s" },
+        ),
+    }
+}
+
 impl HysteresisModel {
     /// Learns both relations from runs whose state was measured only at some samples
     /// ([`LatentRun`]), by expectation-maximisation (the module's documentation,
@@ -108,7 +151,14 @@ impl HysteresisModel {
             rounds: Vec::new(),
         };
         let Some((mut best_nlpd, nrmse)) = held_out(&best) else {
-            best.summary_mut().latent = Some(report);
+            let warning = format!(
+                "{}; without held-out data to judge a refit by, the model trained on the state \
+                 interpolated between them",
+                sparse_note(&report)
+            );
+            let summary = best.summary_mut();
+            summary.warnings.push(warning);
+            summary.latent = Some(report);
             return Ok(best);
         };
         report.rounds.push(EmRound {
@@ -171,7 +221,9 @@ impl HysteresisModel {
             best_nlpd = nlpd;
             best = candidate;
         }
+        let warning = em_note(&report);
         let summary = best.summary_mut();
+        summary.warnings.push(warning);
         if let Some(v) = summary.validation.as_mut()
             && v.candidates.is_empty()
         {

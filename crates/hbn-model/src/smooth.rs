@@ -292,7 +292,7 @@ fn frame_update(m: &mut Vector3<f64>, p: &mut Matrix3<f64>, frame: &StateFrame, 
 /// The batch filter ([`crate::filter::run`], the same per-sample code) with a record per
 /// sample: the estimate and the records. `frames` (sorted by `k`) are measurements of the state
 /// with noise variance `frame_var`, applied after each step's update with `y_k`; the records
-/// hold the filtered state after them (the estimate, the filter's own output, does not).
+/// hold the filtered state after them; the estimate holds each step's output before them.
 fn record_run(
     ekf: &Ekf<'_>,
     u: &[f64],
@@ -382,7 +382,8 @@ impl HysteresisModel {
     /// [`HysteresisModel::smooth_with`] given measurements of the state as well (`frames`,
     /// sorted by grid sample, each with noise variance `frame_var`): the smoothed states of a
     /// training log whose state was recorded at its own rate, with gaps (the E-step of
-    /// [`HysteresisModel::fit_latent`]). [`Smoothing::filtered`] is the filter without them.
+    /// [`HysteresisModel::fit_latent`]). [`Smoothing::filtered`] is the filter's output at
+    /// each sample before that sample's frames (the frames of earlier samples included).
     pub fn smooth_frames(
         &self,
         u: &[f64],
@@ -736,5 +737,109 @@ mod tests {
             assert_eq!(s.states.len(), test.u.len());
             assert_eq!(s.states.lag_one.len(), test.u.len() - 1);
         }
+    }
+
+    #[test]
+    fn a_frame_measures_the_interpolation_between_grid_samples() {
+        let mut m = Vector3::new(1.0, 0.0, 0.5);
+        let mut p = Matrix3::new(1.0, 0.2, 0.1, 0.2, 1.0, 0.0, 0.1, 0.0, 0.5);
+        let frame = StateFrame {
+            k: 3,
+            weight: 0.25,
+            value: 2.0,
+        };
+        frame_update(&mut m, &mut p, &frame, 1e-10);
+        // The measured combination moves to the frame, the covariance stays symmetric and
+        // loses the measured direction.
+        assert!((0.25 * m.x + 0.75 * m.y - 2.0).abs() < 1e-8, "{m}");
+        assert_eq!(p, p.transpose());
+        let h = Vector3::new(0.25, 0.75, 0.0);
+        assert!(h.dot(&(p * h)) < 1e-9);
+        assert!(p.symmetric_eigenvalues().iter().all(|v| *v > -1e-12));
+        // A frame with a large variance barely moves the state; a bad frame does nothing.
+        let (m0, p0) = (m, p);
+        for bad in [
+            StateFrame {
+                value: f64::NAN,
+                ..frame
+            },
+            StateFrame {
+                weight: f64::INFINITY,
+                ..frame
+            },
+        ] {
+            frame_update(&mut m, &mut p, &bad, 1e-10);
+            assert_eq!((m, p), (m0, p0));
+        }
+        frame_update(&mut m, &mut p, &frame, 0.0);
+        assert_eq!((m, p), (m0, p0));
+    }
+
+    /// Frames at every sample pin the smoothed state to them; frames at a few samples pin it
+    /// there and pull the samples between them towards the truth (measured: nRMSE 0.0222 against
+    /// 0.0245 without frames; the simulator's disturbance of the state does not propagate, so
+    /// a frame says little about the samples around it).
+    #[test]
+    fn frames_pin_the_smoothed_state() {
+        let cfg = SimConfig {
+            noise_gain: 1.0,
+            seed: 5,
+            ..SimConfig::new(SystemKind::Duhem)
+        };
+        let train = simulate_random(&cfg, 400).unwrap();
+        let params = HbnParams {
+            max_points: 120,
+            n_starts: 1,
+            validation: 0.0,
+            ..HbnParams::default()
+        };
+        let model =
+            HysteresisModel::fit(&[Sequence::new(&train.u, &train.x, &train.y)], &params).unwrap();
+        let test = simulate_random(&SimConfig { seed: 6, ..cfg }, 400).unwrap();
+        let config = model.ekf_config(Mode::Ekf);
+        let every: Vec<StateFrame> = test
+            .x
+            .iter()
+            .enumerate()
+            .map(|(k, &value)| StateFrame {
+                k,
+                weight: 1.0,
+                value,
+            })
+            .collect();
+        let pinned = model
+            .smooth_frames(&test.u, &test.y, &every, 1e-12, &config)
+            .unwrap();
+        let range = 1.0;
+        for (s, x) in pinned.states.mean.iter().zip(&test.x) {
+            assert!((s.x - x).abs() < 1e-4 * range, "{} vs {x}", s.x);
+        }
+        // Every tenth sample, each frame halfway between two grid samples.
+        let sparse: Vec<StateFrame> = (1..test.x.len())
+            .step_by(10)
+            .map(|k| StateFrame {
+                k,
+                weight: 0.5,
+                value: 0.5 * (test.x[k] + test.x[k - 1]),
+            })
+            .collect();
+        let some = model
+            .smooth_frames(&test.u, &test.y, &sparse, 1e-8, &config)
+            .unwrap();
+        let plain = model.smooth_with(&test.u, &test.y, &config).unwrap();
+        let x_of = |s: &Smoothing| s.states.mean.iter().map(|m| m.x).collect::<Vec<_>>();
+        for f in &sparse {
+            let m = &some.states.mean[f.k];
+            assert!(
+                (0.5 * (m.x + m.y) - f.value).abs() < 1e-3,
+                "{m} vs {}",
+                f.value
+            );
+        }
+        let (with, without) = (nrmse(&x_of(&some), &test.x), nrmse(&x_of(&plain), &test.x));
+        assert!(
+            with < 0.95 * without,
+            "with frames {with}, without {without}"
+        );
     }
 }

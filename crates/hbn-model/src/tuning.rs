@@ -1051,4 +1051,74 @@ mod tests {
         assert!((f64::from(LAST_STEP) * LATTICE - 0.1).abs() < 1e-12);
         assert!((f64::from(LOG_MIN) * LATTICE + 3.0).abs() < 1e-12);
     }
+
+    #[test]
+    fn only_measured_states_are_scored_held_out() {
+        // The mask follows every cut of the split and of the cap.
+        let (u, x, y) = seq(400);
+        let observed: Vec<bool> = (0..400).map(|k| k % 3 == 0).collect();
+        let runs = [Sequence::new(&u, &x, &y).with_observed(&observed)];
+        let s = split(&runs, 0.25).unwrap();
+        for f in &s.folds {
+            for part in f.train.iter().chain(f.validation.iter().map(|b| &b.seq)) {
+                let o = part.observed.expect("the mask is kept");
+                assert_eq!(o.len(), part.u.len());
+                for (k, &t) in part.u.iter().enumerate() {
+                    assert_eq!(o[k], (t as usize) % 3 == 0);
+                }
+            }
+            let b = f.validation[0].prefix(40);
+            assert_eq!(b.seq.observed.unwrap().len(), b.seq.u.len());
+        }
+        // The filter's run scores the measured samples and leaves the others out.
+        let cfg = hbn_sim::SimConfig {
+            noise_gain: 1.0,
+            ..hbn_sim::SimConfig::new(hbn_sim::SystemKind::Duhem)
+        };
+        let t = hbn_sim::simulate_random(&cfg, 300).unwrap();
+        let params = crate::HbnParams {
+            max_points: 80,
+            n_starts: 1,
+            validation: 0.0,
+            ..crate::HbnParams::default()
+        };
+        let model = HysteresisModel::fit(&[Sequence::new(&t.u, &t.x, &t.y)], &params).unwrap();
+        let observed: Vec<bool> = (0..300).map(|k| k % 4 == 1).collect();
+        // The state between the measurements is garbage: it must not count.
+        let garbage: Vec<f64> =
+            t.x.iter()
+                .zip(&observed)
+                .map(|(&x, &o)| if o { x } else { x + 100.0 })
+                .collect();
+        let run = |seq: Sequence<'_>| {
+            let trials = [Scored {
+                model: &model,
+                blocks: vec![Block { seq, burn_in: 20 }],
+            }];
+            Run::of(&trials, Mode::Ekf, 1.0, 1.0).unwrap()
+        };
+        let masked = run(Sequence::new(&t.u, &garbage, &t.y).with_observed(&observed));
+        let clean = run(Sequence::new(&t.u, &t.x, &t.y));
+        assert_eq!(masked.x, clean.x);
+        let scored: Vec<usize> = (20..300).filter(|k| observed[*k]).collect();
+        assert_eq!(masked.sums().n, scored.len());
+        for (i, k) in (20..300).enumerate() {
+            if observed[k] {
+                assert_eq!(masked.reference[i], t.x[k]);
+            } else {
+                assert!(masked.reference[i].is_nan());
+            }
+        }
+        // Over the measured samples the scores are those of the clean state there.
+        let clean_measured = Run {
+            reference: clean
+                .reference
+                .iter()
+                .enumerate()
+                .map(|(i, &r)| if observed[i + 20] { r } else { f64::NAN })
+                .collect(),
+            ..clean.clone()
+        };
+        assert_eq!(masked.scores(1.0), clean_measured.scores(1.0));
+    }
 }
