@@ -433,7 +433,10 @@ fn multi_systems_help() -> String {
      A multi-signal system writes one topic per input, /input0, /input1, ..., and per sensor,\n\
      /sensor0, /sensor1, ... (field data), and one topic /state with a field per state\n\
      component: the paths are /input0.data, ..., /state.x0, /state.x1, ..., /sensor0.data, ...\n\
-     Every input is its own random ramp (from --input-seed).",
+     Every input is its own random ramp (from --input-seed).\n\n\
+     A slow camera: --state-rate 30 --state-drop 0.1 writes the state as a 30 Hz camera that\n\
+     drops a tenth of its frames records it (the input and sensor stay at --rate):\n  \
+     hbn simulate --system bouc-wen --steps 3000 --state-rate 30 --state-drop 0.1 --out cam.mcap",
     systems_help(),
     multi_systems_help()
 ))]
@@ -463,6 +466,19 @@ pub struct SimulateArgs {
     /// Largest input increment per sample.
     #[arg(long, default_value_t = hbn_sim::DEFAULT_MAX_INCREMENT, value_parser = parse_positive)]
     pub max_increment: f64,
+    /// Rate of the state topic (Hz): a camera slower than the sensor, its frames at 1 s + j /
+    /// HZ on its own clock, each the true state interpolated between the samples around it;
+    /// at most --rate [default: --rate, the state at every sample]
+    #[arg(long, value_name = "HZ", allow_negative_numbers = true, value_parser = parse_positive)]
+    pub state_rate: Option<f64>,
+    /// Share of the camera's frames dropped, each independently (seeded by --seed), in [0, 1);
+    /// the first and last frames are kept, so the state spans the log.
+    #[arg(long, value_name = "FRACTION", default_value_t = 0.0, allow_negative_numbers = true,
+          value_parser = |s: &str| match s.trim().parse::<f64>() {
+              Ok(v) if (0.0..1.0).contains(&v) => Ok(v),
+              _ => Err(format!("expected a fraction in [0, 1), got {s:?}")),
+          })]
+    pub state_drop: f64,
     /// Output MCAP file.
     #[arg(long)]
     pub out: PathBuf,
