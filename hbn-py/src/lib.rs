@@ -957,8 +957,9 @@ impl HysteresisModelCore {
 
 #[pymethods]
 impl HysteresisModelCore {
-    /// Fits both GPs to trajectories (lists of equal-length `u`, `x`, `y` arrays); `params`
-    /// are the training keywords (`rate_hz` among them) applied over the library defaults.
+    /// Fits both GPs to trajectories (lists of equal-length `u`, `x`, `y` arrays; `x` NaN where
+    /// the state was not measured, `HysteresisModel::fit_partial`); `params` are the training
+    /// keywords (`rate_hz` among them) applied over the library defaults.
     #[staticmethod]
     #[pyo3(signature = (u, x, y, signals, params))]
     fn fit(
@@ -993,7 +994,7 @@ impl HysteresisModelCore {
             let seqs: Vec<Sequence<'_>> = (0..u.len())
                 .map(|i| Sequence::new(&u[i], &x[i], &y[i]))
                 .collect();
-            Ok(HysteresisModel::fit(&seqs, &p)?)
+            Ok(HysteresisModel::fit_partial(&seqs, &p)?)
         })?;
         Ok(Self::wrap(inner))
     }

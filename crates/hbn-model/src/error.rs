@@ -37,6 +37,15 @@ pub enum DataError {
     /// No trajectories at all.
     #[error("no trajectories given; train from at least one")]
     NoTrajectories,
+    /// A trajectory's state is NaN at every sample: nothing to learn it from
+    /// ([`crate::HysteresisModel::fit_partial`]).
+    #[error(
+        "trajectory {trajectory}: the state x is NaN at every sample; NaN marks a sample without a measurement, and a trajectory needs some"
+    )]
+    NoStateMeasured {
+        /// Index of the trajectory.
+        trajectory: usize,
+    },
     /// The mask of measured states ([`crate::Sequence::observed`]) is not as long as the
     /// trajectory.
     #[error(

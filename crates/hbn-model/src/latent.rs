@@ -8,12 +8,14 @@
 //!    ([`HysteresisModel::smooth_frames`]: each frame is a linear measurement of `x_k` and
 //!    `x_{k-1}`, the grid samples around it);
 //! 3. M-step: refit the GPs (the configuration the first fit chose, hyperparameters searched
-//!    again) on the smoothed states;
-//! 4. repeat while the held-out NLPD of the default mode improves, within a training time of
+//!    again) on a path of every run drawn from the smoothed distribution
+//!    ([`crate::smooth::Smoothed::sample_path`]), so that the GPs see the latent states'
+//!    uncertainty, not only their means;
+//! 4. repeat while the held-out NLPD of the default mode improves without the held-out nRMSE
+//!    growing beyond the first fit's (the rule of model selection), within a training time of
 //!    [`TIME_BUDGET`] times the first fit's.
 //!
-//! The M-step uses the smoothed means as data. docs/slow-camera.md gives the reasoning and
-//! the measurements.
+//! docs/slow-camera.md gives the reasoning and the measurements.
 
 use std::time::Instant;
 
@@ -21,14 +23,18 @@ use serde::{Deserialize, Serialize};
 
 use crate::dataset::Sequence;
 use crate::model::GpRole;
-use crate::params::CheckedHbnParams;
+use crate::params::{CheckedHbnParams, HbnParams};
 use crate::smooth::StateFrame;
 use crate::{HysteresisModel, ModelError};
+use hbn_core::rng::Rng;
 use hbn_gp::FitProgress;
 
 /// Training time of the whole of [`HysteresisModel::fit_latent`] at most, as a multiple of its
 /// first fit's: a round of EM starts only when the rounds so far suggest it ends within it.
 pub const TIME_BUDGET: f64 = 3.0;
+
+/// Mixed into the training seed per round for the draws of the latent paths.
+const SEED_STRIDE: u64 = 0x9E37_79B9_7F4A_7C15;
 
 /// Rounds of EM at most (each a smoothing pass and a refit).
 pub const MAX_ROUNDS: usize = 4;
@@ -58,7 +64,8 @@ pub struct EmRound {
     pub nlpd: f64,
     /// Held-out nRMSE of the default mode at the measured samples.
     pub nrmse: f64,
-    /// Whether the round improved on the best before it (round 0 always does).
+    /// Whether the round is kept over the best before it: a lower held-out NLPD, and a held-out
+    /// nRMSE no higher than round 0's (round 0 always is).
     pub improved: bool,
 }
 
@@ -71,6 +78,76 @@ pub struct LatentReport {
     pub frames: usize,
     /// The rounds of EM, the first fit included; the model is the best one's.
     pub rounds: Vec<EmRound>,
+}
+
+/// The grid samples next to a frame (of the two grid samples around it, the nearer): where
+/// the state interpolated between the frames is, within half a grid step, a measurement
+/// ([`Sequence::observed`]). `len` is the run's length; frames beyond it are ignored.
+pub fn observed_mask(frames: &[StateFrame], len: usize) -> Vec<bool> {
+    let mut mask = vec![false; len];
+    for f in frames {
+        let k = if f.weight >= 0.5 {
+            f.k
+        } else {
+            f.k.saturating_sub(1)
+        };
+        if let Some(m) = mask.get_mut(k) {
+            *m = true;
+        }
+    }
+    mask
+}
+
+/// A state measured at some samples of a run and not at the others, in the parts of a
+/// [`LatentRun`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PartialState {
+    /// The measured samples, each a frame on its grid sample (weight 1).
+    pub frames: Vec<StateFrame>,
+    /// The state interpolated linearly between the measured samples (held before the first
+    /// and after the last).
+    pub interpolated: Vec<f64>,
+    /// Which samples were measured.
+    pub observed: Vec<bool>,
+}
+
+impl PartialState {
+    /// The measured samples of `x`: the finite ones (NaN marks a sample without a
+    /// measurement). `None` when no sample is finite.
+    pub fn from_gaps(x: &[f64]) -> Option<Self> {
+        let frames: Vec<StateFrame> = x
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| v.is_finite())
+            .map(|(k, &value)| StateFrame {
+                k,
+                weight: 1.0,
+                value,
+            })
+            .collect();
+        let first = frames.first()?;
+        let mut interpolated = vec![first.value; x.len()];
+        for pair in frames.windows(2) {
+            let (a, b) = (pair[0], pair[1]);
+            let span = (b.k - a.k) as f64;
+            for (i, v) in interpolated.iter_mut().enumerate().take(b.k + 1).skip(a.k) {
+                let w = (i - a.k) as f64 / span;
+                *v = (1.0 - w) * a.value + w * b.value;
+            }
+        }
+        if let Some(last) = frames.last() {
+            interpolated
+                .iter_mut()
+                .skip(last.k)
+                .for_each(|v| *v = last.value);
+        }
+        let observed = x.iter().map(|v| v.is_finite()).collect();
+        Some(Self {
+            frames,
+            interpolated,
+            observed,
+        })
+    }
 }
 
 /// The default mode's held-out score of a model: `(NLPD, nRMSE)`; `None` untuned.
@@ -94,12 +171,7 @@ fn sparse_note(report: &LatentReport) -> String {
 /// What expectation-maximisation did ([`sparse_note`] first).
 fn em_note(report: &LatentReport) -> String {
     let first = report.rounds.first();
-    let best = report
-        .rounds
-        .iter()
-        .filter(|r| r.improved)
-        .next_back()
-        .or(first);
+    let best = report.rounds.iter().rfind(|r| r.improved).or(first);
     let refits = report.rounds.len().saturating_sub(1);
     match (first, best) {
         (Some(first), Some(best)) if best.round > 0 => format!(
@@ -125,6 +197,40 @@ fn em_note(report: &LatentReport) -> String {
 }
 
 impl HysteresisModel {
+    /// [`HysteresisModel::fit`] for trajectories whose state is NaN where it was not measured
+    /// (a slow or dropping camera): [`HysteresisModel::fit_latent`] over the measured samples
+    /// ([`PartialState::from_gaps`]) when some are missing, the plain fit otherwise. A
+    /// trajectory without one measured state is [`crate::DataError::NoStateMeasured`].
+    pub fn fit_partial(
+        trajectories: &[Sequence<'_>],
+        params: &HbnParams,
+    ) -> Result<Self, ModelError> {
+        let checked = params.clone().check()?;
+        if trajectories
+            .iter()
+            .all(|t| t.x.iter().all(|v| v.is_finite()))
+        {
+            return Self::fit_checked(trajectories, &checked, &mut |_, _| {});
+        }
+        let partial: Vec<PartialState> = trajectories
+            .iter()
+            .enumerate()
+            .map(|(i, t)| {
+                PartialState::from_gaps(t.x)
+                    .ok_or(crate::DataError::NoStateMeasured { trajectory: i })
+            })
+            .collect::<Result<_, _>>()?;
+        let runs: Vec<LatentRun<'_>> = trajectories
+            .iter()
+            .zip(&partial)
+            .map(|(t, p)| LatentRun {
+                seq: Sequence::new(t.u, &p.interpolated, t.y).with_observed(&p.observed),
+                frames: &p.frames,
+            })
+            .collect();
+        Self::fit_latent(&runs, &checked, &mut |_, _| {})
+    }
+
     /// Learns both relations from runs whose state was measured only at some samples
     /// ([`LatentRun`]), by expectation-maximisation (the module's documentation,
     /// [`crate::latent`]). The model returned is the round with the lowest held-out NLPD; its
@@ -167,6 +273,7 @@ impl HysteresisModel {
             nrmse,
             improved: true,
         });
+        let first_nrmse = nrmse;
         // What the first fit chose among: a refit trains its choice only.
         let candidates = best
             .summary()
@@ -191,11 +298,21 @@ impl HysteresisModel {
             }
             let t_round = Instant::now();
             let config = best.ekf_config(best.default_mode());
+            // One path per run drawn from the smoothed distribution: the refit sees the latent
+            // states' spread, where the smoothed means would show it a trajectory smoother
+            // than the state and a noise too small.
+            let mut rng = Rng::new(refit.seed ^ (round as u64).wrapping_mul(SEED_STRIDE));
             let smoothed: Vec<Vec<f64>> = runs
                 .iter()
                 .map(|r| {
                     best.smooth_frames(r.seq.u, r.seq.y, r.frames, frame_var, &config)
-                        .map(|s| s.states.mean.iter().map(|m| m.x).collect())
+                        .map(|s| {
+                            s.states
+                                .sample_path(|| rng.normal())
+                                .iter()
+                                .map(|z| z.x)
+                                .collect()
+                        })
                 })
                 .collect::<Result<_, _>>()?;
             let seqs: Vec<Sequence<'_>> = runs
@@ -208,7 +325,9 @@ impl HysteresisModel {
             let Some((nlpd, nrmse)) = held_out(&candidate) else {
                 break;
             };
-            let improved = nlpd < best_nlpd;
+            // The rule of model selection: a lower held-out NLPD, and no less accurate than
+            // the first fit held out (NLPD alone can prefer a wide band around a worse mean).
+            let improved = nlpd < best_nlpd && nrmse <= first_nrmse;
             report.rounds.push(EmRound {
                 round,
                 nlpd,
@@ -235,5 +354,157 @@ impl HysteresisModel {
         summary.latent = Some(report);
         summary.seconds = t0.elapsed().as_secs_f64();
         Ok(best)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::HbnParams;
+    use crate::metrics::nrmse;
+    use hbn_sim::{InputKind, SimConfig, SystemKind, generate_input, simulate};
+
+    /// Frames of `x` at every `every`-th sample (offset by `phase` grid steps, between two grid
+    /// samples), and the state interpolated between them, held at the ends.
+    fn film(x: &[f64], every: usize, phase: f64) -> (Vec<StateFrame>, Vec<f64>, Vec<bool>) {
+        let n = x.len();
+        let frames: Vec<StateFrame> = (1..n)
+            .step_by(every)
+            .map(|k| StateFrame {
+                k,
+                weight: phase,
+                value: phase * x[k] + (1.0 - phase) * x[k - 1],
+            })
+            .collect();
+        let at: Vec<f64> = frames.iter().map(|f| f.k as f64 - 1.0 + f.weight).collect();
+        let interpolated = (0..n)
+            .map(|k| {
+                let t = k as f64;
+                let i = at.partition_point(|&s| s <= t);
+                match (i.checked_sub(1), frames.get(i)) {
+                    (Some(a), Some(b)) => {
+                        let w = (t - at[a]) / (at[i] - at[a]);
+                        (1.0 - w) * frames[a].value + w * b.value
+                    }
+                    (Some(a), None) => frames[a].value,
+                    (None, _) => frames[0].value,
+                }
+            })
+            .collect();
+        let mask = observed_mask(&frames, n);
+        (frames, interpolated, mask)
+    }
+
+    #[test]
+    fn a_state_with_gaps_becomes_frames_an_interpolation_and_a_mask() {
+        let nan = f64::NAN;
+        let p = PartialState::from_gaps(&[nan, 1.0, nan, nan, 4.0, nan]).unwrap();
+        assert_eq!(p.interpolated, vec![1.0, 1.0, 2.0, 3.0, 4.0, 4.0]);
+        assert_eq!(p.observed, vec![false, true, false, false, true, false]);
+        assert_eq!(p.frames.len(), 2);
+        assert_eq!(
+            (p.frames[1].k, p.frames[1].weight, p.frames[1].value),
+            (4, 1.0, 4.0)
+        );
+        assert_eq!(observed_mask(&p.frames, 6), p.observed);
+        assert!(PartialState::from_gaps(&[nan, nan]).is_none());
+        // A frame between two samples marks the nearer one; frames past the end are ignored.
+        let f = |k, weight| StateFrame {
+            k,
+            weight,
+            value: 0.0,
+        };
+        assert_eq!(
+            observed_mask(&[f(0, 1.0), f(2, 0.3), f(3, 0.7), f(9, 1.0)], 4),
+            vec![true, true, false, true]
+        );
+    }
+
+    #[test]
+    fn fit_partial_refuses_a_run_without_a_measured_state() {
+        let u: Vec<f64> = (0..100).map(|k| (k as f64 * 0.1).sin()).collect();
+        let x = vec![f64::NAN; 100];
+        let e = HysteresisModel::fit_partial(&[Sequence::new(&u, &x, &u)], &HbnParams::default())
+            .unwrap_err();
+        assert!(
+            matches!(
+                e,
+                ModelError::Data(crate::DataError::NoStateMeasured { trajectory: 0 })
+            ),
+            "{e}"
+        );
+    }
+
+    /// A case built for EM: Bouc-Wen at noise gain 1, the state filmed at every fourth sample
+    /// (halfway between two grid samples). The model trained on the interpolated state learns
+    /// the interpolation's straight lines; EM's refits on paths drawn from the smoothed states
+    /// score better held out round after round (measured: nRMSE 0.0200 -> 0.0172 at the
+    /// measured samples, NLPD -2.64 -> -3.22 nats over four refits) and estimate a fresh run more accurately
+    /// (0.0200 against 0.0205), and the model kept has the best held-out score of its rounds.
+    #[test]
+    fn em_improves_on_the_interpolated_state() {
+        let cfg = SimConfig {
+            noise_gain: 1.0,
+            ..SimConfig::new(SystemKind::BoucWen)
+        };
+        let u = generate_input(InputKind::RandomRamps, 600, 0.05, 3).unwrap();
+        let runs: Vec<_> = (0..3)
+            .map(|i| {
+                simulate(
+                    &SimConfig {
+                        seed: 10 + i,
+                        ..cfg
+                    },
+                    &u,
+                )
+                .unwrap()
+            })
+            .collect();
+        let filmed: Vec<_> = runs.iter().map(|r| film(&r.x, 4, 0.5)).collect();
+        let latent: Vec<LatentRun<'_>> = runs
+            .iter()
+            .zip(&filmed)
+            .map(|(r, (frames, xi, mask))| LatentRun {
+                seq: Sequence::new(&r.u, xi, &r.y).with_observed(mask),
+                frames,
+            })
+            .collect();
+        let params = HbnParams {
+            max_points: 250,
+            n_starts: 1,
+            ..HbnParams::default()
+        }
+        .check()
+        .unwrap();
+        let seqs: Vec<Sequence<'_>> = latent.iter().map(|r| r.seq).collect();
+        let interpolated = HysteresisModel::fit_checked(&seqs, &params, &mut |_, _| {}).unwrap();
+        let em = HysteresisModel::fit_latent(&latent, &params, &mut |_, _| {}).unwrap();
+        let report = em.summary().latent.clone().unwrap();
+        assert_eq!(
+            report.frames,
+            filmed.iter().map(|f| f.0.len()).sum::<usize>()
+        );
+        assert!((report.observed - 0.25).abs() < 0.01, "{report:?}");
+        let kept = report.rounds.iter().rfind(|r| r.improved).unwrap();
+        let best = report
+            .rounds
+            .iter()
+            .map(|r| r.nlpd)
+            .fold(f64::INFINITY, f64::min);
+        assert_eq!(kept.nlpd, best);
+        assert_eq!(held_out(&em).unwrap().0, best);
+        // EM kept a refit, more accurate held out than the first fit.
+        assert!(kept.round >= 1, "{report:?}");
+        assert!(kept.nrmse < report.rounds[0].nrmse, "{report:?}");
+        assert!(em.summary().warnings.iter().any(|w| w.contains("latent")));
+        let test_u = generate_input(InputKind::RandomRamps, 800, 0.05, 99).unwrap();
+        let test = simulate(&SimConfig { seed: 99, ..cfg }, &test_u).unwrap();
+        let score = |m: &HysteresisModel| {
+            let e = m.estimate(&test.u, &test.y, m.default_mode()).unwrap();
+            nrmse(&e.x, &test.x)
+        };
+        let (a, b) = (score(&interpolated), score(&em));
+        eprintln!("interpolated {a}, EM {b}, rounds {:?}", report.rounds);
+        assert!(b < a, "EM {b} against the interpolated state's {a}");
     }
 }

@@ -62,7 +62,7 @@ pub use evidence::KernelEvidence;
 pub use filter::{Filter, FilterOutput};
 /// A GP's prior mean ([`HbnParams::linear_mean`]).
 pub use hbn_gp::MeanFunction;
-pub use latent::{EmRound, LatentReport, LatentRun};
+pub use latent::{EmRound, LatentReport, LatentRun, PartialState, observed_mask};
 pub use local::LocalData;
 #[allow(deprecated)]
 pub use model::HbnModel;

@@ -115,6 +115,51 @@ impl<const N: usize> Smoothed<N> {
     }
 }
 
+impl Smoothed<3> {
+    /// A path drawn from the smoothed distribution of the whole sequence, `p(z_{0..T} | y)`, by
+    /// sampling backwards: `z_T` from its marginal, then each `z_k` given the `z_{k+1}` drawn,
+    /// `N(m_k + J_k (z_{k+1} - m_{k+1}), P_k - J_k C_k^T)` with `C_k` the lag-one
+    /// cross-covariance and `J_k = C_k P_{k+1}^{-1}` (the smoothed states form a Gauss-Markov
+    /// chain). `normal` gives standard normal draws. A conditional covariance is symmetrised and
+    /// its negative eigenvalues (round-off) are taken as zero; where `P_{k+1}` cannot be
+    /// inverted, `z_k` is drawn from its marginal. Training on such paths sees the latent
+    /// states' uncertainty, which the smoothed means hide.
+    pub fn sample_path(&self, mut normal: impl FnMut() -> f64) -> Vec<Vector3<f64>> {
+        let n = self.mean.len();
+        let mut out = vec![Vector3::zeros(); n];
+        let mut draw = |mean: Vector3<f64>, cov: Matrix3<f64>| {
+            let sym = 0.5 * (cov + cov.transpose());
+            let eig = SymmetricEigen::new(sym);
+            let e = Vector3::from_fn(|i, _| eig.eigenvalues[i].max(0.0).sqrt() * normal());
+            let z = mean + eig.eigenvectors * e;
+            if z.iter().all(|v| v.is_finite()) {
+                z
+            } else {
+                mean
+            }
+        };
+        let Some(last) = n.checked_sub(1) else {
+            return out;
+        };
+        out[last] = draw(self.mean[last], self.cov[last]);
+        for k in (0..last).rev() {
+            let c = self.lag_one.get(k).copied().unwrap_or_else(Matrix3::zeros);
+            let next_inv = self.cov[k + 1].try_inverse();
+            out[k] = match next_inv {
+                Some(inv) if c.iter().any(|v| *v != 0.0) => {
+                    let j = c * inv;
+                    draw(
+                        self.mean[k] + j * (out[k + 1] - self.mean[k + 1]),
+                        self.cov[k] - j * c.transpose(),
+                    )
+                }
+                _ => draw(self.mean[k], self.cov[k]),
+            };
+        }
+        out
+    }
+}
+
 /// The Cholesky factor of `p`, with up to [`JITTER_RETRIES`] growing jitters on the diagonal;
 /// the retries used are added to `retries`.
 fn factor<const N: usize>(

@@ -1056,7 +1056,7 @@ mod tests {
     fn only_measured_states_are_scored_held_out() {
         // The mask follows every cut of the split and of the cap.
         let (u, x, y) = seq(400);
-        let observed: Vec<bool> = (0..400).map(|k| k % 3 == 0).collect();
+        let observed: Vec<bool> = (0..400).map(|k: usize| k.is_multiple_of(3)).collect();
         let runs = [Sequence::new(&u, &x, &y).with_observed(&observed)];
         let s = split(&runs, 0.25).unwrap();
         for f in &s.folds {
@@ -1064,7 +1064,7 @@ mod tests {
                 let o = part.observed.expect("the mask is kept");
                 assert_eq!(o.len(), part.u.len());
                 for (k, &t) in part.u.iter().enumerate() {
-                    assert_eq!(o[k], (t as usize) % 3 == 0);
+                    assert_eq!(o[k], (t as usize).is_multiple_of(3));
                 }
             }
             let b = f.validation[0].prefix(40);

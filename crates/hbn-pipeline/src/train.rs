@@ -4,10 +4,12 @@
 use std::path::PathBuf;
 
 use hbn_io::SignalPath;
-use hbn_model::{HbnParams, HysteresisModel, LatentRun, Problem, Sequence, StateFrame};
+use hbn_model::{
+    HbnParams, HysteresisModel, LatentRun, Problem, Sequence, StateFrame, observed_mask,
+};
 
 use crate::error::{LogOption, OptionError, PipelineError};
-use crate::log::{Event, LogData, LogOptions, Observer, load_log_pieces};
+use crate::log::{Event, GridRate, LogData, LogOptions, Observer, load_log_pieces};
 
 /// Default message path of the input `u` (what `hbn simulate` writes).
 pub const DEFAULT_INPUT: &str = "/input.data";
@@ -73,9 +75,9 @@ impl Trained {
 /// Trains the HBN from MCAP logs, each log one trajectory.
 ///
 /// Every option and parameter is checked before a file is opened. The grid rate is
-/// `log_options.rate_hz`, or the native rate of the input in the first log (rounded to 0.1 Hz);
-/// every log is resampled to it, and the model keeps it as its rate. The model's signals record
-/// the paths read.
+/// `log_options.rate_hz`, or the native rate of the sensor output in the first log (rounded to
+/// 0.1 Hz; [`GridRate`]: the filter updates once per measurement); every log is resampled to
+/// it, and the model keeps it as its rate. The model's signals record the paths read.
 pub fn train_from_logs(
     logs: &[PathBuf],
     signals: &TrainSignals,
@@ -100,7 +102,9 @@ pub fn train_from_logs(
     let mut rate = opts.rate_hz;
     let mut data = Vec::with_capacity(logs.len());
     for file in logs {
-        let split = load_log_pieces(file, &paths, rate, &opts, MIN_PIECE_SAMPLES, observe)?;
+        // Without a rate, the sensor's (position 2) sets the grid; later logs take the first's.
+        let grid = rate.map_or(GridRate::SlowestOf(&[2]), GridRate::Given);
+        let split = load_log_pieces(file, &paths, grid, &opts, MIN_PIECE_SAMPLES, observe)?;
         for piece in split.pieces {
             rate = Some(piece.rate_hz());
             data.push(piece);
@@ -233,23 +237,6 @@ fn state_frames(log: &LogData) -> Option<Vec<StateFrame>> {
             })
             .collect(),
     )
-}
-
-/// The grid samples next to a frame (the nearer grid point of the two around it): where the
-/// interpolated state is, within half a grid step, a measurement.
-fn observed_mask(frames: &[StateFrame], len: usize) -> Vec<bool> {
-    let mut mask = vec![false; len];
-    for f in frames {
-        let k = if f.weight >= 0.5 || f.k == 0 {
-            f.k
-        } else {
-            f.k - 1
-        };
-        if let Some(m) = mask.get_mut(k) {
-            *m = true;
-        }
-    }
-    mask
 }
 
 #[cfg(test)]

@@ -1027,7 +1027,11 @@ class HysteresisModel:
         ``{"name", "path", "unit"}`` dicts as values; for a vector model a list of names or
         message paths per key, one per column): ``hbn estimate --model`` then reads ``u`` and
         ``y`` from those message paths. To train from MCAP logs use :meth:`from_logs`, which
-        keeps the logs' rate. A vector model takes the same training keywords. It chooses its
+        keeps the logs' rate. For a scalar model, ``x`` may be NaN where the state was not
+        measured (a camera slower than ``u`` and ``y``, or dropped frames): those samples are
+        latent, and training runs expectation-maximisation over them (``docs/slow-camera.md``);
+        ``summary["latent"]`` records how much was measured and what each round scored. A
+        vector model takes the same training keywords. It chooses its
         mode, its process-noise scale, each component's standard-deviation scale and, with the
         default ``sensor_inputs``, each sensor's inputs on the held-out last quarter of every
         trajectory; ``sensor_inputs`` given as one value applies to every sensor, as a list to

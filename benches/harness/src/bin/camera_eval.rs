@@ -20,7 +20,7 @@ use std::time::Instant;
 use clap::Parser;
 use hbn_core::rng::Rng;
 use hbn_model::metrics::{calibration, nrmse};
-use hbn_model::{HbnParams, HysteresisModel, LatentRun, Sequence, StateFrame};
+use hbn_model::{HbnParams, HysteresisModel, LatentRun, Sequence, StateFrame, observed_mask};
 use hbn_pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
 use hbn_sim::SystemKind;
 
@@ -124,20 +124,6 @@ fn film(
     (frames, interpolated)
 }
 
-/// The grid samples next to a frame.
-fn mask(frames: &[StateFrame], n: usize) -> Vec<bool> {
-    let mut m = vec![false; n];
-    for f in frames {
-        let k = if f.weight >= 0.5 || f.k == 0 {
-            f.k
-        } else {
-            f.k - 1
-        };
-        m[k] = true;
-    }
-    m
-}
-
 struct Row {
     camera: usize,
     full: f64,
@@ -197,7 +183,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     let masks: Vec<Vec<bool>> = filmed
                         .iter()
                         .zip(&train)
-                        .map(|((f, _), r)| mask(f, r.x.len()))
+                        .map(|((f, _), r)| observed_mask(f, r.x.len()))
                         .collect();
                     let runs: Vec<LatentRun<'_>> = train
                         .iter()
