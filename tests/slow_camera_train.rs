@@ -1,0 +1,117 @@
+//! Training from a log whose state is a slow camera with dropped frames, end to end through the
+//! `hbn` binary: `hbn simulate --state-rate --state-drop`, `hbn train` (expectation-maximisation
+//! over the latent samples, said in a warning and recorded in the model file), `hbn estimate
+//! --smooth --csv` on a full-rate test log.
+
+mod run_hbn;
+
+use run_hbn::{ok, s};
+
+#[test]
+fn a_slow_camera_log_trains_by_em_and_estimates() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (train, test, model, csv) = (
+        dir.path().join("train.mcap"),
+        dir.path().join("test.mcap"),
+        dir.path().join("model.hbn"),
+        dir.path().join("est.csv"),
+    );
+    ok(&[
+        "simulate",
+        "--system",
+        "duhem",
+        "--steps",
+        "1200",
+        "--seed",
+        "1",
+        "--state-rate",
+        "30",
+        "--state-drop",
+        "0.1",
+        "--out",
+        &s(&train),
+    ]);
+    ok(&[
+        "simulate",
+        "--system",
+        "duhem",
+        "--steps",
+        "600",
+        "--seed",
+        "2",
+        "--out",
+        &s(&test),
+    ]);
+    let trained = ok(&[
+        "train",
+        "--log",
+        &s(&train),
+        "--out",
+        &s(&model),
+        "--max-points",
+        "200",
+        "--starts",
+        "1",
+    ]);
+    let said = format!("{}{}", trained.stdout, trained.stderr);
+    assert!(
+        said.contains("the samples between them are latent")
+            && said.contains("expectation-maximisation"),
+        "{said}"
+    );
+    // The model records how much of the state was measured and each round's held-out score.
+    let text = std::fs::read_to_string(&model).expect("model file");
+    let file: serde_json::Value = serde_json::from_str(&text).expect("json");
+    let latent = &file["model"]["summary"]["latent"];
+    let observed = latent["observed"].as_f64().expect("observed");
+    assert!((0.2..0.35).contains(&observed), "{latent}");
+    let frames = latent["frames"].as_u64().expect("frames");
+    assert!((300..=360).contains(&frames), "{latent}");
+    assert_eq!(latent["rounds"][0]["round"], 0);
+    ok(&[
+        "estimate",
+        "--model",
+        &s(&model),
+        "--log",
+        &s(&test),
+        "--smooth",
+        "--csv",
+        &s(&csv),
+    ]);
+    let out = std::fs::read_to_string(&csv).expect("csv");
+    let header = out.lines().next().expect("header");
+    let columns: Vec<&str> = header.split(',').collect();
+    assert!(
+        columns.contains(&"x") && columns.contains(&"x_std"),
+        "{header}"
+    );
+    assert_eq!(out.lines().count(), 601);
+    // A log with the state at every sample trains as before: no EM, nothing recorded.
+    let full = dir.path().join("full.mcap");
+    ok(&[
+        "simulate",
+        "--system",
+        "duhem",
+        "--steps",
+        "600",
+        "--seed",
+        "3",
+        "--out",
+        &s(&full),
+    ]);
+    let plain = dir.path().join("plain.hbn");
+    let r = ok(&[
+        "train",
+        "--log",
+        &s(&full),
+        "--out",
+        &s(&plain),
+        "--max-points",
+        "150",
+        "--starts",
+        "1",
+    ]);
+    assert!(!format!("{}{}", r.stdout, r.stderr).contains("latent"));
+    let text = std::fs::read_to_string(&plain).expect("model file");
+    assert!(!text.contains("\"latent\""));
+}
