@@ -175,8 +175,8 @@ fn em_note(report: &LatentReport) -> String {
     let refits = report.rounds.len().saturating_sub(1);
     match (first, best) {
         (Some(first), Some(best)) if best.round > 0 => format!(
-            "{}: expectation-maximisation refitted the model on the smoothed states {refits} \
-             time{}, and round {} is kept (held-out NLPD at the measured samples {:.3} -> \
+            "{}: expectation-maximisation refitted the model on paths drawn from the smoothed \
+             states {refits} time{}, and round {} is kept (held-out NLPD at the measured samples {:.3} -> \
              {:.3}, nRMSE {:.4} -> {:.4})",
             sparse_note(report),
             if refits == 1 { "" } else { "s" },
@@ -187,8 +187,8 @@ fn em_note(report: &LatentReport) -> String {
             best.nrmse
         ),
         _ => format!(
-            "{}: expectation-maximisation refitted the model on the smoothed states {refits} \
-             time{} without improving the held-out score, so the model trained on the state \
+            "{}: expectation-maximisation refitted the model on paths drawn from the smoothed \
+             states {refits} time{} without improving the held-out score, so the model trained on the state \
              interpolated between the frames is kept",
             sparse_note(report),
             if refits == 1 { "" } else { "s" },
