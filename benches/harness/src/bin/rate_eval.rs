@@ -9,8 +9,9 @@
 //! The camera records the state as [`hbn_pipeline::StateCamera`] does (frames at their own
 //! times, the true state interpolated between the simulator's samples); the test log holds the
 //! state at every simulator sample instead. A default model (seeded) is trained through
-//! [`hbn_pipeline::train_from_logs`] at every rate of `--rates` and at the default rate (no rate
-//! given; the first trained), and estimates the test log through [`hbn_pipeline::estimate_log`] in its default
+//! [`hbn_pipeline::train_from_logs`] at the default rate (no rate given), at the input's and
+//! the sensor's rates, at half the sensor's and at every rate of `--rates`, once per distinct
+//! rate. Each estimates the test log through [`hbn_pipeline::estimate_log`] in its default
 //! mode; the estimate, interpolated linearly at the simulator's samples inside its grid, is
 //! scored by nRMSE against the true state there.
 //!
@@ -18,17 +19,21 @@
 //! - `input`: the input's native rate;
 //! - `sensor`: the sensor's native rate;
 //! - `slowest`: the slower of the input's and the sensor's;
-//! - `held-out`: of the input's and the sensor's rates, the one whose model has the lower
-//!   held-out nRMSE in training (two trainings);
+//! - `held-out (input, sensor)`: of the input's and the sensor's rates, the one whose model has
+//!   the lower held-out nRMSE in training (both trained);
+//! - `held-out (sensor, sensor / 2)`: the same between the sensor's rate and half of it;
 //! - `default`: what `train_from_logs` chooses with no rate given;
 //! - `N Hz`: the rate forced.
 //!
 //! One JSON object per line (per case and setup), then per setup a table: per rule the rates it
-//! chose, the geometric-mean nRMSE, its geometric-mean ratio to the best rule of each case, the
-//! worst such ratio, and the mean training time of the model chosen.
+//! chose, the geometric-mean nRMSE, its geometric-mean ratio to the best model of each case,
+//! the worst such ratio, and the mean training time the rule costs (the held-out rules: both
+//! trainings). `--tables FILE...` prints the tables of saved JSON lines (several runs' output
+//! together) without running.
 //!
 //! ```text
-//! rate_eval --systems bouc-wen,duhem,preisach --gains 0,1,10 --seeds 1,2,3
+//! rate_eval --systems bouc-wen,duhem,preisach --gains 0,1,10 --seeds 1,2,3 > rates.jsonl
+//! rate_eval --tables rates.jsonl
 //! ```
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -48,13 +53,13 @@ use hbn_sim::{InputKind, SimConfig, SystemKind, Trajectory};
 #[derive(Parser)]
 struct Args {
     /// Simulators (comma-separated).
-    #[arg(long, value_delimiter = ',', required = true, value_parser = parse::<SystemKind>)]
+    #[arg(long, value_delimiter = ',', required_unless_present = "tables", value_parser = parse::<SystemKind>)]
     systems: Vec<SystemKind>,
     /// Noise gains (comma-separated).
-    #[arg(long, value_delimiter = ',', required = true)]
+    #[arg(long, value_delimiter = ',', required_unless_present = "tables")]
     gains: Vec<f64>,
     /// Seeds (comma-separated).
-    #[arg(long, value_delimiter = ',', required = true)]
+    #[arg(long, value_delimiter = ',', required_unless_present = "tables")]
     seeds: Vec<u64>,
     /// Setups (comma-separated): `a` valve 200 Hz, sensor 100 Hz, camera 30 Hz; `b` valve
     /// 50 Hz, sensor 100 Hz, camera 30 Hz; `c` everything 100 Hz.
@@ -81,6 +86,10 @@ struct Args {
     /// Directory for the logs (default: a temporary one, removed at the end).
     #[arg(long)]
     dir: Option<PathBuf>,
+    /// Print the tables of these files of JSON lines (earlier runs' output, concatenated)
+    /// instead of running.
+    #[arg(long, num_args = 1..)]
+    tables: Vec<PathBuf>,
 }
 
 /// A value of `T` by its `FromStr`, the error as text (for clap).
@@ -120,9 +129,6 @@ const SETUPS: [Setup; 3] = [
         camera_hz: 100.0,
     },
 ];
-
-/// The rules compared, in table order.
-const RULES: [&str; 5] = ["input", "sensor", "slowest", "held-out", "default"];
 
 /// Every `step`-th of `values`.
 fn every(values: &[f64], step: usize) -> Vec<f64> {
@@ -306,11 +312,183 @@ fn trial(
     })
 }
 
-/// One case in one setup: each rule's pick.
+/// One case in one setup: the models trained, the default's first.
 struct Row {
-    setup: usize,
-    /// Per rule of [`RULES`], then per forced rate: the trial chosen.
-    picks: Vec<Trial>,
+    setup: String,
+    trials: Vec<Trial>,
+}
+
+impl Row {
+    /// The trial at `rate`, if one was trained there.
+    fn at(&self, rate: f64) -> Option<&Trial> {
+        self.trials.iter().find(|t| t.rate == rate)
+    }
+
+    /// Of the trials at `rates`, the one with the lowest held-out nRMSE, and the seconds
+    /// training at all of them took.
+    fn held_out(&self, rates: &[f64]) -> Option<(Trial, f64)> {
+        let mut rates = rates.to_vec();
+        rates.sort_by(f64::total_cmp);
+        rates.dedup();
+        let trials: Vec<&Trial> = rates.iter().map(|&r| self.at(r)).collect::<Option<_>>()?;
+        let best = trials
+            .iter()
+            .min_by(|a, b| a.held_out.total_cmp(&b.held_out))?;
+        Some((**best, trials.iter().map(|t| t.seconds).sum()))
+    }
+
+    /// The trial rule `rule` picks and the training seconds the rule costs.
+    fn pick(&self, rule: &Rule, setup: &Setup) -> Option<(Trial, f64)> {
+        let (u, y) = (setup.input_hz, setup.sensor_hz);
+        let one = |rate: f64| self.at(rate).map(|t| (*t, t.seconds));
+        match rule {
+            Rule::Input => one(u),
+            Rule::Sensor => one(y),
+            Rule::Slowest => one(u.min(y)),
+            Rule::HeldOut => self.held_out(&[u, y]),
+            Rule::HeldOutHalf => self.held_out(&[y, y / 2.0]),
+            Rule::Default => self.trials.first().map(|t| (*t, t.seconds)),
+            Rule::Forced(r) => one(*r),
+        }
+    }
+
+    fn json(&self, system: &str, gain: f64, seed: u64) -> serde_json::Value {
+        serde_json::json!({
+            "system": system,
+            "gain": gain,
+            "seed": seed,
+            "setup": self.setup,
+            "default_rate_hz": self.trials.first().map(|t| t.rate),
+            "trials": self.trials.iter().map(|t| serde_json::json!({
+                "rate_hz": t.rate,
+                "nrmse": t.nrmse,
+                "held_out_nrmse": t.held_out,
+                "seconds": t.seconds,
+            })).collect::<Vec<_>>(),
+        })
+    }
+
+    /// A row from its JSON line; the default's trial (at `default_rate_hz`) first.
+    fn from_json(v: &serde_json::Value) -> Option<Row> {
+        let num = |t: &serde_json::Value, k: &str| t.get(k).and_then(|x| x.as_f64());
+        let mut trials: Vec<Trial> = v
+            .get("trials")?
+            .as_array()?
+            .iter()
+            .map(|t| {
+                Some(Trial {
+                    rate: num(t, "rate_hz")?,
+                    nrmse: num(t, "nrmse")?,
+                    held_out: num(t, "held_out_nrmse").unwrap_or(f64::NAN),
+                    seconds: num(t, "seconds")?,
+                })
+            })
+            .collect::<Option<_>>()?;
+        let default = num(v, "default_rate_hz")?;
+        let i = trials.iter().position(|t| t.rate == default)?;
+        trials.swap(0, i);
+        Some(Row {
+            setup: v.get("setup")?.as_str()?.to_owned(),
+            trials,
+        })
+    }
+}
+
+/// A rule of the grid rate.
+#[derive(Clone, Copy, Debug)]
+enum Rule {
+    Input,
+    Sensor,
+    Slowest,
+    HeldOut,
+    HeldOutHalf,
+    Default,
+    Forced(f64),
+}
+
+impl Rule {
+    fn name(&self) -> String {
+        match self {
+            Rule::Input => "input".into(),
+            Rule::Sensor => "sensor".into(),
+            Rule::Slowest => "slowest".into(),
+            Rule::HeldOut => "held-out (input, sensor)".into(),
+            Rule::HeldOutHalf => "held-out (sensor, sensor / 2)".into(),
+            Rule::Default => "default".into(),
+            Rule::Forced(r) => format!("{r} Hz"),
+        }
+    }
+}
+
+/// Per setup, the table of the rules over `rows`.
+fn tables(rows: &[Row], setups: &[Setup], rates: &[f64]) {
+    let mut rules = vec![
+        Rule::Input,
+        Rule::Sensor,
+        Rule::Slowest,
+        Rule::HeldOut,
+        Rule::HeldOutHalf,
+        Rule::Default,
+    ];
+    rules.extend(rates.iter().map(|&r| Rule::Forced(r)));
+    let geo = |v: &[f64]| {
+        let logs: Vec<f64> = v.iter().map(|x| x.ln()).filter(|x| x.is_finite()).collect();
+        (logs.iter().sum::<f64>() / logs.len().max(1) as f64).exp()
+    };
+    for setup in setups {
+        let group: Vec<&Row> = rows.iter().filter(|r| r.setup == setup.name).collect();
+        if group.is_empty() {
+            continue;
+        }
+        println!();
+        println!(
+            "setup {}: input {} Hz, sensor {} Hz, camera {} Hz ({} cases)",
+            setup.name,
+            setup.input_hz,
+            setup.sensor_hz,
+            setup.camera_hz,
+            group.len()
+        );
+        println!(
+            "| rule | grid rates chosen (Hz) | nRMSE (geo. mean) | / best (geo. mean) | / best (worst) | training s (mean) |"
+        );
+        println!("|---|---|---|---|---|---|");
+        for rule in &rules {
+            let picks: Vec<(Trial, f64, f64)> = group
+                .iter()
+                .filter_map(|r| {
+                    let (t, secs) = r.pick(rule, setup)?;
+                    let best = r
+                        .trials
+                        .iter()
+                        .map(|t| t.nrmse)
+                        .fold(f64::INFINITY, f64::min);
+                    Some((t, secs, t.nrmse / best))
+                })
+                .collect();
+            if picks.len() < group.len() {
+                continue;
+            }
+            let mut chosen: Vec<f64> = picks.iter().map(|p| p.0.rate).collect();
+            chosen.sort_by(f64::total_cmp);
+            chosen.dedup();
+            let nr: Vec<f64> = picks.iter().map(|p| p.0.nrmse).collect();
+            let ratios: Vec<f64> = picks.iter().map(|p| p.2).collect();
+            println!(
+                "| {} | {} | {:.4} | {:.3} | {:.3} | {:.1} |",
+                rule.name(),
+                chosen
+                    .iter()
+                    .map(|r| format!("{r}"))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                geo(&nr),
+                geo(&ratios),
+                ratios.iter().copied().fold(f64::NAN, f64::max),
+                picks.iter().map(|p| p.1).sum::<f64>() / picks.len() as f64,
+            );
+        }
+    }
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -326,6 +504,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 .ok_or_else(|| format!("unknown setup {n}: a, b or c"))
         })
         .collect::<Result<_, _>>()?;
+    if !args.tables.is_empty() {
+        let mut rows = Vec::new();
+        for file in &args.tables {
+            for line in std::fs::read_to_string(file)?.lines() {
+                if !line.starts_with('{') {
+                    continue;
+                }
+                let v: serde_json::Value = serde_json::from_str(line)?;
+                rows.push(
+                    Row::from_json(&v)
+                        .ok_or_else(|| format!("{}: not a line of rate_eval", file.display()))?,
+                );
+            }
+        }
+        tables(&rows, &setups, &args.rates);
+        return Ok(());
+    }
     let tmp;
     let dir = match &args.dir {
         Some(d) => {
@@ -358,7 +553,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     seed * 1000 + 999,
                     seed * 1000 + 999,
                 )?;
-                for (si, setup) in setups.iter().enumerate() {
+                for setup in &setups {
                     let camera = StateCamera {
                         rate_hz: setup.camera_hz,
                         drop: args.camera_drop,
@@ -375,48 +570,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     let test_file = dir.join(format!("test-{}.mcap", setup.name));
                     write_run(&test_file, &test, setup, None)?;
                     // One training per distinct rate, the default's (no rate given) first.
-                    let default = trial(&logs, &test_file, &test, None, seed)?;
-                    let mut trials: Vec<Trial> = vec![default];
-                    let mut at = |rate: f64| -> Result<Trial, Box<dyn std::error::Error>> {
-                        if let Some(t) = trials.iter().find(|t| t.rate == rate) {
-                            return Ok(*t);
+                    let mut trials = vec![trial(&logs, &test_file, &test, None, seed)?];
+                    let wanted = [setup.input_hz, setup.sensor_hz, setup.sensor_hz / 2.0];
+                    for &rate in wanted.iter().chain(&args.rates) {
+                        if !trials.iter().any(|t| t.rate == rate) {
+                            trials.push(trial(&logs, &test_file, &test, Some(rate), seed)?);
                         }
-                        let t = trial(&logs, &test_file, &test, Some(rate), seed)?;
-                        trials.push(t);
-                        Ok(t)
-                    };
-                    let input = at(setup.input_hz)?;
-                    let sensor = at(setup.sensor_hz)?;
-                    let slowest = at(setup.input_hz.min(setup.sensor_hz))?;
-                    let held_out = if input.held_out <= sensor.held_out {
-                        input
-                    } else {
-                        sensor
-                    };
-                    let forced: Vec<Trial> = args
-                        .rates
-                        .iter()
-                        .map(|&r| at(r))
-                        .collect::<Result<_, _>>()?;
-                    let mut picks = vec![input, sensor, slowest, held_out, default];
-                    picks.extend(forced);
-                    let mut line = serde_json::json!({
-                        "system": system.name(),
-                        "gain": gain,
-                        "seed": seed,
-                        "setup": setup.name,
-                        "trials": trials.iter().map(|t| serde_json::json!({
-                            "rate_hz": t.rate,
-                            "nrmse": t.nrmse,
-                            "held_out_nrmse": t.held_out,
-                            "seconds": t.seconds,
-                        })).collect::<Vec<_>>(),
-                    });
-                    if let Some(o) = line.as_object_mut() {
-                        o.insert("default_rate_hz".into(), default.rate.into());
                     }
-                    println!("{line}");
-                    rows.push(Row { setup: si, picks });
+                    let row = Row {
+                        setup: setup.name.to_owned(),
+                        trials,
+                    };
+                    println!("{}", row.json(system.name(), gain, seed));
+                    rows.push(row);
                 }
             }
         }
@@ -424,77 +590,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if args.dir.is_none() {
         let _ = std::fs::remove_dir_all(&dir);
     }
-    let names: Vec<String> = RULES
-        .iter()
-        .map(|r| (*r).to_owned())
-        .chain(args.rates.iter().map(|r| format!("{r} Hz")))
-        .collect();
-    for (si, setup) in setups.iter().enumerate() {
-        let group: Vec<&Row> = rows.iter().filter(|r| r.setup == si).collect();
-        println!();
-        println!(
-            "setup {}: input {} Hz, sensor {} Hz, camera {} Hz ({} cases)",
-            setup.name,
-            setup.input_hz,
-            setup.sensor_hz,
-            setup.camera_hz,
-            group.len()
-        );
-        println!(
-            "| rule | grid rates chosen (Hz) | nRMSE (geo. mean) | / best (geo. mean) | / best (worst) | training s (mean) |"
-        );
-        println!("|---|---|---|---|---|---|");
-        let geo = |v: &[f64]| {
-            let logs: Vec<f64> = v.iter().map(|x| x.ln()).filter(|x| x.is_finite()).collect();
-            (logs.iter().sum::<f64>() / logs.len().max(1) as f64).exp()
-        };
-        for (i, name) in names.iter().enumerate() {
-            let mut rates: Vec<f64> = group.iter().map(|r| r.picks[i].rate).collect();
-            rates.sort_by(f64::total_cmp);
-            rates.dedup();
-            let nr: Vec<f64> = group.iter().map(|r| r.picks[i].nrmse).collect();
-            let ratios: Vec<f64> = group
-                .iter()
-                .map(|r| {
-                    let best = r
-                        .picks
-                        .iter()
-                        .map(|t| t.nrmse)
-                        .fold(f64::INFINITY, f64::min);
-                    r.picks[i].nrmse / best
-                })
-                .collect();
-            let worst = ratios.iter().copied().fold(f64::NAN, f64::max);
-            // The held-out rule trains at both candidate rates.
-            let secs: f64 = group
-                .iter()
-                .map(|r| {
-                    if RULES.get(i) == Some(&"held-out") {
-                        r.picks[0].seconds
-                            + if r.picks[1].rate == r.picks[0].rate {
-                                0.0
-                            } else {
-                                r.picks[1].seconds
-                            }
-                    } else {
-                        r.picks[i].seconds
-                    }
-                })
-                .sum::<f64>()
-                / group.len().max(1) as f64;
-            println!(
-                "| {name} | {} | {:.4} | {:.3} | {:.3} | {:.1} |",
-                rates
-                    .iter()
-                    .map(|r| format!("{r}"))
-                    .collect::<Vec<_>>()
-                    .join(", "),
-                geo(&nr),
-                geo(&ratios),
-                worst,
-                secs
-            );
-        }
-    }
+    tables(&rows, &setups, &args.rates);
     Ok(())
 }
