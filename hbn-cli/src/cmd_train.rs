@@ -2,7 +2,7 @@
 
 use anyhow::Context;
 use hbn_model::{GpRole, HbnParams, HysteresisModel, Selection};
-use hbn_pipeline::{TrainSignals, VectorSignals, train_from_logs, train_vector_from_logs};
+use hbn_pipeline::{Event, TrainSignals, VectorSignals, train_from_logs, train_vector_from_logs};
 use serde_json::json;
 
 use crate::Ui;
@@ -116,13 +116,17 @@ fn run_vector(ui: &mut Ui<'_>, args: &TrainArgs, signals: &VectorSignals) -> any
         ..args.read.options(args.rate)
     };
     let mut render = Renderer::default();
+    let mut native = None;
     let trained = train_vector_from_logs(
         &args.logs,
         signals,
         opts,
         args.params(),
         &args.sensor_inputs,
-        &mut |e| render.event(ui, e),
+        &mut |e| {
+            note_native_rate(&mut native, &e);
+            render.event(ui, e)
+        },
     );
     render.finish();
     let trained = trained.map_err(|e| report::error(e, opts.time_source))?;
@@ -133,7 +137,7 @@ fn run_vector(ui: &mut Ui<'_>, args: &TrainArgs, signals: &VectorSignals) -> any
     let d = model.dims();
     let s = model.summary();
     let mut text = format!(
-        "trained a vector model ({} inputs, {} state components, {} sensors) on {} samples from {} trajectories in {:.1} s at {} Hz; saved to `{}`\n",
+        "trained a vector model ({} inputs, {} state components, {} sensors) on {} samples from {} trajectories in {:.1} s at {} Hz{}; saved to `{}`\n",
         d.inputs,
         d.states,
         d.sensors,
@@ -141,6 +145,8 @@ fn run_vector(ui: &mut Ui<'_>, args: &TrainArgs, signals: &VectorSignals) -> any
         s.trajectories,
         s.seconds,
         model.rate_hz(),
+        rate_reason(args.rate, native.as_deref(), &signals.outputs)
+            .map_or(String::new(), |r| format!(" ({r})")),
         args.out.display()
     );
     let names = model.signal_names();
@@ -235,7 +241,9 @@ fn run_scalar(
             );
         }
     }
+    let mut native = None;
     let trained = train_from_logs(&args.logs, &signals, opts, params, &mut |e| {
+        note_native_rate(&mut native, &e);
         render.event(ui, e)
     });
     render.finish();
@@ -254,9 +262,48 @@ fn run_scalar(
         }
         ui.line(serde_json::to_string_pretty(&v).context("cannot format JSON")?)?;
     } else {
-        ui.print(summary_text(&model, samples, &args.out, ui.verbose))?;
+        let reason = rate_reason(
+            args.rate,
+            native.as_deref(),
+            std::slice::from_ref(&signals.output),
+        );
+        ui.print(summary_text(
+            &model,
+            samples,
+            &args.out,
+            reason.as_deref(),
+            ui.verbose,
+        ))?;
     }
     Ok(model)
+}
+
+/// Keeps the path of the first [`Event::NativeRate`]: the signal whose native rate the grid
+/// runs at.
+fn note_native_rate(native: &mut Option<String>, e: &Event<'_>) {
+    if let Event::NativeRate { path, .. } = e {
+        native.get_or_insert_with(|| path.to_string());
+    }
+}
+
+/// Why the grid runs at its rate, for the summary: `--rate` given, or the native rate of a
+/// signal (`native`), named as the sensor (`outputs`, the slowest of several) where it is one.
+/// `None` without either.
+pub fn rate_reason(
+    given: Option<f64>,
+    native: Option<&str>,
+    outputs: &[hbn_io::SignalPath],
+) -> Option<String> {
+    if given.is_some() {
+        return Some("set by --rate".to_owned());
+    }
+    let path = native?;
+    let sensor = outputs.iter().any(|o| o.to_string() == path);
+    Some(match (sensor, outputs.len()) {
+        (true, 1) => "the sensor's rate".to_owned(),
+        (true, _) => format!("the rate of {path}, the slowest sensor"),
+        (false, _) => format!("the native rate of {path}"),
+    })
 }
 
 /// The one-line result of filter-aware training: the default mode and its held-out scores.
@@ -309,23 +356,26 @@ pub fn budget_line(model: &HysteresisModel) -> Option<String> {
     ))
 }
 
-/// The training summary: what was trained, how long it took, the default mode and its
-/// held-out scores, and the warnings; with `verbose`, each GP and the held-out table.
+/// The training summary: what was trained, at which rate and why (`rate_reason`, see
+/// [`rate_reason`]), how long it took, the default mode and its held-out scores, and the
+/// warnings; with `verbose`, each GP and the held-out table.
 pub fn summary_text(
     model: &HysteresisModel,
     samples: usize,
     out: &std::path::Path,
+    rate_reason: Option<&str>,
     verbose: bool,
 ) -> String {
     let s = model.summary();
     let p = model.params();
     let mut text = format!(
-        "trained `{}` from {} log{}: {} samples at {:.1} Hz; training took {:.1} s\n  {}\n",
+        "trained `{}` from {} log{}: {} samples at {:.1} Hz{}; training took {:.1} s\n  {}\n",
         out.display(),
         s.trajectories,
         if s.trajectories == 1 { "" } else { "s" },
         samples,
         model.rate_hz(),
+        rate_reason.map_or(String::new(), |r| format!(" ({r})")),
         s.seconds,
         default_mode_line(model),
     );

@@ -3,7 +3,7 @@
 //! A sample's way from MCAP bytes to an estimate file, in library code only:
 //!
 //! 1. [`load_log`] reads the signals by Foxglove message path ([`hbn_io::read_signals_observed`]),
-//!    chooses the grid rate (given, the model's, or the first signal's native rate), resamples
+//!    chooses the grid rate (given, the model's, or a signal's native rate: [`GridRate`]), resamples
 //!    and checks gaps ([`hbn_io::resample`]) under [`LogOptions`] (time source, largest gap,
 //!    rate), checked once ([`LogOptions::check`]);
 //! 2. [`train_from_logs`] trains the HBN on the grid and keeps the rate in the model
@@ -43,8 +43,8 @@ pub use estimate::{
 pub use eval::{Evaluation, Method, Score, evaluate_log};
 pub use log::{
     CheckedLogOptions, DEFAULT_MIN_COVERAGE, DEFAULT_MIN_STATE_SAMPLES, DROPOUT_FACTOR, Event,
-    LogData, LogOptions, LogPieces, Observer, RATE_NOTICE_TOLERANCE, join_pieces, load_log,
-    load_log_pieces, model_log_options, parse_signal, parse_time_source, round_rate,
+    GridRate, LogData, LogOptions, LogPieces, Observer, RATE_NOTICE_TOLERANCE, join_pieces,
+    load_log, load_log_pieces, model_log_options, parse_signal, parse_time_source, round_rate,
 };
 pub use sim::{
     CameraFrames, MULTI_STATE_TOPIC, MultiSimLog, START_NS, SimLog, StateCamera, log_times,

@@ -17,8 +17,9 @@ pub struct LogOptions {
     pub time_source: TimeSource,
     /// Largest allowed gap between two samples of a signal inside the grid's span (s).
     pub max_gap_s: f64,
-    /// Grid rate (Hz); `None`: the native rate of the first signal of the first log, rounded to
-    /// 0.1 Hz (training), or the model's rate (estimation).
+    /// Grid rate (Hz); `None`: in training, the slowest native rate of the sensor outputs in
+    /// the first log, rounded to 0.1 Hz (the filter updates once per measurement; see
+    /// [`GridRate`]); in estimation, the model's rate.
     pub rate_hz: Option<f64>,
     /// A signal whose samples span less than this fraction of the log's span (from the first
     /// sample of any signal to the last) is reported ([`Event::PartialCoverage`]): the grid
@@ -148,11 +149,12 @@ pub enum Event<'a> {
         /// How far.
         progress: ReadProgress,
     },
-    /// No rate was given: the grid uses the native rate of a signal.
+    /// No rate was given: the grid uses the native rate of a signal, the slowest of those that
+    /// may set it ([`GridRate::SlowestOf`]; in training, the sensor outputs).
     NativeRate {
         /// The log.
         file: &'a Path,
-        /// The signal.
+        /// The signal the rate came from.
         path: &'a SignalPath,
         /// The rate chosen (rounded to 0.1 Hz).
         rate_hz: f64,
@@ -232,6 +234,35 @@ pub fn round_rate(hz: f64) -> f64 {
     ((hz * 10.0).round() / 10.0).max(0.1)
 }
 
+/// The rate of a log's grid: given, or the native rate of one of the signals read.
+///
+/// Training reads the input, the state and the sensor outputs and, without a given rate, runs
+/// the grid at the slowest sensor's native rate ([`GridRate::SlowestOf`] the outputs'
+/// positions): the filter then updates once per measurement, on measured values. A faster grid
+/// feeds the filter interpolated sensor values as if they were measurements of their own; the
+/// input's rate and the state's (a camera, latent between its frames) do not set the grid.
+/// `Option<f64>` converts: `Some(rate)` is [`GridRate::Given`], `None` the first signal's
+/// native rate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum GridRate<'a> {
+    /// This rate (Hz).
+    Given(f64),
+    /// The slowest native rate, rounded to 0.1 Hz, of the signals at these positions of the
+    /// paths read (positions past the paths, and signals without a native rate, are skipped),
+    /// reported as [`Event::NativeRate`] naming the signal. None of them with a native rate is
+    /// [`PipelineError::UnknownRate`], naming the first.
+    SlowestOf(&'a [usize]),
+}
+
+impl From<Option<f64>> for GridRate<'_> {
+    fn from(rate: Option<f64>) -> Self {
+        match rate {
+            Some(r) => GridRate::Given(r),
+            None => GridRate::SlowestOf(&[0]),
+        }
+    }
+}
+
 /// Signals of one log on one uniform grid.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LogData {
@@ -297,15 +328,15 @@ impl LogData {
     }
 }
 
-/// Reads `paths` from `file` in one pass and resamples them to `rate_hz`, or (when `None`) to
-/// the native rate of the first path rounded to 0.1 Hz (reported as [`Event::NativeRate`]). A
-/// signal whose native rate differs from the grid's by more than 1% is reported as
-/// [`Event::Resampling`]. A gap longer than [`LogOptions::max_gap_s`] is an error
-/// ([`load_log_pieces`] splits the log there instead).
-pub fn load_log(
+/// Reads `paths` from `file` in one pass and resamples them to the grid rate `rate`: given, or
+/// a signal's native rate rounded to 0.1 Hz ([`GridRate`]; `None` is the first path's),
+/// reported as [`Event::NativeRate`]. A signal whose native rate differs from the grid's by
+/// more than 1% is reported as [`Event::Resampling`]. A gap longer than
+/// [`LogOptions::max_gap_s`] is an error ([`load_log_pieces`] splits the log there instead).
+pub fn load_log<'r>(
     file: &Path,
     paths: &[SignalPath],
-    rate_hz: Option<f64>,
+    rate: impl Into<GridRate<'r>>,
     opts: &CheckedLogOptions,
     observe: &mut Observer<'_>,
 ) -> Result<LogData, PipelineError> {
@@ -313,7 +344,7 @@ pub fn load_log(
         signals: raw,
         native,
         rate_hz: rate,
-    } = read_raw(file, paths, rate_hz, opts, observe)?;
+    } = read_raw(file, paths, rate.into(), opts, observe)?;
     align(file, paths, &raw, native, rate, opts)
 }
 
@@ -334,10 +365,10 @@ pub struct LogPieces {
 /// between gaps with fewer than `min_samples` grid samples are left out and counted (a log
 /// without such gaps is one piece, however short). A split is reported as
 /// [`Event::Split`]. A log whose pieces are all too short is the gap's error.
-pub fn load_log_pieces(
+pub fn load_log_pieces<'r>(
     file: &Path,
     paths: &[SignalPath],
-    rate_hz: Option<f64>,
+    rate: impl Into<GridRate<'r>>,
     opts: &CheckedLogOptions,
     min_samples: usize,
     observe: &mut Observer<'_>,
@@ -346,7 +377,7 @@ pub fn load_log_pieces(
         signals: raw,
         native,
         rate_hz: rate,
-    } = read_raw(file, paths, rate_hz, opts, observe)?;
+    } = read_raw(file, paths, rate.into(), opts, observe)?;
     let (windows, gaps) = hbn_io::split_at_gaps(&raw, opts.max_gap_s);
     if gaps.is_empty() {
         return Ok(LogPieces {
@@ -395,7 +426,7 @@ struct RawLog {
     signals: Vec<hbn_io::RawSignal>,
     /// Each signal's native rate (Hz), if it has one.
     native: Vec<Option<f64>>,
-    /// The grid rate (Hz): given, or the first signal's native rate.
+    /// The grid rate (Hz): given, or a signal's native rate ([`GridRate`]).
     rate_hz: f64,
 }
 
@@ -403,7 +434,7 @@ struct RawLog {
 fn read_raw(
     file: &Path,
     paths: &[SignalPath],
-    rate_hz: Option<f64>,
+    rate: GridRate<'_>,
     opts: &CheckedLogOptions,
     observe: &mut Observer<'_>,
 ) -> Result<RawLog, PipelineError> {
@@ -443,19 +474,24 @@ fn read_raw(
             }
         }
     }
-    let rate = match rate_hz {
-        Some(r) => r,
-        None => {
-            let (Some(first), Some(Some(r))) = (paths.first(), native.first()) else {
+    let rate = match rate {
+        GridRate::Given(r) => r,
+        GridRate::SlowestOf(which) => {
+            let Some((path, r)) = slowest(paths, &native, which) else {
                 return Err(PipelineError::UnknownRate {
                     file: file.to_owned(),
-                    path: paths.first().map(|p| p.to_string()).unwrap_or_default(),
+                    path: which
+                        .iter()
+                        .chain(&[0])
+                        .find_map(|&i| paths.get(i))
+                        .map(|p| p.to_string())
+                        .unwrap_or_default(),
                 });
             };
-            let r = round_rate(*r);
+            let r = round_rate(r);
             observe(Event::NativeRate {
                 file,
-                path: first,
+                path,
                 rate_hz: r,
             });
             r
@@ -478,6 +514,22 @@ fn read_raw(
         native,
         rate_hz: rate,
     })
+}
+
+/// The signal with the slowest native rate among those at positions `which` of `paths` that
+/// have one, and its rate; the first of equal ones.
+fn slowest<'p>(
+    paths: &'p [SignalPath],
+    native: &[Option<f64>],
+    which: &[usize],
+) -> Option<(&'p SignalPath, f64)> {
+    which
+        .iter()
+        .filter_map(|&i| Some((paths.get(i)?, (*native.get(i)?)?)))
+        .fold(None, |best, (p, r)| match best {
+            Some((_, b)) if b <= r => best,
+            _ => Some((p, r)),
+        })
 }
 
 /// `raw` on one grid at `rate`.
@@ -589,4 +641,52 @@ pub fn join_pieces(pieces: &[LogData]) -> Option<LogData> {
         }
     }
     Some(joined)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn paths(names: &[&str]) -> Vec<SignalPath> {
+        names.iter().map(|n| n.parse().unwrap()).collect()
+    }
+
+    #[test]
+    fn the_slowest_of_the_signals_named_sets_the_rate() {
+        let p = paths(&[
+            "/input.data",
+            "/state.data",
+            "/sensor.data",
+            "/sensor2.data",
+        ]);
+        let native = [Some(200.0), Some(30.0), Some(100.0), Some(50.0)];
+        // The state is the slowest signal, but only the positions given count.
+        let (path, rate) = slowest(&p, &native, &[2]).unwrap();
+        assert_eq!((path.to_string().as_str(), rate), ("/sensor.data", 100.0));
+        let (path, rate) = slowest(&p, &native, &[2, 3]).unwrap();
+        assert_eq!((path.to_string().as_str(), rate), ("/sensor2.data", 50.0));
+        let (path, _) = slowest(&p, &native, &[0, 2]).unwrap();
+        assert_eq!(path.to_string(), "/sensor.data");
+        // Equal rates: the first named.
+        let same = [Some(100.0); 4];
+        let (path, _) = slowest(&p, &same, &[3, 2]).unwrap();
+        assert_eq!(path.to_string(), "/sensor2.data");
+    }
+
+    #[test]
+    fn signals_without_a_rate_and_positions_past_the_paths_are_skipped() {
+        let p = paths(&["/input.data", "/state.data", "/sensor.data"]);
+        let native = [Some(200.0), Some(30.0), None];
+        assert_eq!(slowest(&p, &native, &[2]), None);
+        assert_eq!(slowest(&p, &native, &[5]), None);
+        assert_eq!(slowest(&p, &native, &[]), None);
+        let (path, rate) = slowest(&p, &native, &[2, 0, 7]).unwrap();
+        assert_eq!((path.to_string().as_str(), rate), ("/input.data", 200.0));
+    }
+
+    #[test]
+    fn an_optional_rate_is_given_or_the_first_signals() {
+        assert_eq!(GridRate::from(Some(50.0)), GridRate::Given(50.0));
+        assert_eq!(GridRate::from(None), GridRate::SlowestOf(&[0]));
+    }
 }

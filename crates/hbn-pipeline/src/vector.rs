@@ -15,7 +15,7 @@ use hbn_model::{
 use serde_json::{Value, json};
 
 use crate::error::{LogOption, OptionError, PipelineError};
-use crate::log::{Event, LogData, LogOptions, Observer, load_log, load_log_pieces};
+use crate::log::{Event, GridRate, LogData, LogOptions, Observer, load_log, load_log_pieces};
 use crate::train::{DEFAULT_INPUT, DEFAULT_OUTPUT, DEFAULT_STATE, MIN_PIECE_SAMPLES};
 
 /// Where the signals of a vector system are in the logs, in order.
@@ -112,7 +112,7 @@ pub fn default_signals(
             .into_iter()
             .flatten()
             .collect::<Vec<_>>();
-        match load_log(log, &probe, None, &checked, observe) {
+        match load_log(log, &probe, GridRate::SlowestOf(&[0]), &checked, observe) {
             Ok(_) => {
                 return Ok(VectorSignals {
                     inputs,
@@ -149,7 +149,8 @@ fn rows(log: &LogData, first: usize, d: usize) -> Vec<f64> {
 }
 
 /// Trains a vector model from MCAP logs, each log (piece between gaps) one trajectory; as
-/// [`crate::train_from_logs`] for a scalar one. `sensor_inputs`: each sensor's inputs, none
+/// [`crate::train_from_logs`] for a scalar one, the grid at the given rate or at the slowest
+/// sensor's native rate in the first log. `sensor_inputs`: each sensor's inputs, none
 /// (chosen on held-out data), one for all sensors or one per sensor.
 pub fn train_vector_from_logs(
     logs: &[PathBuf],
@@ -171,9 +172,12 @@ pub fn train_vector_from_logs(
     let params = params.check()?;
     let paths = signals.all();
     let mut rate = opts.rate_hz;
+    // Without a rate, the slowest sensor sets the grid; later logs take the first's.
+    let sensors: Vec<usize> = (dims.inputs + dims.states..paths.len()).collect();
     let mut data = Vec::new();
     for file in logs {
-        let split = load_log_pieces(file, &paths, rate, &opts, MIN_PIECE_SAMPLES, observe)?;
+        let grid = rate.map_or(GridRate::SlowestOf(&sensors), GridRate::Given);
+        let split = load_log_pieces(file, &paths, grid, &opts, MIN_PIECE_SAMPLES, observe)?;
         for piece in split.pieces {
             rate = Some(piece.rate_hz());
             data.push(piece);
