@@ -449,6 +449,35 @@ impl<'a> GpView<'a> {
         )
     }
 
+    /// The EKF's prediction for the vector filter: [`GpView::predict`] with [`Want::EKF`], the
+    /// same bits, but the mean gradient only with respect to the first `grad_cols` inputs,
+    /// written into `grad_mean` (entries from `grad_cols` on are unspecified), and no
+    /// [`Prediction`] to copy. A transition of a vector model reads 12 inputs, of which the
+    /// filter differentiates 4 (the state's). Kernels whose feature Jacobian is not diagonal
+    /// (warped or Mahalanobis) differentiate every input.
+    pub(crate) fn predict_ekf_into(
+        &self,
+        x_raw: &[f64],
+        grad_cols: usize,
+        scratch: &mut [f64],
+        grad_mean: &mut [f64; MAX_DIM],
+    ) -> Result<Moments, CoreError> {
+        crate::simd::vectorised(
+            #[inline(always)]
+            || {
+                let mut unused = [0.0; MAX_DIM];
+                self.predict_parts(
+                    x_raw,
+                    Want::EKF,
+                    Pass::Rows { grad_cols },
+                    scratch,
+                    grad_mean,
+                    &mut unused,
+                )
+            },
+        )
+    }
+
     /// [`GpView::predict`], inlined where it is called ([`crate::simd::vectorised`]).
     #[inline(always)]
     fn predict_inline(
@@ -457,6 +486,38 @@ impl<'a> GpView<'a> {
         want: Want,
         scratch: &mut [f64],
     ) -> Result<Prediction, CoreError> {
+        let mut grad_mean = [0.0; MAX_DIM];
+        let mut grad_variance = [0.0; MAX_DIM];
+        let m = self.predict_parts(
+            x_raw,
+            want,
+            Pass::ByDim,
+            scratch,
+            &mut grad_mean,
+            &mut grad_variance,
+        )?;
+        Ok(Prediction {
+            mean: m.mean,
+            variance: m.variance,
+            prior_variance: m.prior_variance,
+            grad_mean,
+            grad_variance,
+        })
+    }
+
+    /// The prediction's work: the moments returned, the gradients written into `grad_mean`
+    /// and `grad_variance` where `want` asks for them (their first `dim` entries; the arrays
+    /// must hold zeros).
+    #[inline(always)]
+    fn predict_parts(
+        &self,
+        x_raw: &[f64],
+        want: Want,
+        pass: Pass,
+        scratch: &mut [f64],
+        grad_mean: &mut [f64; MAX_DIM],
+        grad_variance: &mut [f64; MAX_DIM],
+    ) -> Result<Moments, CoreError> {
         let d = self.dim();
         let n = self.len();
         if x_raw.len() != d {
@@ -523,32 +584,43 @@ impl<'a> GpView<'a> {
         };
         // Without a gradient (the unscented mode's sigma points, a mean or variance alone) the
         // pass skips the profile's slope and the gradient sums.
-        let mean_std = if want.grad_mean || want.grad_variance {
-            acc.run_dim::<true>(d, kvec, cslot, &mut grad_u)
-        } else {
-            acc.run_dim::<false>(d, kvec, cslot, &mut grad_u)
+        let grad = want.grad_mean || want.grad_variance;
+        // The inputs whose mean gradient the pass computes (every one, but where the caller
+        // asks for fewer and the feature Jacobian is diagonal).
+        let grad_cols = match pass {
+            Pass::Rows { grad_cols } if !want.grad_variance && diagonal_features(&spec) => {
+                grad_cols.min(d)
+            }
+            _ => d,
+        };
+        let mean_std = match (pass, grad) {
+            (Pass::ByDim, true) => acc.run_dim::<true>(d, kvec, cslot, &mut grad_u),
+            (Pass::ByDim, false) => acc.run_dim::<false>(d, kvec, cslot, &mut grad_u),
+            (Pass::Rows { .. }, true) => {
+                acc.run_rows::<true>(d, grad_cols, kvec, cslot, &mut grad_u)
+            }
+            (Pass::Rows { .. }, false) => acc.run_rows::<false>(d, d, kvec, cslot, &mut grad_u),
         };
 
-        let mut out = Prediction {
+        let mut out = Moments {
             mean: self.output_mean + self.output_scale * mean_std,
             variance: 0.0,
             prior_variance: 0.0,
-            grad_mean: [0.0; MAX_DIM],
-            grad_variance: [0.0; MAX_DIM],
         };
         if want.grad_mean {
             chain_to_raw(
                 &grad_u,
                 &du_dz,
                 d,
+                grad_cols,
                 self.output_scale,
                 self.input_scale,
-                &mut out.grad_mean,
+                grad_mean,
             );
         }
         // `new` checked that `linear` is empty or has `d` slopes.
         let centred = x_raw.iter().zip(self.input_mean);
-        for ((w, (x, m)), g) in self.linear.iter().zip(centred).zip(&mut out.grad_mean) {
+        for ((w, (x, m)), g) in self.linear.iter().zip(centred).zip(grad_mean.iter_mut()) {
             out.mean += w * (x - m);
             if want.grad_mean {
                 *g += w;
@@ -558,7 +630,7 @@ impl<'a> GpView<'a> {
             // `with_mean_input` checked `j < dim`, so both exist.
             out.mean += x_raw.get(j).copied().unwrap_or(0.0);
             if want.grad_mean
-                && let Some(g) = out.grad_mean.get_mut(j)
+                && let Some(g) = grad_mean.get_mut(j)
             {
                 *g += 1.0;
             }
@@ -597,14 +669,7 @@ impl<'a> GpView<'a> {
                         *g += wc * (r - u);
                     }
                 }
-                chain_to_raw(
-                    &gv_u,
-                    &du_dz,
-                    d,
-                    s2,
-                    self.input_scale,
-                    &mut out.grad_variance,
-                );
+                chain_to_raw(&gv_u, &du_dz, d, d, s2, self.input_scale, grad_variance);
             }
         }
         if !(out.mean.is_finite() && out.variance.is_finite()) {
@@ -612,6 +677,33 @@ impl<'a> GpView<'a> {
         }
         Ok(out)
     }
+}
+
+/// The moments of a prediction ([`GpView::predict_ekf_into`]), as in [`Prediction`].
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Moments {
+    /// Predictive mean.
+    pub(crate) mean: f64,
+    /// Predictive variance of the latent function.
+    pub(crate) variance: f64,
+    /// Prior variance `k(x, x)`.
+    pub(crate) prior_variance: f64,
+}
+
+/// Which kernel pass a prediction runs: the one compiled per dimension ([`Accum::run_dim`]),
+/// or the pass over blocks of rows ([`Accum::run_rows`]) with the mean gradient of the
+/// first `grad_cols` inputs only. Both give the same bits where both compute.
+#[derive(Clone, Copy, Debug)]
+enum Pass {
+    ByDim,
+    Rows { grad_cols: usize },
+}
+
+/// Whether the kernel's features are its inputs scaled one by one (no warping, a diagonal
+/// metric), so that the gradient with respect to one input needs only its own feature.
+fn diagonal_features(spec: &crate::kernel::KernelSpec) -> bool {
+    spec.dim > MAX_DENSE_DIM
+        || (spec.warp_units == 0 && spec.metric != crate::kernel::Metric::Mahalanobis)
 }
 
 /// Number of `f64` scratch values needed to predict with `n` support (or inducing) points.
@@ -633,7 +725,7 @@ pub const fn predict_scratch(n: usize, sparse: bool, want: Want) -> usize {
 /// `out = T k` for a row-packed lower-triangular `T` (`n = out.len()` rows). The sparse GP's
 /// rows are short (`m <= 256`), so what costs is not the arithmetic but the work at each row's
 /// ends: row `i` sums its first `4 floor(i / 4)` columns in one four-lane accumulator (no tail
-/// loop), then adds its last one to four products in column order. With AVX2, four rows go at
+/// loop), then adds its last one to four products in column order. With AVX2, eight rows go at
 /// once in intrinsics (`simd::lower_packed_times_rows4`), to the same bits.
 /// `cargo bench --bench gp -- triangular` measures it.
 pub fn lower_packed_times(t_packed: &[f64], k: &[f64], out: &mut [f64]) {
@@ -747,18 +839,21 @@ fn lower_packed_transpose_times_inline(t_packed: &[f64], v: &[f64], out: &mut [f
     }
 }
 
-/// `grad_raw_j = out_scale * sum_r g_u[r] du_r/dz_j / in_scale_j`.
+/// `grad_raw_j = out_scale * sum_r g_u[r] du_r/dz_j / in_scale_j`, for `j < cols` above
+/// [`MAX_DENSE_DIM`] inputs (where the Jacobian is diagonal), for every `j < d` below.
 fn chain_to_raw(
     g_u: &[f64; MAX_DIM],
     du_dz: &[f64; FEATURE_JACOBIAN_LEN],
     d: usize,
+    cols: usize,
     out_scale: f64,
     in_scale: &[f64],
     out: &mut [f64; MAX_DIM],
 ) {
     if d > MAX_DENSE_DIM {
         // A diagonal Jacobian ([`Kernel::features`]).
-        for (((o, s), g), j) in out.iter_mut().zip(in_scale).zip(g_u).zip(du_dz).take(d) {
+        let cols = cols.min(d);
+        for (((o, s), g), j) in out.iter_mut().zip(in_scale).zip(g_u).zip(du_dz).take(cols) {
             *o = out_scale * (g * j) / s;
         }
         return;
@@ -787,6 +882,10 @@ struct Accum<'s> {
 /// Support points per block of [`Accum::run`]: its profile pass runs over a fixed-size array,
 /// which the compiler vectorises (the exponential is straight-line code).
 const BLOCK: usize = 16;
+
+/// Support points per block of [`Accum::run_rows`]: enough profiles at once for the
+/// exponentials' long chains of multiplications and additions to overlap.
+const ROWS_BLOCK: usize = 64;
 
 impl Accum<'_> {
     /// [`Accum::run`] for `d` inputs (the kernel pass is compiled per dimension).
@@ -825,7 +924,8 @@ impl Accum<'_> {
         self.run_width::<D, GRAD>(D, kvec, cvec, grad_u)
     }
 
-    /// [`Accum::run`] for `d` (9..=[`MAX_DIM`]) inputs: one compiled pass for every width.
+    /// [`Accum::run`] for `d` (9..=[`MAX_DIM`]) inputs: one compiled pass for every width
+    /// ([`Accum::run_rows`]).
     #[inline(always)]
     fn run_wide<const GRAD: bool>(
         &self,
@@ -834,8 +934,126 @@ impl Accum<'_> {
         cvec: Option<&mut [f64]>,
         grad_u: &mut [f64; MAX_DIM],
     ) -> f64 {
+        self.run_rows::<GRAD>(d, d, kvec, cvec, grad_u)
+    }
+
+    /// The pass of [`Accum::run_width`] over rows of `d` features (1..=[`MAX_DIM`]), to the
+    /// same bits, with the gradient of the first `grad_cols` features only (the others are
+    /// left zero). Rows of many features are too wide for one row's sums to keep the CPU
+    /// busy, so with AVX2 the squared distances go four rows at a time
+    /// (`simd::sq_dists_rows4`) and the gradient's sums four columns at a time
+    /// (`simd::weighted_diffs`), each sum in the order of [`Accum::run_width`]'s loops.
+    #[inline(always)]
+    fn run_rows<const GRAD: bool>(
+        &self,
+        d: usize,
+        grad_cols: usize,
+        kvec: &mut [f64],
+        mut cvec: Option<&mut [f64]>,
+        grad_u: &mut [f64; MAX_DIM],
+    ) -> f64 {
         // `1 <= MAX_DIM`: the clamp cannot panic.
-        self.run_width::<MAX_DIM, GRAD>(d.clamp(1, MAX_DIM), kvec, cvec, grad_u)
+        let width = d.clamp(1, MAX_DIM);
+        let us = self.u_star;
+        let mut mean = 0.0;
+        let mut gsum = [0.0; MAX_DIM];
+        let n = kvec.len().min(self.alpha.len());
+        let mut first = 0;
+        while first < n {
+            let last = n.min(first + ROWS_BLOCK);
+            let (Some(rows), Some(k_out), Some(alpha)) = (
+                self.features.get(first * width..last * width),
+                kvec.get_mut(first..last),
+                self.alpha.get(first..last),
+            ) else {
+                break;
+            };
+            let mut r2 = [0.0; ROWS_BLOCK];
+            let r2_rows = r2.get_mut(..last - first).unwrap_or(&mut []);
+            let done = crate::simd::sq_dists_rows4(rows, width, us, r2_rows);
+            for (r2_i, row) in r2_rows
+                .iter_mut()
+                .zip(rows.chunks_exact(width.max(1)))
+                .skip(done)
+            {
+                let mut acc = 0.0;
+                for (r, u) in row.iter().zip(us) {
+                    let dj = r - u;
+                    acc += dj * dj;
+                }
+                *r2_i = acc;
+            }
+            let (mut k, mut c) = ([0.0; ROWS_BLOCK], [0.0; ROWS_BLOCK]);
+            if GRAD {
+                profiles_and_slopes(self.profile, &r2, &mut k, &mut c);
+            } else {
+                profiles(self.profile, &r2, &mut k);
+            }
+            if self.direction {
+                let dirs = self.directions.get(first..).unwrap_or(&[]);
+                for ((k_j, c_j), dir) in k.iter_mut().zip(c.iter_mut()).zip(dirs) {
+                    let factor = 0.5 * (1.0 + self.g_star * dir);
+                    *k_j *= factor;
+                    *c_j *= factor;
+                }
+            }
+            let mut a = [0.0; ROWS_BLOCK];
+            for (a_j, hi) in a.iter_mut().zip(alpha) {
+                *a_j = *hi;
+            }
+            if let Some(lo) = self.alpha_lo.get(first..) {
+                for (a_j, lo) in a.iter_mut().zip(lo) {
+                    *a_j += lo;
+                }
+            }
+            for (k_j, c_j) in k.iter_mut().zip(c.iter_mut()) {
+                *k_j *= self.sf2;
+                *c_j *= self.sf2;
+            }
+            for (k_out, k_j) in k_out.iter_mut().zip(&k) {
+                *k_out = *k_j;
+            }
+            if let Some(cv) = cvec
+                .as_deref_mut()
+                .filter(|_| GRAD)
+                .and_then(|cv| cv.get_mut(first..))
+            {
+                for (c_out, c_j) in cv.iter_mut().zip(&c) {
+                    *c_out = *c_j;
+                }
+            }
+            if GRAD {
+                // dk/du* = c dr2/du* = -2 c (u_i - u*): the mean's gradient weights.
+                let mut w = [0.0; ROWS_BLOCK];
+                for ((w_j, (k_j, c_j)), a_j) in w
+                    .iter_mut()
+                    .zip(k.iter().zip(&c))
+                    .zip(&a)
+                    .take(last - first)
+                {
+                    mean += k_j * a_j;
+                    *w_j = -2.0 * c_j * a_j;
+                }
+                let w = w.get(..last - first).unwrap_or(&[]);
+                if !crate::simd::weighted_diffs(rows, width, grad_cols, us, w, &mut gsum) {
+                    for (row, w_j) in rows.chunks_exact(width.max(1)).zip(w) {
+                        for ((g, r), u) in gsum.iter_mut().zip(row).zip(us).take(grad_cols) {
+                            *g += w_j * (r - u);
+                        }
+                    }
+                }
+            } else {
+                // The same sum in the same order: the mean is bit-identical either way.
+                for (k_j, a_j) in k.iter().zip(&a) {
+                    mean += k_j * a_j;
+                }
+            }
+            first = last;
+        }
+        for (g, s) in grad_u.iter_mut().zip(&gsum) {
+            *g = *s;
+        }
+        mean
     }
 
     /// The pass over rows of `width` features, with arrays of `D >= width` slots (`D ==
@@ -1405,6 +1623,113 @@ mod tests {
                         let wide = gp.predict(&x, want, &mut scratch).unwrap();
                         let narrow = gp.predict_inline(&x, want, &mut scratch).unwrap();
                         assert_eq!(bits(&wide), bits(&narrow), "{spec:?} sparse {sparse}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// The vector filter's prediction (`predict_ekf_into`) gives the bits of `predict` with
+    /// `Want::EKF`: the moments, and the mean gradient of the inputs it asks for (all of them
+    /// for a kernel whose features mix or warp its inputs), on narrow and wide inputs, with a
+    /// partial last block of rows, for exact and sparse factors.
+    #[test]
+    fn the_vector_filters_prediction_gives_the_bits_of_predict() {
+        let n = 37usize;
+        let alpha: Vec<f64> = (0..n).map(|i| libm::cos(0.61 * i as f64)).collect();
+        let alpha_lo: Vec<f64> = (0..n).map(|i| 1e-9 * libm::sin(i as f64)).collect();
+        let dirs: Vec<f64> = (0..n)
+            .map(|i| if i % 3 == 0 { -1.0 } else { 1.0 })
+            .collect();
+        let mut packed = vec![0.0; n * (n + 1) / 2];
+        for i in 0..n {
+            for j in 0..=i {
+                packed[i * (i + 1) / 2 + j] = if i == j {
+                    0.02 * (1.0 + 0.2 * libm::sin(i as f64))
+                } else {
+                    4e-4 * libm::cos((i * 5 + j) as f64)
+                };
+            }
+        }
+        let mut specs: Vec<KernelSpec> = all_specs().to_vec();
+        for d in [5, 12, 14] {
+            specs.push(KernelSpec::se_ard(d));
+            specs.push(KernelSpec {
+                profile: Profile::Matern52,
+                direction: Some([1, 0]),
+                ..KernelSpec::se_ard(d)
+            });
+        }
+        for spec in specs {
+            let d = spec.dim;
+            let feats: Vec<f64> = (0..d * n)
+                .map(|i| 1.3 * libm::sin(0.37 * i as f64 + 0.2))
+                .collect();
+            let theta: Vec<f64> = (0..spec.n_params())
+                .map(|i| 0.2 * libm::cos(0.9 * i as f64))
+                .collect();
+            let whiten: Vec<f64> = (0..d * d)
+                .map(|i| if i % (d + 1) == 0 { 1.1 } else { 0.1 })
+                .collect();
+            let (mean, scale): (Vec<f64>, Vec<f64>) = (0..d)
+                .map(|j| (0.1 * j as f64, 1.0 + 0.1 * j as f64))
+                .unzip();
+            let slopes: Vec<f64> = (0..d).map(|j| 0.05 * j as f64).collect();
+            for (sparse, linear) in [(false, &[][..]), (true, &slopes[..])] {
+                let gp = GpView::new(GpParts {
+                    kernel: Kernel::new(spec, &theta, &whiten).unwrap(),
+                    input_mean: &mean,
+                    input_scale: &scale,
+                    output_mean: 0.3,
+                    output_scale: 2.0,
+                    linear,
+                    features: &feats,
+                    directions: if spec.direction.is_some() { &dirs } else { &[] },
+                    alpha: &alpha,
+                    alpha_lo: if sparse { &alpha_lo } else { &[] },
+                    variance: if sparse {
+                        Variance::Sparse {
+                            variance_factor: &packed,
+                        }
+                    } else {
+                        Variance::Exact {
+                            chol_packed: &packed,
+                        }
+                    },
+                    noise_var: 0.01,
+                })
+                .unwrap()
+                .with_mean_input(0)
+                .unwrap();
+                let mut scratch = vec![0.0; gp.predict_scratch(Want::ALL)];
+                for q in 0..3 {
+                    let x: Vec<f64> = (0..d)
+                        .map(|j| 0.4 * libm::sin(q as f64 + 0.7 * j as f64))
+                        .collect();
+                    let want = gp.predict(&x, Want::EKF, &mut scratch).unwrap();
+                    for grad_cols in [1, 4, d] {
+                        let mut grad = [0.0; MAX_DIM];
+                        let got = gp
+                            .predict_ekf_into(&x, grad_cols, &mut scratch, &mut grad)
+                            .unwrap();
+                        let moments = |m: [f64; 3]| m.map(f64::to_bits);
+                        assert_eq!(
+                            moments([got.mean, got.variance, got.prior_variance]),
+                            moments([want.mean, want.variance, want.prior_variance]),
+                            "{spec:?}"
+                        );
+                        let cols = if diagonal_features(&spec) {
+                            grad_cols.min(d)
+                        } else {
+                            d
+                        };
+                        for j in 0..cols {
+                            assert_eq!(
+                                grad[j].to_bits(),
+                                want.grad_mean[j].to_bits(),
+                                "{spec:?}, {grad_cols} columns, input {j}"
+                            );
+                        }
                     }
                 }
             }

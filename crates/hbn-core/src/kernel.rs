@@ -627,6 +627,18 @@ impl<'a> Kernel<'a> {
             self.features_wide(x_std, u, du_dx);
             return;
         }
+        if self.spec.warp_units == 0 && self.spec.metric != Metric::Mahalanobis {
+            // No warping (`phi(x) = x`, slope 1) and a diagonal metric: what the general
+            // path below computes, without preparing the warp's derivatives.
+            let scales = u.iter_mut().zip(x_std).zip(&self.metric_scale);
+            for (r, ((uj, x), s)) in scales.enumerate().take(d) {
+                *uj = x * s;
+                for c in 0..d {
+                    set(du_dx, r * d + c, if r == c { *s } else { 0.0 });
+                }
+            }
+            return;
+        }
         let prep = self.prepare(x_std, 0.0);
         self.apply_metric(&prep.p, u);
         // du/dx = L diag(phi'(x)), entry by entry: `L` is diagonal (isotropic, ARD) or

@@ -13,12 +13,17 @@
 //! It also holds [`sqrt`], the square root the core uses everywhere: `libm`'s is legacy-SSE
 //! inline assembly, which stalls inside the AVX2 code on some CPUs.
 //!
-//! And it holds one kernel written with AVX2 intrinsics, the sparse GP's `T k`
-//! (`lower_packed_times_rows4`), where the compiler's own vectorisation chooses a poor layout.
+//! And it holds the kernels written with AVX2 intrinsics, where the compiler's own
+//! vectorisation chooses a poor layout: the sparse GP's `T k` (`lower_packed_times_rows4`), and
+//! the two sums over rows of features of the kernel pass over many inputs, the squared
+//! distances (`sq_dists_rows4`) and the mean gradient's weighted differences
+//! (`weighted_diffs`). Each adds its terms in the order of the plain loop it replaces, so the
+//! bits are those of that loop, which runs without AVX2.
 //!
 //! This module holds the crate's only `unsafe` code: the calls of `#[target_feature]` functions,
 //! made only after the CPU was seen to support the feature, the SSE2 square root (SSE2 is
-//! part of every x86-64 CPU), and the unaligned vector loads and stores of that kernel.
+//! part of every x86-64 CPU), and the unaligned (or masked) vector loads and stores of those
+//! kernels.
 #![allow(unsafe_code)]
 
 #[cfg(target_arch = "x86_64")]
@@ -82,11 +87,12 @@ pub fn sqrt(x: f64) -> f64 {
 /// (`n = out.len()`), with AVX2 intrinsics when the CPU has them; returns how many rows it
 /// wrote (0 without AVX2, where the caller does them all).
 ///
-/// The rows go four at a time. Each row sums the columns before its block (a multiple of
-/// four) in one four-lane accumulator, then adds the block's triangle column by column: the
-/// order of `crate::gp`'s row-by-row loop, so the bits are the same (multiplications and
-/// additions stay separate, never fused). The compiler's own vectorisation of that loop pairs
-/// lanes across rows with shuffles, and one row at a time waits on its accumulator.
+/// The rows go in blocks of four, two blocks at a time (eight independent sums). Each row
+/// sums the columns before its block (a multiple of four) in one four-lane accumulator, then
+/// adds the block's triangle column by column: the order of `crate::gp`'s row-by-row loop, so
+/// the bits are the same (multiplications and additions stay separate, never fused). The
+/// compiler's own vectorisation of that loop pairs lanes across rows with shuffles, and one
+/// row at a time waits on its accumulator.
 pub(crate) fn lower_packed_times_rows4(t_packed: &[f64], k: &[f64], out: &mut [f64]) -> usize {
     #[cfg(target_arch = "x86_64")]
     if avx2() {
@@ -105,39 +111,21 @@ fn lower_packed_times_avx2(t_packed: &[f64], k: &[f64], out: &mut [f64]) -> usiz
         _mm256_permute2f128_pd, _mm256_setzero_pd, _mm256_storeu_pd,
     };
     let row = |i: usize| crate::gp::lower_row(t_packed, i);
-    // A chunk of exactly four values (what `chunks_exact(4)` yields) as one vector.
-    let load = |c: &[f64]| match c.first_chunk::<4>() {
+    // A chunk of exactly four values (what `as_chunks` yields) as one vector.
+    let load = |c: &[f64; 4]| {
         // SAFETY: the pointer is to four readable, initialised `f64`s; the load is unaligned.
-        Some(c4) => unsafe { _mm256_loadu_pd(c4.as_ptr()) },
-        None => _mm256_setzero_pd(),
+        unsafe { _mm256_loadu_pd(c.as_ptr()) }
     };
-    let mut done = 0;
-    for (b, block) in out.chunks_exact_mut(4).enumerate() {
-        let i = 4 * b;
-        let (Some(r0), Some(r1), Some(r2), Some(r3), Some(k_head), Some(&[k0, k1, k2, k3])) = (
-            row(i),
-            row(i + 1),
-            row(i + 2),
-            row(i + 3),
-            k.get(..i),
-            k.get(i..).and_then(|t| t.first_chunk::<4>()),
-        ) else {
-            break;
-        };
-        let mut acc: [__m256d; 4] = [_mm256_setzero_pd(); 4];
-        let it = k_head
-            .chunks_exact(4)
-            .zip(r0.chunks_exact(4))
-            .zip(r1.chunks_exact(4))
-            .zip(r2.chunks_exact(4))
-            .zip(r3.chunks_exact(4));
-        for ((((kc, c0), c1), c2), c3) in it {
-            let kv = load(kc);
-            for (a, c) in acc.iter_mut().zip([c0, c1, c2, c3]) {
-                *a = _mm256_add_pd(*a, _mm256_mul_pd(load(c), kv));
-            }
-        }
-        // Row r's (x0 + x1) + (x2 + x3), the four rows in one vector.
+    fn heads(r: &[f64], i: usize) -> &[[f64; 4]] {
+        r.get(..i).unwrap_or(&[]).as_chunks::<4>().0
+    }
+    fn chunk(r: &[f64], i: usize) -> Option<&[f64; 4]> {
+        r.get(i..).and_then(|t| t.first_chunk::<4>())
+    }
+    // The block of rows `i..i + 4` (`i` a multiple of four), from the sums of their first `i`
+    // columns in the lanes of `acc` (one vector per row): row r's (x0 + x1) + (x2 + x3), then
+    // the block's triangle column by column.
+    let finish = |acc: [__m256d; 4], rs: [&[f64]; 4], kb: &[f64; 4], block: &mut [f64]| {
         let [a0, a1, a2, a3] = acc;
         let (h01, h23) = (_mm256_hadd_pd(a0, a1), _mm256_hadd_pd(a2, a3));
         let sums = _mm256_add_pd(
@@ -148,23 +136,359 @@ fn lower_packed_times_avx2(t_packed: &[f64], k: &[f64], out: &mut [f64]) -> usiz
         // SAFETY: `s` holds four writable `f64`s; the store is unaligned.
         unsafe { _mm256_storeu_pd(s.as_mut_ptr(), sums) };
         let [s0, s1, s2, s3] = s;
-        let (
-            [o0, o1, o2, o3],
+        let [k0, k1, k2, k3] = *kb;
+        if let (
+            Some([o0, o1, o2, o3]),
             [.., a00],
             [.., a10, a11],
             [.., a20, a21, a22],
             [.., a30, a31, a32, a33],
-        ) = (block, r0, r1, r2, r3)
-        else {
-            break;
+        ) = (block.first_chunk_mut::<4>(), rs[0], rs[1], rs[2], rs[3])
+        {
+            *o0 = s0 + a00 * k0;
+            *o1 = (s1 + a10 * k0) + a11 * k1;
+            *o2 = ((s2 + a20 * k0) + a21 * k1) + a22 * k2;
+            *o3 = (((s3 + a30 * k0) + a31 * k1) + a32 * k2) + a33 * k3;
+        }
+    };
+    let kb = |i: usize| k.get(i..).and_then(|t| t.first_chunk::<4>());
+    let mut i = 0;
+    // Two blocks of four rows at a time (eight independent sums), the chunks of columns the
+    // two share first, then the one more of the second block.
+    while i + 8 <= out.len() {
+        let (Some(r0), Some(r1), Some(r2), Some(r3), Some(r4), Some(r5), Some(r6), Some(r7)) = (
+            row(i),
+            row(i + 1),
+            row(i + 2),
+            row(i + 3),
+            row(i + 4),
+            row(i + 5),
+            row(i + 6),
+            row(i + 7),
+        ) else {
+            return i;
         };
-        *o0 = s0 + a00 * k0;
-        *o1 = (s1 + a10 * k0) + a11 * k1;
-        *o2 = ((s2 + a20 * k0) + a21 * k1) + a22 * k2;
-        *o3 = (((s3 + a30 * k0) + a31 * k1) + a32 * k2) + a33 * k3;
-        done = i + 4;
+        let (Some(ka), Some(kb4), Some(k_head)) = (kb(i), kb(i + 4), k.get(..i)) else {
+            return i;
+        };
+        let mut acc: [__m256d; 8] = [_mm256_setzero_pd(); 8];
+        let it = k_head
+            .as_chunks::<4>()
+            .0
+            .iter()
+            .zip(heads(r0, i).iter().zip(heads(r1, i)))
+            .zip(heads(r2, i).iter().zip(heads(r3, i)))
+            .zip(heads(r4, i).iter().zip(heads(r5, i)))
+            .zip(heads(r6, i).iter().zip(heads(r7, i)));
+        for ((((kc, (c0, c1)), (c2, c3)), (c4, c5)), (c6, c7)) in it {
+            let kv = load(kc);
+            for (a, c) in acc.iter_mut().zip([c0, c1, c2, c3, c4, c5, c6, c7]) {
+                *a = _mm256_add_pd(*a, _mm256_mul_pd(load(c), kv));
+            }
+        }
+        // Columns `i..i + 4`: a whole chunk for the second block's rows.
+        let [a0, a1, a2, a3, mut a4, mut a5, mut a6, mut a7] = acc;
+        if let (Some(c4), Some(c5), Some(c6), Some(c7)) =
+            (chunk(r4, i), chunk(r5, i), chunk(r6, i), chunk(r7, i))
+        {
+            let kv = load(ka);
+            a4 = _mm256_add_pd(a4, _mm256_mul_pd(load(c4), kv));
+            a5 = _mm256_add_pd(a5, _mm256_mul_pd(load(c5), kv));
+            a6 = _mm256_add_pd(a6, _mm256_mul_pd(load(c6), kv));
+            a7 = _mm256_add_pd(a7, _mm256_mul_pd(load(c7), kv));
+        }
+        let (lo, hi) = out
+            .get_mut(i..i + 8)
+            .and_then(|b| b.split_at_mut_checked(4))
+            .unwrap_or((&mut [], &mut []));
+        finish([a0, a1, a2, a3], [r0, r1, r2, r3], ka, lo);
+        finish([a4, a5, a6, a7], [r4, r5, r6, r7], kb4, hi);
+        i += 8;
+    }
+    if i + 4 <= out.len() {
+        let (Some(r0), Some(r1), Some(r2), Some(r3), Some(ka), Some(k_head)) = (
+            row(i),
+            row(i + 1),
+            row(i + 2),
+            row(i + 3),
+            kb(i),
+            k.get(..i),
+        ) else {
+            return i;
+        };
+        let mut acc: [__m256d; 4] = [_mm256_setzero_pd(); 4];
+        let it = k_head
+            .as_chunks::<4>()
+            .0
+            .iter()
+            .zip(heads(r0, i).iter().zip(heads(r1, i)))
+            .zip(heads(r2, i).iter().zip(heads(r3, i)));
+        for ((kc, (c0, c1)), (c2, c3)) in it {
+            let kv = load(kc);
+            for (a, c) in acc.iter_mut().zip([c0, c1, c2, c3]) {
+                *a = _mm256_add_pd(*a, _mm256_mul_pd(load(c), kv));
+            }
+        }
+        finish(
+            acc,
+            [r0, r1, r2, r3],
+            ka,
+            out.get_mut(i..i + 4).unwrap_or(&mut []),
+        );
+        i += 4;
+    }
+    i
+}
+
+/// Squared distances of `width`-wide rows to `u`, `r2[i] = sum_j (rows[i width + j] - u[j])^2`,
+/// for the first `4 floor(r2.len() / 4)` rows, with AVX2 intrinsics when the CPU has them;
+/// returns how many rows it wrote (0 without AVX2, where the caller does them all).
+///
+/// Four rows go at once, one per lane: a 4 x 4 block of the rows is transposed in registers
+/// (two 128-bit loads and two unpacks per pair of columns) and each lane sums its row's squares
+/// in column order, the order of `crate::gp`'s row-by-row loop, so the bits are the same.
+pub(crate) fn sq_dists_rows4(rows: &[f64], width: usize, u: &[f64], r2: &mut [f64]) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if avx2() {
+        // SAFETY: the CPU supports AVX2 (as in `vectorised`).
+        return unsafe { sq_dists_avx2(rows, width, u, r2) };
+    }
+    let _ = (rows, width, u, r2);
+    0
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn sq_dists_avx2(rows: &[f64], width: usize, u: &[f64], r2: &mut [f64]) -> usize {
+    use core::arch::x86_64::{
+        __m256d, _mm_loadu_pd, _mm256_add_pd, _mm256_castpd128_pd256, _mm256_insertf128_pd,
+        _mm256_mul_pd, _mm256_set_pd, _mm256_set1_pd, _mm256_setzero_pd, _mm256_storeu_pd,
+        _mm256_sub_pd, _mm256_unpackhi_pd, _mm256_unpacklo_pd,
+    };
+    let Some(u) = u.get(..width).filter(|_| width > 0) else {
+        return 0;
+    };
+    let (u_heads, u_tail) = u.as_chunks::<4>();
+    // `[lo[k], lo[k + 1], hi[k], hi[k + 1]]`, `k` 0 or 2.
+    let pair = |lo: &[f64; 4], hi: &[f64; 4], k: usize| -> __m256d {
+        let k = k & 2;
+        // SAFETY: `k + 1 < 4`: each pointer is to two readable, initialised `f64`s of a
+        // four-value array; the loads are unaligned.
+        unsafe {
+            _mm256_insertf128_pd::<1>(
+                _mm256_castpd128_pd256(_mm_loadu_pd(lo.as_ptr().add(k))),
+                _mm_loadu_pd(hi.as_ptr().add(k)),
+            )
+        }
+    };
+    // Four rows' columns `4 c..4 c + 4` (`x[r]` of row `r`), one column per vector.
+    let columns = |x: [&[f64; 4]; 4]| -> [__m256d; 4] {
+        let (t0, t1) = (pair(x[0], x[2], 0), pair(x[1], x[3], 0));
+        let (t2, t3) = (pair(x[0], x[2], 2), pair(x[1], x[3], 2));
+        [
+            _mm256_unpacklo_pd(t0, t1),
+            _mm256_unpackhi_pd(t0, t1),
+            _mm256_unpacklo_pd(t2, t3),
+            _mm256_unpackhi_pd(t2, t3),
+        ]
+    };
+    // Four rows' column `j` of their tails (past the last full chunk).
+    let column = |t: [&[f64]; 4], j: usize| -> __m256d {
+        let at = |r: &[f64]| r.get(j).copied().unwrap_or(0.0);
+        _mm256_set_pd(at(t[3]), at(t[2]), at(t[1]), at(t[0]))
+    };
+    let square_add = |acc: __m256d, col: __m256d, uj: f64| -> __m256d {
+        let d = _mm256_sub_pd(col, _mm256_set1_pd(uj));
+        _mm256_add_pd(acc, _mm256_mul_pd(d, d))
+    };
+    let store = |o: &mut [f64], v: __m256d| {
+        if let Some(o) = o.first_chunk_mut::<4>() {
+            // SAFETY: `o` holds four writable `f64`s; the store is unaligned.
+            unsafe { _mm256_storeu_pd(o.as_mut_ptr(), v) };
+        }
+    };
+    let mut rows = rows.chunks_exact(width.max(1)).map(|r| r.as_chunks::<4>());
+    let mut done = 0;
+    // Two blocks of four rows at a time, their columns interleaved: two independent chains of
+    // additions.
+    while done + 8 <= r2.len() {
+        let (Some(a0), Some(a1), Some(a2), Some(a3), Some(b0), Some(b1), Some(b2), Some(b3)) = (
+            rows.next(),
+            rows.next(),
+            rows.next(),
+            rows.next(),
+            rows.next(),
+            rows.next(),
+            rows.next(),
+            rows.next(),
+        ) else {
+            return done;
+        };
+        let (mut acc_a, mut acc_b) = (_mm256_setzero_pd(), _mm256_setzero_pd());
+        let chunks =
+            a0.0.iter()
+                .zip(a1.0)
+                .zip(a2.0.iter().zip(a3.0))
+                .zip(b0.0.iter().zip(b1.0).zip(b2.0.iter().zip(b3.0)))
+                .zip(u_heads);
+        for ((((x0, x1), (x2, x3)), ((y0, y1), (y2, y3))), uc) in chunks {
+            let (ca, cb) = (columns([x0, x1, x2, x3]), columns([y0, y1, y2, y3]));
+            for ((ca, cb), uj) in ca.into_iter().zip(cb).zip(uc) {
+                acc_a = square_add(acc_a, ca, *uj);
+                acc_b = square_add(acc_b, cb, *uj);
+            }
+        }
+        for (j, uj) in u_tail.iter().enumerate() {
+            acc_a = square_add(acc_a, column([a0.1, a1.1, a2.1, a3.1], j), *uj);
+            acc_b = square_add(acc_b, column([b0.1, b1.1, b2.1, b3.1], j), *uj);
+        }
+        store(r2.get_mut(done..).unwrap_or(&mut []), acc_a);
+        store(r2.get_mut(done + 4..).unwrap_or(&mut []), acc_b);
+        done += 8;
+    }
+    if done + 4 <= r2.len()
+        && let (Some(a0), Some(a1), Some(a2), Some(a3)) =
+            (rows.next(), rows.next(), rows.next(), rows.next())
+    {
+        let mut acc = _mm256_setzero_pd();
+        let chunks =
+            a0.0.iter()
+                .zip(a1.0)
+                .zip(a2.0.iter().zip(a3.0))
+                .zip(u_heads);
+        for (((x0, x1), (x2, x3)), uc) in chunks {
+            for (col, uj) in columns([x0, x1, x2, x3]).into_iter().zip(uc) {
+                acc = square_add(acc, col, *uj);
+            }
+        }
+        for (j, uj) in u_tail.iter().enumerate() {
+            acc = square_add(acc, column([a0.1, a1.1, a2.1, a3.1], j), *uj);
+        }
+        store(r2.get_mut(done..).unwrap_or(&mut []), acc);
+        done += 4;
     }
     done
+}
+
+/// `g[j] += w[i] (rows[i width + j] - u[j])` for the rows `i < w.len()` in order and the
+/// columns `j < cols` (`cols <= width`), with AVX2 intrinsics when the CPU has them; returns
+/// false without AVX2 (or for more than 35 columns), where the caller does it.
+///
+/// The columns go four to a lane group, each group's sums held in a register across the rows;
+/// each column still adds its rows' terms one by one in row order, as `crate::gp`'s loop does,
+/// so the bits are the same.
+pub(crate) fn weighted_diffs(
+    rows: &[f64],
+    width: usize,
+    cols: usize,
+    u: &[f64],
+    w: &[f64],
+    g: &mut [f64],
+) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if avx2() {
+        // SAFETY (every arm): the CPU supports AVX2 (as in `vectorised`).
+        return unsafe {
+            match cols / 4 {
+                0 => weighted_diffs_avx2::<0>(rows, width, cols, u, w, g),
+                1 => weighted_diffs_avx2::<1>(rows, width, cols, u, w, g),
+                2 => weighted_diffs_avx2::<2>(rows, width, cols, u, w, g),
+                3 => weighted_diffs_avx2::<3>(rows, width, cols, u, w, g),
+                4 => weighted_diffs_avx2::<4>(rows, width, cols, u, w, g),
+                5 => weighted_diffs_avx2::<5>(rows, width, cols, u, w, g),
+                6 => weighted_diffs_avx2::<6>(rows, width, cols, u, w, g),
+                7 => weighted_diffs_avx2::<7>(rows, width, cols, u, w, g),
+                8 => weighted_diffs_avx2::<8>(rows, width, cols, u, w, g),
+                _ => false,
+            }
+        };
+    }
+    let _ = (rows, width, cols, u, w, g);
+    false
+}
+
+/// [`weighted_diffs`] for `CH = floor(cols / 4)` groups of four columns.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn weighted_diffs_avx2<const CH: usize>(
+    rows: &[f64],
+    width: usize,
+    cols: usize,
+    u: &[f64],
+    w: &[f64],
+    g: &mut [f64],
+) -> bool {
+    use core::arch::x86_64::{
+        __m256d, __m256i, _mm256_add_pd, _mm256_loadu_pd, _mm256_maskload_pd, _mm256_maskstore_pd,
+        _mm256_mul_pd, _mm256_set_epi64x, _mm256_set1_pd, _mm256_setzero_pd, _mm256_storeu_pd,
+        _mm256_sub_pd,
+    };
+    let heads = 4 * CH;
+    let (Some(u), Some(g)) = (u.get(..cols), g.get_mut(..cols)) else {
+        return false;
+    };
+    if width == 0 || cols > width || heads > cols || rows.len() / width.max(1) < w.len() {
+        return false;
+    }
+    let load = |c: &[f64]| match c.first_chunk::<4>() {
+        // SAFETY: the pointer is to four readable, initialised `f64`s; the load is unaligned.
+        Some(c4) => unsafe { _mm256_loadu_pd(c4.as_ptr()) },
+        None => _mm256_setzero_pd(),
+    };
+    let (Some((g_head, g_tail)), Some((u_head, u_tail))) =
+        (g.split_at_mut_checked(heads), u.split_at_checked(heads))
+    else {
+        return false;
+    };
+    // The last `cols - heads` (0 to 3) columns in the low lanes of one more register: masked
+    // loads and stores touch those lanes only.
+    let tail = g_tail.len().min(u_tail.len());
+    let lane = |l: usize| if l < tail { -1 } else { 0 };
+    let mask: __m256i = _mm256_set_epi64x(lane(3), lane(2), lane(1), lane(0));
+    let load_tail = |c: &[f64]| {
+        if c.len() >= tail && tail > 0 {
+            // SAFETY: the lanes the mask loads are the first `tail` values of `c`, which it
+            // holds; the others are not read.
+            unsafe { _mm256_maskload_pd(c.as_ptr(), mask) }
+        } else {
+            _mm256_setzero_pd()
+        }
+    };
+    let mut acc: [__m256d; CH] = [_mm256_setzero_pd(); CH];
+    let mut uv: [__m256d; CH] = [_mm256_setzero_pd(); CH];
+    for ((a, v), (gc, uc)) in acc
+        .iter_mut()
+        .zip(uv.iter_mut())
+        .zip(g_head.chunks_exact(4).zip(u_head.chunks_exact(4)))
+    {
+        *a = load(gc);
+        *v = load(uc);
+    }
+    let mut acc_tail = load_tail(g_tail);
+    let u_tail = load_tail(u_tail);
+    for (row, wi) in rows.chunks_exact(width.max(1)).zip(w) {
+        let wv = _mm256_set1_pd(*wi);
+        let (r_head, r_tail) = row.split_at_checked(heads).unwrap_or((row, &[]));
+        for ((a, v), rc) in acc.iter_mut().zip(&uv).zip(r_head.chunks_exact(4)) {
+            *a = _mm256_add_pd(*a, _mm256_mul_pd(wv, _mm256_sub_pd(load(rc), *v)));
+        }
+        if tail > 0 {
+            let d = _mm256_sub_pd(load_tail(r_tail), u_tail);
+            acc_tail = _mm256_add_pd(acc_tail, _mm256_mul_pd(wv, d));
+        }
+    }
+    for (a, gc) in acc.iter().zip(g_head.chunks_exact_mut(4)) {
+        if let Some(o) = gc.first_chunk_mut::<4>() {
+            // SAFETY: `o` holds four writable `f64`s; the store is unaligned.
+            unsafe { _mm256_storeu_pd(o.as_mut_ptr(), *a) };
+        }
+    }
+    if tail > 0 && g_tail.len() >= tail {
+        // SAFETY: the lanes the mask stores are the first `tail` values of `g_tail`, which it
+        // holds; the others are not written.
+        unsafe { _mm256_maskstore_pd(g_tail.as_mut_ptr(), mask, acc_tail) };
+    }
+    true
 }
 
 /// `f()` in a function compiled with AVX2 enabled.
@@ -207,6 +531,62 @@ mod tests {
         let wide = vectorised(|| sums(&a, &b));
         let narrow = sums(&a, &b);
         assert_eq!(wide.map(f64::to_bits), narrow.map(f64::to_bits));
+    }
+
+    /// Values of very different sizes, so that a sum in another order would differ.
+    fn wild(len: usize, seed: f64) -> Vec<f64> {
+        (0..len)
+            .map(|i| {
+                let x = i as f64 + seed;
+                (x * 0.731).sin() * 10f64.powi((i % 13) as i32 - 6)
+            })
+            .collect()
+    }
+
+    /// The four-row squared distances and the four-column weighted sums give the bits of the
+    /// one-by-one loops they replace, at every width up to 32, for row counts that leave a
+    /// remainder.
+    #[test]
+    fn row_and_column_blocks_give_the_bits_of_the_plain_loops() {
+        for width in 1..=32 {
+            for n in [1, 4, 7, 16] {
+                let rows = wild(n * width, 0.3);
+                let u = wild(width, 7.1);
+                let w = wild(n, 2.9);
+                let mut want = vec![0.0; n];
+                for (r2, row) in want.iter_mut().zip(rows.chunks_exact(width)) {
+                    let mut acc = 0.0;
+                    for (r, u) in row.iter().zip(&u) {
+                        let d = r - u;
+                        acc += d * d;
+                    }
+                    *r2 = acc;
+                }
+                let mut got = vec![f64::NAN; n];
+                let done = sq_dists_rows4(&rows, width, &u, &mut got);
+                assert_eq!(done, if avx2() { n - n % 4 } else { 0 });
+                for (g, w) in got.iter().zip(&want).take(done) {
+                    assert_eq!(g.to_bits(), w.to_bits(), "width {width}, {n} rows");
+                }
+                for cols in [width, width / 2, width.min(4)] {
+                    let start = wild(cols, 5.5);
+                    let mut want_g = start.clone();
+                    for (row, wi) in rows.chunks_exact(width).zip(&w) {
+                        for ((g, r), uj) in want_g.iter_mut().zip(row).zip(&u) {
+                            *g += wi * (r - uj);
+                        }
+                    }
+                    let mut got_g = start.clone();
+                    if weighted_diffs(&rows, width, cols, &u, &w, &mut got_g) {
+                        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                        assert_eq!(bits(&got_g), bits(&want_g), "width {width}, {cols} columns");
+                    } else {
+                        assert!(!avx2());
+                        assert_eq!(got_g, start);
+                    }
+                }
+            }
+        }
     }
 
     /// `sqrt` is the correctly rounded square root everywhere (the bits of `libm::sqrt`), in the

@@ -479,11 +479,10 @@ pub struct VectorStepOutput {
     pub flags: Flags,
 }
 
-/// One linearised GP.
+/// One linearised GP (its gradient goes into the caller's array).
 #[derive(Clone, Copy, Debug)]
 struct Local {
     mean: f64,
-    grad: [f64; MAX_DIM],
     noise: f64,
     epistemic: f64,
 }
@@ -580,7 +579,7 @@ impl<'m> VectorEkf<'m> {
             Mode::Ukf => self.predict_unscented(st, scratch, &mut flags),
             Mode::Ekf | Mode::EkfBlr => self.predict_linearised(st, scratch, &mut flags),
         };
-        st.p = self.bound_covariance(&st.p, &mut flags);
+        self.bound_covariance(&mut st.p, &mut flags);
         st.u_prev = st.u_last;
         st.u_last = u;
         for (a, ps) in st.plays.iter_mut().enumerate().take(d.inputs) {
@@ -675,8 +674,7 @@ impl<'m> VectorEkf<'m> {
             set1(&mut r, j, self.fallback_r(j));
         }
         self.reset_state(&mut st, &x_mean, &x_var, y, &r, &mut flags);
-        let p = st.p;
-        st.p = self.bound_covariance(&p, &mut flags);
+        self.bound_covariance(&mut st.p, &mut flags);
         let mut jacobian = [[0.0; MAX_AUGMENTED]; MAX_AUGMENTED];
         for i in 0..d.augmented() {
             set2(&mut jacobian, i, i, 1.0);
@@ -758,8 +756,7 @@ impl<'m> VectorEkf<'m> {
             set1(&mut r, j, self.fallback_r(j));
         }
         self.reset_state(st, &x_mean, &x_var, y, &r, flags);
-        let p = st.p;
-        st.p = self.bound_covariance(&p, flags);
+        self.bound_covariance(&mut st.p, flags);
         st.lost_run = 0;
         *flags |= Flags::RELOCALISED;
     }
@@ -856,19 +853,23 @@ impl<'m> VectorEkf<'m> {
             .filter(|m| m.is_finite())
     }
 
-    /// Mean, gradient, learned noise and epistemic variance of `gp` at `input`.
+    /// Mean, learned noise and epistemic variance of `gp` at `input`, and into `grad` the
+    /// mean's gradient with respect to the first `grad_cols` inputs (what the Jacobian reads:
+    /// a transition's `x_{k-1}` and `x_{k-2}`, every input of a sensor).
     fn linearise(
         gp: &GpView<'_>,
         input: &[f64; MAX_DIM],
+        grad_cols: usize,
         scratch: &mut [f64],
         flags: &mut u32,
+        grad: &mut [f64; MAX_DIM],
     ) -> Option<Local> {
         let d = gp.dim();
         let Some(x) = input.get(..d) else {
             *flags |= Flags::MODEL_INVALID;
             return None;
         };
-        let p = match gp.predict(x, Want::EKF, scratch) {
+        let p = match gp.predict_ekf_into(x, grad_cols, scratch, grad) {
             Ok(p) => p,
             Err(_) => {
                 *flags |= Flags::MODEL_INVALID;
@@ -881,14 +882,13 @@ impl<'m> VectorEkf<'m> {
         }
         let out = Local {
             mean: p.mean,
-            grad: p.grad_mean,
             noise: gp.noise_variance(),
             epistemic: p.variance,
         };
         if !(out.mean.is_finite()
             && out.noise.is_finite()
             && out.epistemic.is_finite()
-            && out.grad.iter().take(d).all(|g| g.is_finite()))
+            && grad.iter().take(grad_cols.min(d)).all(|g| g.is_finite()))
         {
             *flags |= Flags::MODEL_INVALID;
             return None;
@@ -1007,8 +1007,8 @@ impl<'m> VectorEkf<'m> {
         flags: &mut u32,
     ) -> Predicted {
         let d = self.model.dims;
-        let (dx, dy) = (d.states, d.sensors);
-        let n = d.augmented();
+        let (dx, dy) = (d.states.min(MAX_STATES), d.sensors.min(MAX_SENSORS));
+        let n = d.augmented().min(MAX_AUGMENTED);
         let cfg = self.config;
         let (x1, x2, s1) = self.split(&st.z);
         let t_in = self.transition_input(st, &x1, &x2);
@@ -1018,7 +1018,8 @@ impl<'m> VectorEkf<'m> {
         let mut q_x = [0.0; MAX_STATES];
         let mut left_box = false;
         for (i, gp) in self.model.transitions.iter().enumerate().take(dx) {
-            let Some(t) = Self::linearise(gp, &t_in, scratch, flags) else {
+            let mut grad = [0.0; MAX_DIM];
+            let Some(t) = Self::linearise(gp, &t_in, 2 * dx, scratch, flags, &mut grad) else {
                 return self.random_walk(st);
             };
             let b = cfg.x_bounds.get(i).copied().unwrap_or((0.0, 1.0));
@@ -1026,8 +1027,8 @@ impl<'m> VectorEkf<'m> {
             set1(&mut xk, i, clamp_flag(t.mean, b, flags));
             for c in 0..dx {
                 let (si, sc) = (self.span_x(i), self.span_x(c));
-                let g1 = self.clamp_grad(at1(&t.grad, c), si, sc, flags);
-                let g2 = self.clamp_grad(at1(&t.grad, dx + c), si, sc, flags);
+                let g1 = self.clamp_grad(at1(&grad, c), si, sc, flags);
+                let g2 = self.clamp_grad(at1(&grad, dx + c), si, sc, flags);
                 set3(&mut a1, i, c, g1);
                 set3(&mut a2, i, c, g2);
             }
@@ -1044,14 +1045,15 @@ impl<'m> VectorEkf<'m> {
             let reads = self.sensor_reads_output(j);
             let b = cfg.y_bounds.get(j).copied().unwrap_or((0.0, 1.0));
             let s_in = self.sensor_input(j, &x1, at1(&s1, j), &xk);
-            match Self::linearise(gp, &s_in, scratch, flags) {
+            let mut grad = [0.0; MAX_DIM];
+            match Self::linearise(gp, &s_in, gp.dim(), scratch, flags, &mut grad) {
                 Some(s) => {
                     let sy = self.span_y(j);
                     let off = dx + usize::from(reads);
                     for c in 0..dx {
                         let sc = self.span_x(c);
-                        let gc = self.clamp_grad(at1(&s.grad, c), sy, sc, flags);
-                        let gf = self.clamp_grad(at1(&s.grad, off + c), sy, sc, flags);
+                        let gc = self.clamp_grad(at1(&grad, c), sy, sc, flags);
+                        let gf = self.clamp_grad(at1(&grad, off + c), sy, sc, flags);
                         if let Some(row) = c_mat.get_mut(j) {
                             set1(row, c, gc);
                         }
@@ -1060,7 +1062,7 @@ impl<'m> VectorEkf<'m> {
                         }
                     }
                     if reads {
-                        set1(&mut e, j, self.clamp_grad(at1(&s.grad, dx), sy, sy, flags));
+                        set1(&mut e, j, self.clamp_grad(at1(&grad, dx), sy, sy, flags));
                     }
                     let (qs, rj) = self.q_s_r(j, &s, flags);
                     set1(&mut q_s, j, qs);
@@ -1116,13 +1118,13 @@ impl<'m> VectorEkf<'m> {
                 }
             }
         }
-        for a in 0..n {
-            for b in 0..n {
+        for (p_row, g_a) in p.iter_mut().zip(&g).take(n) {
+            for (pab, g_b) in p_row.iter_mut().zip(&g).take(n) {
                 let mut q = 0.0;
-                for i in 0..dx {
-                    q += at3g(&g, a, i) * at1(&q_x, i) * at3g(&g, b, i);
+                for ((ga, qi), gb) in g_a.iter().zip(&q_x).zip(g_b).take(dx) {
+                    q += ga * qi * gb;
                 }
-                add2(&mut p, a, b, q);
+                *pab += q;
             }
         }
         for j in 0..dy {
@@ -1313,8 +1315,8 @@ impl<'m> VectorEkf<'m> {
         flags: &mut u32,
     ) -> Updated {
         let d = self.model.dims;
-        let (dx, dy) = (d.states, d.sensors);
-        let n = d.augmented();
+        let (dx, dy) = (d.states.min(MAX_STATES), d.sensors.min(MAX_SENSORS));
+        let n = d.augmented().min(MAX_AUGMENTED);
         let cfg = &self.config;
         let mut out = Updated {
             innovation: [0.0; MAX_SENSORS],
@@ -1342,6 +1344,7 @@ impl<'m> VectorEkf<'m> {
                 *flags |= Flags::MEASUREMENT_INVALID;
             }
         }
+        let m = m.min(MAX_SENSORS);
         if m == 0 {
             return out;
         }
@@ -1438,17 +1441,26 @@ impl<'m> VectorEkf<'m> {
             }
         }
         let mut p = sandwich(&a_mat, &st.p, n);
-        for i in 0..n {
-            let ki = k_gain.get(i).copied().unwrap_or([0.0; MAX_SENSORS]);
-            for jj in 0..n {
-                let kj = k_gain.get(jj).copied().unwrap_or([0.0; MAX_SENSORS]);
-                let mut acc = 0.0;
-                for a in 0..m {
-                    for b in 0..m {
-                        acc += at1(&ki, a) * at4(&r_used, a, b) * at1(&kj, b);
+        // + K R K^T: entry (i, j) sums (K_ia R_ab) K_jb over the pairs (a, b) in order, for a
+        // whole row i at once (K^T's rows hold the K_jb of one b).
+        let mut kt = [[0.0; MAX_AUGMENTED]; MAX_SENSORS];
+        for (j, k_row) in k_gain.iter().enumerate().take(n) {
+            for (kt_row, v) in kt.iter_mut().zip(k_row).take(m) {
+                set1(kt_row, j, *v);
+            }
+        }
+        for (p_row, k_row) in p.iter_mut().zip(&k_gain).take(n) {
+            let mut acc = [0.0; MAX_AUGMENTED];
+            for (kia, r_row) in k_row.iter().zip(&r_used).take(m) {
+                for (rab, kt_row) in r_row.iter().zip(&kt).take(m) {
+                    let t = kia * rab;
+                    for (acc_j, kjb) in acc.iter_mut().zip(kt_row).take(n) {
+                        *acc_j += t * kjb;
                     }
                 }
-                add2(&mut p, i, jj, acc);
+            }
+            for (pij, acc_j) in p_row.iter_mut().zip(&acc).take(n) {
+                *pij += acc_j;
             }
         }
         let finite = z.iter().take(n).all(|v| v.is_finite())
@@ -1473,55 +1485,50 @@ impl<'m> VectorEkf<'m> {
             set1(&mut z, k, v);
         }
         st.z = z;
-        st.p = self.bound_covariance(&p, flags);
+        st.p = p;
+        self.bound_covariance(&mut st.p, flags);
         out
     }
 
     /// Symmetrises `p` and clamps the eigenvalues of the scaled covariance
-    /// (`P_ij / (span_i span_j)`) into `[p_min, p_max]`.
-    fn bound_covariance(&self, p: &AugMatrix, flags: &mut u32) -> AugMatrix {
-        let n = self.model.dims.augmented();
+    /// (`P_ij / (span_i span_j)`) into `[p_min, p_max]`, in place.
+    fn bound_covariance(&self, p: &mut AugMatrix, flags: &mut u32) {
+        let n = self.model.dims.augmented().min(MAX_AUGMENTED);
         let (lo, hi) = (self.config.p_min, self.config.p_max);
+        let span = &self.span;
         let mut scaled = [[0.0; MAX_AUGMENTED]; MAX_AUGMENTED];
         let mut finite = true;
-        for i in 0..n {
-            for j in 0..n {
-                let v =
-                    0.5 * (at2(p, i, j) + at2(p, j, i)) / (at1(&self.span, i) * at1(&self.span, j));
+        for (i, (row, si)) in scaled.iter_mut().zip(span).enumerate().take(n) {
+            for (j, (v, sj)) in row.iter_mut().zip(span).enumerate().take(n) {
+                *v = 0.5 * (at2(p, i, j) + at2(p, j, i)) / (si * sj);
                 finite &= v.is_finite();
-                set2(&mut scaled, i, j, v);
             }
         }
-        let unscale = |m: &AugMatrix| -> AugMatrix {
-            let mut out = [[0.0; MAX_AUGMENTED]; MAX_AUGMENTED];
-            for i in 0..n {
-                for j in 0..n {
-                    set2(
-                        &mut out,
-                        i,
-                        j,
-                        at2(m, i, j) * at1(&self.span, i) * at1(&self.span, j),
-                    );
+        // `p` from a scaled covariance: `m_ij span_i span_j`, zero outside the leading block.
+        let unscale = |m: &AugMatrix, p: &mut AugMatrix| {
+            *p = [[0.0; MAX_AUGMENTED]; MAX_AUGMENTED];
+            for ((o_row, m_row), si) in p.iter_mut().zip(m).zip(span).take(n) {
+                for ((o, v), sj) in o_row.iter_mut().zip(m_row).zip(span).take(n) {
+                    *o = v * si * sj;
                 }
             }
-            out
         };
-        let fallback = |flags: &mut u32| -> AugMatrix {
+        let fallback = |flags: &mut u32, p: &mut AugMatrix| {
             *flags |= Flags::COVARIANCE_CLAMPED;
             let mut m = [[0.0; MAX_AUGMENTED]; MAX_AUGMENTED];
             for i in 0..n {
                 set2(&mut m, i, i, hi);
             }
-            unscale(&m)
+            unscale(&m, p);
         };
         if !finite {
-            return fallback(flags);
+            return fallback(flags, p);
         }
         if inside_by_ldl(&scaled, n, lo, hi) {
-            return unscale(&scaled);
+            return unscale(&scaled, p);
         }
         let Some((vals, q)) = crate::eigen::symmetric_eigen_n(&scaled, n) else {
-            return fallback(flags);
+            return fallback(flags, p);
         };
         let mut clamped = vals;
         let mut changed = false;
@@ -1533,7 +1540,7 @@ impl<'m> VectorEkf<'m> {
             }
         }
         if !changed {
-            return unscale(&scaled);
+            return unscale(&scaled, p);
         }
         *flags |= Flags::COVARIANCE_CLAMPED;
         let mut out = [[0.0; MAX_AUGMENTED]; MAX_AUGMENTED];
@@ -1547,7 +1554,7 @@ impl<'m> VectorEkf<'m> {
                 set2(&mut out, j, i, acc);
             }
         }
-        unscale(&out)
+        unscale(&out, p)
     }
 }
 
@@ -1820,11 +1827,6 @@ fn set3(m: &mut [[f64; MAX_STATES]; MAX_STATES], i: usize, j: usize, v: f64) {
 }
 
 #[inline(always)]
-fn at3g(m: &[[f64; MAX_STATES]; MAX_AUGMENTED], i: usize, j: usize) -> f64 {
-    m.get(i).and_then(|r| r.get(j)).copied().unwrap_or(0.0)
-}
-
-#[inline(always)]
 fn at4(m: &[[f64; MAX_SENSORS]; MAX_SENSORS], i: usize, j: usize) -> f64 {
     m.get(i).and_then(|r| r.get(j)).copied().unwrap_or(0.0)
 }
@@ -1867,32 +1869,46 @@ fn set_s1(v: &mut [f64; MAX_SIGMA_DIM], i: usize, x: f64) {
 
 /// `F P F^T` over the leading `n x n` blocks.
 fn sandwich(f: &AugMatrix, p: &AugMatrix, n: usize) -> AugMatrix {
+    let n = n.min(MAX_AUGMENTED);
     let fp = product(f, p, n);
     let mut out = [[0.0; MAX_AUGMENTED]; MAX_AUGMENTED];
-    for i in 0..n {
-        for j in 0..=i {
+    // The lower triangle, row by row, each entry the dot product of a row of `F P` with a
+    // row of `F` in column order; then the upper triangle mirrors it.
+    for (i, (o_row, fp_row)) in out.iter_mut().zip(&fp).enumerate().take(n) {
+        for (o, f_row) in o_row.iter_mut().zip(f).take(i + 1) {
             let mut acc = 0.0;
-            for k in 0..n {
-                acc += at2(&fp, i, k) * at2(f, j, k);
+            for (x, y) in fp_row.iter().zip(f_row).take(n) {
+                acc += x * y;
             }
-            set2(&mut out, i, j, acc);
-            set2(&mut out, j, i, acc);
+            *o = acc;
         }
     }
+    mirror_lower(&mut out, n);
     out
 }
 
-/// `A B` over the leading `n x n` blocks.
+/// Copies the strict lower triangle of the leading `n x n` block onto the upper one.
+fn mirror_lower(m: &mut AugMatrix, n: usize) {
+    let n = n.min(MAX_AUGMENTED);
+    for i in 1..n {
+        for j in 0..i {
+            let v = at2(m, i, j);
+            set2(m, j, i, v);
+        }
+    }
+}
+
+/// `A B` over the leading `n x n` blocks (a zero entry of `A` adds nothing).
 fn product(a: &AugMatrix, b: &AugMatrix, n: usize) -> AugMatrix {
+    let n = n.min(MAX_AUGMENTED);
     let mut out = [[0.0; MAX_AUGMENTED]; MAX_AUGMENTED];
-    for i in 0..n {
-        for k in 0..n {
-            let aik = at2(a, i, k);
-            if aik == 0.0 {
+    for (o_row, a_row) in out.iter_mut().zip(a).take(n) {
+        for (aik, b_row) in a_row.iter().zip(b).take(n) {
+            if *aik == 0.0 {
                 continue;
             }
-            for j in 0..n {
-                add2(&mut out, i, j, aik * at2(b, k, j));
+            for (o, bkj) in o_row.iter_mut().zip(b_row).take(n) {
+                *o += aik * bkj;
             }
         }
     }
@@ -1989,6 +2005,7 @@ fn cholesky_n(
 /// `[lo, hi]`: `p - lo I` has an `L D L^T` factorisation with `D > 0` and the trace is at
 /// most `hi` (as the scalar filter's test).
 fn inside_by_ldl(p: &AugMatrix, n: usize, lo: f64, hi: f64) -> bool {
+    let n = n.min(MAX_AUGMENTED);
     let trace: f64 = (0..n).map(|i| at2(p, i, i)).sum();
     if !(lo >= 0.0 && trace <= hi) {
         return false;
