@@ -34,10 +34,17 @@ def test_model_bad_data():
     d = hbn.simulate("duhem", 50, seed=1)
     with pytest.raises(hbn.DataError, match="equal lengths"):
         hbn.HysteresisModel.fit(d["u"], d["x"][:-1], d["y"])
+    u = d["u"].copy()
+    u[7] = np.nan
+    with pytest.raises(ValueError, match=r"u\[7\]"):
+        hbn.HysteresisModel.fit(u, d["x"], d["y"])
     x = d["x"].copy()
-    x[7] = np.nan
+    x[7] = np.inf
     with pytest.raises(ValueError, match=r"x\[7\]"):
         hbn.HysteresisModel.fit(d["u"], x, d["y"])
+    # NaN in x marks a sample the camera did not see; a state never seen is an error.
+    with pytest.raises(hbn.DataError, match="NaN at every sample"):
+        hbn.HysteresisModel.fit(d["u"], np.full_like(d["x"], np.nan), d["y"])
     with pytest.raises(hbn.ConfigError, match="kernel"):
         hbn.HysteresisModel.fit(d["u"], d["x"], d["y"], kernel="nope")
     with pytest.raises(ValueError, match="rate_hz"):

@@ -206,6 +206,18 @@ impl HysteresisModel {
         params: &HbnParams,
     ) -> Result<Self, ModelError> {
         let checked = params.clone().check()?;
+        // NaN marks a sample without a measurement; an infinity is a broken one.
+        for (trajectory, t) in trajectories.iter().enumerate() {
+            if let Some((index, &value)) = t.x.iter().enumerate().find(|(_, v)| v.is_infinite()) {
+                return Err(crate::DataError::NonFinite {
+                    trajectory,
+                    signal: crate::Signal::State,
+                    index,
+                    value,
+                }
+                .into());
+            }
+        }
         if trajectories
             .iter()
             .all(|t| t.x.iter().all(|v| v.is_finite()))
@@ -417,6 +429,28 @@ mod tests {
         assert_eq!(
             observed_mask(&[f(0, 1.0), f(2, 0.3), f(3, 0.7), f(9, 1.0)], 4),
             vec![true, true, false, true]
+        );
+    }
+
+    #[test]
+    fn fit_partial_refuses_an_infinite_state() {
+        let u: Vec<f64> = (0..100).map(|k| (k as f64 * 0.1).sin()).collect();
+        let mut x = u.clone();
+        x[3] = f64::NAN;
+        x[7] = f64::NEG_INFINITY;
+        let e = HysteresisModel::fit_partial(&[Sequence::new(&u, &x, &u)], &HbnParams::default())
+            .unwrap_err();
+        assert!(
+            matches!(
+                e,
+                ModelError::Data(crate::DataError::NonFinite {
+                    trajectory: 0,
+                    signal: crate::Signal::State,
+                    index: 7,
+                    ..
+                })
+            ),
+            "{e}"
         );
     }
 
