@@ -17,6 +17,7 @@
 //! | `preisach` | [`Preisach::default`] | [`MaxwellSlip`] `k0 = 0.8`, 4 elements `k = 0.2`, `F = 0.004 i` |
 //! | `duhem` | [`Duhem::default`] | `0.85 x + 0.15 P(x)`, `P` = [`Preisach`] 40 levels on `[-0.05, 1.05]`, width `0.3 +- 0.1`, centre `0.5 +- 0.35` |
 //! | `soft-actuator` | lag (`tau = 0.08 s`) -> [`BoucWen`] `A = 1, beta = 3, gamma = 1, n = 1, k_lin = 1, k_z = -0.5` (lagging, counter-clockwise loop) -> creep | SLS (`tau = 0.25 s`, `rho = 0.4`) -> [`Duhem`] `a = 10, b = 0.5, k_lin = 1` |
+//! | `soft-actuator-load` | `soft-actuator`'s, driven by `u + d`: a supply-pressure disturbance `d` (AR(1), correlation time 0.3 s) enters before the lag | `soft-actuator`'s |
 //!
 //! Every sensor ends with the saturating nonlinearity `y = tanh(1.5 h) / tanh(1.5)`, so `y` is
 //! never an affine function of `x`.
@@ -30,6 +31,11 @@
 //! - sensor: standard-linear-solid strain response `v = x + 0.4 (x - q)`, `q` follows `x` with
 //!   `tau = 0.25 s` (overshoots under fast motion, relaxes to `x` at rest), then Duhem, then
 //!   the `tanh` saturation.
+//!
+//! `soft-actuator-load` is the same actuator and sensor (the same calibration; noise-free, the
+//! same signals bit for bit) whose state disturbance is a slowly varying supply pressure added
+//! to `u` before the lag, so it propagates through the lag, the hysteresis and the creep, as a
+//! real actuator's does (see the noise model).
 //!
 //! The other five systems are rate-independent: their outputs depend on the input sequence
 //! only, not on `rate_hz`.
@@ -60,6 +66,22 @@
 //!
 //! So `g = 0` gives exactly the clean signals, and with `g = 1` the state disturbance stays
 //! within `+-0.01 * range_x` with variance `(0.02 range_x)^2 / 12`.
+//!
+//! **`soft-actuator-load`: a disturbance that propagates.** There `eta_x[k]` drives a
+//! supply-pressure disturbance instead, which enters the actuator **upstream** of its dynamics:
+//! - `d[k] = a d[k-1] + sqrt(1 - a^2) g * 0.02 * range_x * eta_x[k]`, `d[-1] = 0`,
+//!   `a = exp(-dt / 0.3 s)`: an AR(1) process with a correlation time of 0.3 s and the
+//!   stationary variance of the others' state disturbance, `(g 0.02 range_x)^2 / 12`, at any
+//!   rate;
+//! - `x[k]` is the actuator's output for the input `u[k] + d[k]` (the pneumatic lag, the
+//!   Bouc-Wen bend and the creep all run on the disturbed pressure), so `x[k]` carries the
+//!   disturbances of every sample before it;
+//! - the sensor reads `x` with the same measurement noise as above.
+//!
+//! With `g = 1` the state strays from the noise-free run by a standard deviation of about
+//! 0.005 (the others': 0.0058), and that deviation 0.1 s later is still correlated at about
+//! 0.9 with it; `g = 0` gives exactly the clean `soft-actuator`. The future of the log tells
+//! about the present here, which is what a smoother (`docs/smoothing.md`) needs.
 //!
 //! ## Multi-signal systems ([`MultiKind`])
 //!
@@ -108,12 +130,17 @@
 //! clean signals. Inputs: [`generate_multi_input`] gives independent random ramps, one per
 //! input.
 //!
-//! ## The floor under estimation
+//! ## The floors under estimation
 //!
 //! [`oracle_estimate`] gives, for a simulated trajectory, the exact posterior mean of each state
 //! given the input and sensor output so far, the true past states and the simulator itself: no
 //! causal estimator has a lower expected squared error on that trajectory, so it measures how
 //! much any estimator could still gain (`docs/accuracy.md` reports it beside the estimators).
+//! [`oracle_smooth_estimate`] is its two-sided counterpart: the posterior given also the
+//! outputs up to `lookahead` samples later and the true states at every other sample, the
+//! floor under any smoother; the ratio of the two is the most smoothing could gain there.
+//! Both need a disturbance that does not propagate, and refuse `soft-actuator-load`
+//! ([`SimError::NoExactOracle`]).
 //!
 //! ## Building blocks
 //!
@@ -141,7 +168,7 @@ pub use operators::{
     BoucWen, BoucWenParams, Duhem, Envelope, Hysteresis, MaxwellSlip, PlayOperator,
     PrandtlIshlinskii, Preisach, PreisachDensity,
 };
-pub use oracle::{ORACLE_GRID, OracleEstimate, oracle_estimate};
+pub use oracle::{ORACLE_GRID, OracleEstimate, oracle_estimate, oracle_smooth_estimate};
 
 /// Admissible input interval of [`simulate`] (inputs are nominally in `[0, 1]`).
 pub const INPUT_RANGE: (f64, f64) = (-0.5, 1.5);
@@ -234,6 +261,17 @@ pub enum SimError {
         /// Upper admissible bound.
         hi: f64,
     },
+    /// An oracle asked for a system whose disturbance propagates
+    /// ([`SystemKind::disturbance_propagates`]): its state carries the disturbances of the
+    /// samples before it, so the true past states do not pin the current one and the oracle's
+    /// exact posterior does not apply.
+    #[error(
+        "no exact oracle for `{system}`: its disturbance enters upstream of the actuator's dynamics and propagates, so the true past states do not pin the current state"
+    )]
+    NoExactOracle {
+        /// The system's name.
+        system: &'static str,
+    },
     /// A trajectory whose signals differ in length.
     #[error("trajectory signals differ in length: u {u}, x {x}, y {y} samples")]
     LengthMismatch {
@@ -261,17 +299,21 @@ pub enum SystemKind {
     Duhem,
     /// Rate-dependent pneumatic soft actuator with a viscoelastic hysteretic strain sensor.
     SoftActuator,
+    /// The soft actuator under a slowly correlated supply-pressure disturbance that enters
+    /// upstream of its lag, hysteresis and creep, so it propagates into the later states.
+    SoftActuatorLoad,
 }
 
 impl SystemKind {
     /// All systems, in declaration order.
-    pub const ALL: [SystemKind; 6] = [
+    pub const ALL: [SystemKind; 7] = [
         SystemKind::MaxwellSlip,
         SystemKind::GeneralizedPi,
         SystemKind::BoucWen,
         SystemKind::Preisach,
         SystemKind::Duhem,
         SystemKind::SoftActuator,
+        SystemKind::SoftActuatorLoad,
     ];
 
     /// Command-line name (kebab case).
@@ -283,6 +325,7 @@ impl SystemKind {
             SystemKind::Preisach => "preisach",
             SystemKind::Duhem => "duhem",
             SystemKind::SoftActuator => "soft-actuator",
+            SystemKind::SoftActuatorLoad => "soft-actuator-load",
         }
     }
 
@@ -305,6 +348,9 @@ impl SystemKind {
             SystemKind::SoftActuator => {
                 "pneumatic soft finger: lag + Bouc-Wen + creep, viscoelastic Duhem strain sensor; rate-dependent"
             }
+            SystemKind::SoftActuatorLoad => {
+                "soft-actuator under a supply-pressure disturbance (AR(1), 0.3 s) that enters before its dynamics and propagates; rate-dependent"
+            }
         }
     }
 
@@ -322,7 +368,18 @@ impl SystemKind {
 
     /// Whether the system's response depends on the sampling rate.
     pub fn is_rate_dependent(self) -> bool {
-        matches!(self, SystemKind::SoftActuator)
+        matches!(
+            self,
+            SystemKind::SoftActuator | SystemKind::SoftActuatorLoad
+        )
+    }
+
+    /// Whether the state disturbance enters upstream of the actuator's dynamics and so
+    /// propagates into the later states (`soft-actuator-load`), rather than being a white
+    /// jitter added to the actuator's output (every other system). [`oracle_estimate`] and
+    /// [`oracle_smooth_estimate`] give an exact floor only where it does not.
+    pub fn disturbance_propagates(self) -> bool {
+        matches!(self, SystemKind::SoftActuatorLoad)
     }
 }
 
@@ -386,7 +443,10 @@ impl SimConfig {
     }
 
     /// Width of the state disturbance, `noise_gain * 0.02 * range_x`: `x` is the clean state
-    /// plus this times a uniform draw from `[-0.5, 0.5]` (see the crate docs).
+    /// plus this times a uniform draw from `[-0.5, 0.5]` (see the crate docs). For a system
+    /// whose disturbance propagates ([`SystemKind::disturbance_propagates`]) it scales the
+    /// upstream disturbance instead: its stationary standard deviation is this over
+    /// `sqrt(12)`, as the others' state disturbance.
     pub fn noise_width_x(&self) -> f64 {
         self.noise_gain * 0.02 * self.system.nominal_range_x()
     }
@@ -431,6 +491,9 @@ pub struct Simulator {
     rng: Rng,
     noise_x: f64,
     noise_y: f64,
+    /// The upstream disturbance of a system whose disturbance propagates (else `None`: the
+    /// disturbance is added to the actuator's output).
+    load: Option<systems::LoadDisturbance>,
     steps: usize,
 }
 
@@ -438,11 +501,16 @@ impl Simulator {
     /// The system of `config` in its initial (demagnetised/relaxed) state; checks `config`.
     pub fn new(config: &SimConfig) -> Result<Self, SimError> {
         config.validate()?;
+        let dt = 1.0 / config.rate_hz;
         Ok(Self {
-            system: systems::System::new(config.system, 1.0 / config.rate_hz)?,
+            system: systems::System::new(config.system, dt)?,
             rng: Rng::new(config.seed ^ NOISE_SALT),
             noise_x: config.noise_width_x(),
             noise_y: config.noise_width_y(),
+            load: config
+                .system
+                .disturbance_propagates()
+                .then(|| systems::LoadDisturbance::new(config.noise_width_x(), dt)),
             steps: 0,
         })
     }
@@ -465,7 +533,13 @@ impl Simulator {
         }
         let eta_x = self.rng.uniform() - 0.5;
         let eta_y = self.rng.uniform() - 0.5;
-        let x = self.system.actuate(u) + self.noise_x * eta_x;
+        let x = match &mut self.load {
+            Some(load) => {
+                let d = load.step(eta_x);
+                self.system.actuate(u + d)
+            }
+            None => self.system.actuate(u) + self.noise_x * eta_x,
+        };
         let y = self.system.sense(x) + self.noise_y * eta_y;
         self.steps += 1;
         Ok((x, y))

@@ -22,7 +22,7 @@ pub(crate) fn sweep() -> Vec<f64> {
         .collect()
 }
 
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub(crate) enum Op {
     Pi(PrandtlIshlinskii),
     Ms(MaxwellSlip),
@@ -56,7 +56,7 @@ impl Hysteresis for Op {
 /// First-order lag `s' = (target - s) / tau`, discretised exactly for a target held over the
 /// sample: `s[k] = s[k-1] + (1 - exp(-dt / tau)) (target[k] - s[k-1])`. In quasi-static mode
 /// (used for calibration) it follows the target exactly.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Lag {
     alpha: f64,
     pub(crate) quasi_static: bool,
@@ -142,8 +142,9 @@ impl Actuator {
 }
 
 /// Sensor chain: optional standard-linear-solid strain response -> `lin v + k_op H(v)` ->
-/// affine calibration -> `tanh(kappa h) / tanh(kappa)`.
-#[derive(Clone, Debug)]
+/// affine calibration -> `tanh(kappa h) / tanh(kappa)`. Two sensors that compare equal give
+/// the same outputs for the same states from then on.
+#[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Sensor {
     /// SLS: `v = x + rho (x - q)`, `q` lagging `x` (the dashpot of the Maxwell arm).
     sls: Option<(Lag, f64)>,
@@ -256,7 +257,7 @@ fn build(kind: SystemKind, dt: f64) -> Result<(Actuator, Sensor), SimError> {
                 )?))
             },
         ),
-        SystemKind::SoftActuator => (
+        SystemKind::SoftActuator | SystemKind::SoftActuatorLoad => (
             Actuator {
                 lag: Some(Lag::new(0.08, dt)),
                 creep: Some((Lag::new(1.5, dt), 0.15)),
@@ -276,6 +277,38 @@ fn build(kind: SystemKind, dt: f64) -> Result<(Actuator, Sensor), SimError> {
             },
         ),
     })
+}
+
+/// Correlation time of the supply-pressure disturbance of `soft-actuator-load`, in seconds.
+pub(crate) const LOAD_TAU: f64 = 0.3;
+
+/// The upstream disturbance of `soft-actuator-load`: an AR(1) process
+/// `d[k] = a d[k-1] + sqrt(1 - a^2) w eta[k]`, `a = exp(-dt / LOAD_TAU)`, `eta[k]` uniform on
+/// `[-0.5, 0.5]`, from `d = 0`. Its stationary variance is `w^2 / 12` at every rate (that of the
+/// other systems' state disturbance) and its correlation time `LOAD_TAU`.
+#[derive(Clone, Debug)]
+pub(crate) struct LoadDisturbance {
+    a: f64,
+    scale: f64,
+    d: f64,
+}
+
+impl LoadDisturbance {
+    /// The process for disturbance width `width` (`noise_width_x`) and sampling period `dt`.
+    pub(crate) fn new(width: f64, dt: f64) -> Self {
+        let a = (-dt / LOAD_TAU).exp();
+        Self {
+            a,
+            scale: (1.0 - a * a).sqrt() * width,
+            d: 0.0,
+        }
+    }
+
+    /// The next disturbance for the uniform draw `eta` in `[-0.5, 0.5]`.
+    pub(crate) fn step(&mut self, eta: f64) -> f64 {
+        self.d = self.a * self.d + self.scale * eta;
+        self.d
+    }
 }
 
 fn span(name: &'static str, lo: f64, hi: f64) -> Result<f64, SimError> {
@@ -363,9 +396,8 @@ impl System {
         self.sen.step(x)
     }
 
-    /// The clean output [`System::sense`] would give for `x`, without moving the sensor's
-    /// state (a trial on a copy of it).
-    pub(crate) fn sense_trial(&self, x: f64) -> f64 {
-        self.sen.clone().step(x)
+    /// A copy of the sensor in its current state (for trials run over several samples).
+    pub(crate) fn sensor(&self) -> Sensor {
+        self.sen.clone()
     }
 }

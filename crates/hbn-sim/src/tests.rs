@@ -147,7 +147,7 @@ fn bounded_with_heavy_noise_and_extreme_inputs() {
 }
 
 #[test]
-fn soft_actuator_is_rate_dependent_others_are_not() {
+fn soft_actuators_are_rate_dependent_others_are_not() {
     let u = generate_input(InputKind::RandomRamps, 3000, 0.02, 2).unwrap();
     for kind in SystemKind::ALL {
         let slow = simulate(
@@ -190,7 +190,7 @@ fn soft_actuator_is_rate_dependent_others_are_not() {
             .iter()
             .filter(|k| k.is_rate_dependent())
             .count(),
-        1
+        2
     );
 }
 
@@ -227,7 +227,11 @@ fn noise_free_is_exactly_the_clean_chain() {
 #[test]
 fn unit_gain_noise_is_uniform_within_one_percent_of_range() {
     let u = generate_input(InputKind::RandomRamps, 20_000, 0.02, 3).unwrap();
-    for kind in SystemKind::ALL {
+    // A propagating disturbance is not added to the output: see the `soft-actuator-load` tests.
+    for kind in SystemKind::ALL
+        .into_iter()
+        .filter(|k| !k.disturbance_propagates())
+    {
         let clean = simulate(&SimConfig::new(kind), &u).unwrap();
         let cfg = SimConfig {
             noise_gain: 1.0,
@@ -336,6 +340,7 @@ fn system_names_parse_and_display() {
         "preisach",
         "duhem",
         "soft-actuator",
+        "soft-actuator-load",
     ];
     for (kind, name) in SystemKind::ALL.into_iter().zip(names) {
         assert_eq!(kind.name(), name);
@@ -404,4 +409,117 @@ fn a_rejected_step_leaves_the_simulator_where_it_was() {
         assert_eq!((x, y), (whole.x[k], whole.y[k]), "sample {k}");
     }
     assert_eq!(sim.steps(), 300);
+}
+
+#[test]
+fn only_the_load_disturbance_propagates() {
+    let propagating: Vec<SystemKind> = SystemKind::ALL
+        .into_iter()
+        .filter(|k| k.disturbance_propagates())
+        .collect();
+    assert_eq!(propagating, [SystemKind::SoftActuatorLoad]);
+    assert!(SystemKind::SoftActuatorLoad.is_rate_dependent());
+}
+
+/// Noise-free, `soft-actuator-load` is the soft actuator, bit for bit, at any rate.
+#[test]
+fn the_load_system_without_noise_is_the_soft_actuator() {
+    let u = generate_input(InputKind::RandomRamps, 3000, 0.02, 6).unwrap();
+    for rate_hz in [30.0, 100.0, 400.0] {
+        let cfg = |system| SimConfig {
+            rate_hz,
+            seed: 9,
+            ..SimConfig::new(system)
+        };
+        let load = simulate(&cfg(SystemKind::SoftActuatorLoad), &u).unwrap();
+        let soft = simulate(&cfg(SystemKind::SoftActuator), &u).unwrap();
+        assert_eq!(load, soft, "{rate_hz} Hz");
+    }
+}
+
+/// The disturbance process alone: stationary variance `w^2 / 12` and lag-one correlation
+/// `exp(-dt / 0.3 s)` at every rate.
+#[test]
+fn the_load_disturbance_is_ar1_with_the_others_variance() {
+    for rate_hz in [25.0, 100.0, 500.0] {
+        let dt = 1.0 / rate_hz;
+        let width = 0.06;
+        let mut load = systems::LoadDisturbance::new(width, dt);
+        let mut rng = Rng::new(17);
+        let d: Vec<f64> = (0..400_000)
+            .map(|_| load.step(rng.uniform() - 0.5))
+            .collect();
+        let d = &d[5000..];
+        let n = d.len() as f64;
+        let mean = d.iter().sum::<f64>() / n;
+        let var = d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+        let want = width * width / 12.0;
+        assert!(
+            (var / want - 1.0).abs() < 0.06,
+            "{rate_hz} Hz: var {var} vs {want}"
+        );
+        let cov1 = d
+            .windows(2)
+            .map(|w| (w[0] - mean) * (w[1] - mean))
+            .sum::<f64>()
+            / (n - 1.0);
+        let a = (-dt / systems::LOAD_TAU).exp();
+        assert!(
+            (cov1 / var - a).abs() < 0.01,
+            "{rate_hz} Hz: rho {} vs {a}",
+            cov1 / var
+        );
+    }
+}
+
+/// `soft-actuator-load` at gain 1: the state strays from the clean one by about the others'
+/// disturbance (standard deviation within a factor 2 of `0.02 / sqrt(12)`), slowly (its
+/// deviation 0.1 s later is strongly correlated with it: the disturbance propagates), and the
+/// sensor reads the disturbed state plus the usual measurement noise.
+#[test]
+fn the_load_disturbance_propagates_through_the_dynamics() {
+    let u = generate_input(InputKind::RandomRamps, 20_000, 0.02, 3).unwrap();
+    let system = SystemKind::SoftActuatorLoad;
+    let clean = simulate(&SimConfig::new(system), &u).unwrap();
+    let cfg = SimConfig {
+        noise_gain: 1.0,
+        seed: 77,
+        ..SimConfig::new(system)
+    };
+    let noisy = simulate(&cfg, &u).unwrap();
+    let dev: Vec<f64> = noisy.x.iter().zip(&clean.x).map(|(a, b)| a - b).collect();
+    let n = dev.len() as f64;
+    let mean = dev.iter().sum::<f64>() / n;
+    let var = dev.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / n;
+    let sd = var.sqrt();
+    let others = 0.02 / 12f64.sqrt();
+    assert!(
+        (0.5 * others..2.0 * others).contains(&sd),
+        "sd {sd} vs {others}"
+    );
+    assert!(mean.abs() < 0.3 * others, "mean {mean}");
+    let lag = 10;
+    let cov = dev
+        .windows(lag + 1)
+        .map(|w| (w[0] - mean) * (w[lag] - mean))
+        .sum::<f64>()
+        / (n - lag as f64);
+    assert!(cov / var > 0.6, "correlation at 0.1 s: {}", cov / var);
+    // The measurement noise: y is the sensor's reading of the recorded x within +-0.01.
+    let mut sys = systems::System::new(system, 0.01).unwrap();
+    for k in 0..noisy.x.len() {
+        let y_clean = sys.sense(noisy.x[k]);
+        assert!((noisy.y[k] - y_clean).abs() <= 0.01 + 1e-12, "sample {k}");
+    }
+    // x and y stay in about [0, 1].
+    for v in noisy.x.iter().chain(&noisy.y) {
+        assert!((-0.1..=1.1).contains(v), "{v}");
+    }
+    assert_eq!(simulate(&cfg, &u).unwrap(), noisy);
+    let other = simulate(&SimConfig { seed: 78, ..cfg }, &u).unwrap();
+    assert_ne!(other.x, noisy.x);
+    eprintln!(
+        "load: sd {sd} (others {others}), correlation at 0.1 s {}",
+        cov / var
+    );
 }
