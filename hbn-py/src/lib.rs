@@ -2104,7 +2104,8 @@ fn simulate<'py>(
 
 /// The floor under causal estimation on a simulated trajectory
 /// ([`hbn_sim::oracle_estimate`]): the posterior `(mean, std)` of each `x[k]` given `u` and `y`
-/// up to `k`, the true past states and the simulator itself.
+/// up to `k`, the true past states and the simulator itself. A system whose disturbance
+/// propagates has none (`ConfigError` on `system`).
 #[pyfunction]
 #[pyo3(signature = (system, u, x, y, noise_gain, rate_hz))]
 fn oracle_estimate<'py>(
@@ -2123,7 +2124,12 @@ fn oracle_estimate<'py>(
         y: slice(&y, "y")?.to_vec(),
         rate_hz: cfg.rate_hz,
     };
-    let est = detached(py, move || Ok(hbn_sim::oracle_estimate(&cfg, &traj)?))?;
+    let est = detached(py, move || match hbn_sim::oracle_estimate(&cfg, &traj) {
+        Ok(est) => Ok(est),
+        // A system with no exact floor: the `system` argument is what to change.
+        Err(e @ hbn_sim::SimError::NoExactOracle { .. }) => Err(Fail::config("system", &e)),
+        Err(e) => Err(e.into()),
+    })?;
     Ok((
         PyArray1::from_vec(py, est.mean),
         PyArray1::from_vec(py, est.std),

@@ -1814,8 +1814,9 @@ def simulate(
     """Simulates a hysteretic actuator/sensor system under a random bounded-increment input.
 
     ``system``: one of :data:`SYSTEMS` (``"maxwell-slip"``, ``"generalized-pi"``, ``"bouc-wen"``,
-    ``"preisach"``, ``"duhem"``, ``"soft-actuator"``). ``noise_gain``: the thesis' noise gain
-    (0 = noise-free). Returns ``{"u", "x", "y"}`` arrays of ``steps`` samples (the data of
+    ``"preisach"``, ``"duhem"``, ``"soft-actuator"``, ``"soft-actuator-load"``: the soft
+    actuator under a supply-pressure disturbance that propagates through its dynamics).
+    ``noise_gain``: the thesis' noise gain (0 = noise-free). Returns ``{"u", "x", "y"}`` arrays of ``steps`` samples (the data of
     ``hbn simulate`` with the same settings).
 
     >>> import hbn
@@ -1853,8 +1854,9 @@ def oracle_estimate(
     baseline) conditions on less, so none has a lower expected squared error than ``mean`` on
     the same log: the ratio of an estimator's RMSE to this one's is what it could still gain.
     Noise-free logs give ``mean == x``. :class:`DataError` if the arrays differ in length or an
-    input lies outside the simulator's range; :class:`ConfigError` for an unknown system or a
-    bad setting.
+    input lies outside the simulator's range; :class:`ConfigError` for an unknown system, a bad
+    setting, or ``"soft-actuator-load"``, whose disturbance propagates through its dynamics: the
+    true past states do not pin its current state, so it has no exact floor.
 
     >>> import hbn, numpy as np
     >>> d = hbn.simulate("bouc-wen", 400, seed=3, noise_gain=3.0)

@@ -2,11 +2,15 @@
 //! system x noise gain x seed, a default model is trained on the protocol's training set
 //! (`hbn_pipeline::experiment`: one random-ramp input repeated with fresh noise) and each mode's
 //! filtered and smoothed estimates of a fresh test log are scored: nRMSE, the ratio smoothed /
-//! filtered, and the 2-sigma coverage of each. One JSON object per line, then a table of the
-//! means per system, gain and mode.
+//! filtered, and the 2-sigma coverage of each. Beside them, on the same test log, the floors of
+//! the simulator ([`hbn_sim::oracle_estimate`], causal, and [`hbn_sim::oracle_smooth_estimate`],
+//! two-sided, with `--lookahead` samples of the future, the whole log by default): their
+//! ratio, two-sided / causal, is the most any smoother could gain over the best filter there.
+//! A system whose disturbance propagates (`soft-actuator-load`) has no exact floor; its rows
+//! say so. One JSON object per line, then a table of the means per system, gain and mode.
 //!
 //! ```text
-//! smooth_eval --systems bouc-wen,preisach,soft-actuator --gains 0,1,10 --seeds 1,2,3
+//! smooth_eval --systems bouc-wen,duhem,preisach,soft-actuator-load --gains 1,10 --seeds 1,2,3
 //! ```
 use clap::Parser;
 use hbn_core::Mode;
@@ -14,7 +18,7 @@ use hbn_model::metrics::{calibration, nrmse};
 use hbn_model::{HbnParams, HysteresisModel};
 use hbn_pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
 use hbn_pipeline::sequences;
-use hbn_sim::SystemKind;
+use hbn_sim::{SimConfig, SimError, SystemKind};
 
 /// Smoothed and filtered nRMSE and coverage, one JSON line per (system, gain, seed, mode).
 #[derive(Parser)]
@@ -37,6 +41,9 @@ struct Args {
     /// Samples of the test log.
     #[arg(long, default_value_t = 1000)]
     test_steps: usize,
+    /// Samples of the future the two-sided floor reads (default: the whole log).
+    #[arg(long)]
+    lookahead: Option<usize>,
 }
 
 /// A value of `T` by its `FromStr`, the error as text (for clap).
@@ -56,6 +63,34 @@ struct Row {
     smoothed: f64,
     cover_filtered: f64,
     cover_smoothed: f64,
+    /// nRMSE of the causal and of the two-sided floor (none where the system has no exact one).
+    floors: Option<(f64, f64)>,
+}
+
+/// The floors' nRMSE on the test log `test` of `system` at `gain`, `(causal, two-sided)`, or
+/// why there is none.
+fn floors(
+    system: SystemKind,
+    gain: f64,
+    test: &hbn_sim::Trajectory,
+    lookahead: usize,
+) -> Result<Result<(f64, f64), String>, SimError> {
+    // The noise seed is not used by the oracles; the rate is the log's.
+    let config = SimConfig {
+        noise_gain: gain,
+        rate_hz: test.rate_hz,
+        ..SimConfig::new(system)
+    };
+    let causal = match hbn_sim::oracle_estimate(&config, test) {
+        Ok(est) => est,
+        Err(e @ SimError::NoExactOracle { .. }) => return Ok(Err(e.to_string())),
+        Err(e) => return Err(e),
+    };
+    let two_sided = hbn_sim::oracle_smooth_estimate(&config, test, lookahead)?;
+    Ok(Ok((
+        nrmse(&causal.mean, &test.x),
+        nrmse(&two_sided.mean, &test.x),
+    )))
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -77,6 +112,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 };
                 let model = HysteresisModel::fit(&sequences(&train), &params)?;
                 let test = test_trajectory(system, gain, seed, &cfg)?;
+                let lookahead = args.lookahead.unwrap_or(usize::MAX);
+                let floor = floors(system, gain, &test, lookahead)?;
+                if let Err(note) = &floor {
+                    eprintln!(
+                        "{} gain {gain} seed {seed}: no floor: {note}",
+                        system.name()
+                    );
+                }
+                let floor_ok = floor.as_ref().ok().copied();
+                let floor_json = |i: usize| floor_ok.map(|f| if i == 0 { f.0 } else { f.1 });
                 for mode in Mode::ALL {
                     let s = model.smooth_with(&test.u, &test.y, &model.ekf_config(mode))?;
                     let (f, sm) = (&s.filtered, &s.estimate);
@@ -88,6 +133,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         smoothed: nrmse(&sm.x, &test.x),
                         cover_filtered: calibration(&f.x, &f.x_std, &test.x).coverage_2sigma,
                         cover_smoothed: calibration(&sm.x, &sm.x_std, &test.x).coverage_2sigma,
+                        floors: floor_ok,
                     };
                     println!(
                         "{}",
@@ -102,6 +148,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             "ratio": row.smoothed / row.filtered,
                             "coverage_filtered": row.cover_filtered,
                             "coverage_smoothed": row.cover_smoothed,
+                            "nrmse_floor_causal": floor_json(0),
+                            "nrmse_floor_two_sided": floor_json(1),
+                            "floor_ratio": floor_ok.map(|(c, t)| t / c),
+                            "floor_note": floor.as_ref().err(),
                             "jitter_retries": s.states.jitter_retries,
                             "unlinked": s.states.unlinked,
                             "clamped": s.states.clamped,
@@ -114,9 +164,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     println!();
     println!(
-        "| system | gain | mode | nRMSE filtered | nRMSE smoothed | ratio | in 2 sd filtered | in 2 sd smoothed |"
+        "| system | gain | mode | nRMSE filtered | nRMSE smoothed | smoothed / filtered | in 2 sd filtered | in 2 sd smoothed | floor causal | floor two-sided | floor two-sided / causal |"
     );
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for &system in &args.systems {
         for &gain in &args.gains {
             for mode in Mode::ALL {
@@ -130,8 +180,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let mean = |f: &dyn Fn(&Row) -> f64| {
                     group.iter().map(|r| f(r)).sum::<f64>() / group.len() as f64
                 };
+                let floor_cells = if group.iter().all(|r| r.floors.is_some()) {
+                    let f = |i: usize| {
+                        mean(&|r| {
+                            r.floors
+                                .map_or(f64::NAN, |f| if i == 0 { f.0 } else { f.1 })
+                        })
+                    };
+                    let ratio = mean(&|r| r.floors.map_or(f64::NAN, |f| f.1 / f.0));
+                    format!("{:.4} | {:.4} | {ratio:.2}", f(0), f(1))
+                } else {
+                    "- | - | -".to_string()
+                };
                 println!(
-                    "| {} | {gain} | {} | {:.4} | {:.4} | {:.2} | {:.1}% | {:.1}% |",
+                    "| {} | {gain} | {} | {:.4} | {:.4} | {:.2} | {:.1}% | {:.1}% | {floor_cells} |",
                     system.name(),
                     mode.name(),
                     mean(&|r| r.filtered),
