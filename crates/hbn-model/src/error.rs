@@ -37,15 +37,14 @@ pub enum DataError {
     /// No trajectories at all.
     #[error("no trajectories given; train from at least one")]
     NoTrajectories,
-    /// A trajectory's state is NaN at every sample: nothing to learn it from
-    /// ([`crate::HysteresisModel::fit_partial`]).
+    /// No trajectory has a measured state: nothing to learn it from
+    /// ([`crate::HysteresisModel::fit_partial`], [`crate::HysteresisModel::fit_latent`]).
+    /// Trajectories without one join training only beside trajectories with one.
     #[error(
-        "trajectory {trajectory}: the state x is NaN at every sample; NaN marks a sample without a measurement, and a trajectory needs some"
+        "no trajectory has a measured state (x is NaN at every sample of every one); NaN marks \
+         a sample without a measurement, and at least one trajectory needs measured samples"
     )]
-    NoStateMeasured {
-        /// Index of the trajectory.
-        trajectory: usize,
-    },
+    NoStateMeasured,
     /// The mask of measured states ([`crate::Sequence::observed`]) is not as long as the
     /// trajectory.
     #[error(

@@ -1030,6 +1030,8 @@ class HysteresisModel:
         keeps the logs' rate. For a scalar model, ``x`` may be NaN where the state was not
         measured (a camera slower than ``u`` and ``y``, or dropped frames): those samples are
         latent, and training runs expectation-maximisation over them (``docs/slow-camera.md``);
+        a trajectory whose ``x`` is NaN throughout (only ``u`` and ``y`` logged) joins its
+        refits, beside at least one trajectory with a measured state;
         ``summary["latent"]`` records how much was measured and what each round scored. A
         vector model takes the same training keywords. It chooses its
         mode, its process-noise scale, each component's standard-deviation scale and, with the
