@@ -796,20 +796,19 @@ impl<'m> VectorEkf<'m> {
         let d = self.model.dims;
         let mut input = [0.0; MAX_DIM];
         let m = self.model.plays.len();
-        let values = x1
-            .iter()
-            .take(d.states)
-            .chain(x2.iter().take(d.states))
-            .chain(st.u_last.iter().take(d.inputs))
-            .chain(st.u_prev.iter().take(d.inputs))
-            .chain(
-                st.plays
-                    .iter()
-                    .take(d.inputs)
-                    .flat_map(|p| p.iter().take(m)),
-            );
-        for (slot, v) in input.iter_mut().zip(values) {
-            *slot = *v;
+        let mut next = 0;
+        let mut put = |values: &[f64], count: usize| {
+            for v in values.iter().take(count) {
+                set1(&mut input, next, *v);
+                next += 1;
+            }
+        };
+        put(x1, d.states);
+        put(x2, d.states);
+        put(&st.u_last, d.inputs);
+        put(&st.u_prev, d.inputs);
+        for p in st.plays.iter().take(d.inputs) {
+            put(p, m);
         }
         input
     }
@@ -1441,8 +1440,8 @@ impl<'m> VectorEkf<'m> {
             }
         }
         let mut p = sandwich(&a_mat, &st.p, n);
-        // + K R K^T: entry (i, j) sums (K_ia R_ab) K_jb over the pairs (a, b) in order, for a
-        // whole row i at once (K^T's rows hold the K_jb of one b).
+        // + K R K^T, as (K R) K^T: row i of K R, then its products with the rows of K^T (each
+        // holds the column of K of one sensor).
         let mut kt = [[0.0; MAX_AUGMENTED]; MAX_SENSORS];
         for (j, k_row) in k_gain.iter().enumerate().take(n) {
             for (kt_row, v) in kt.iter_mut().zip(k_row).take(m) {
@@ -1450,13 +1449,16 @@ impl<'m> VectorEkf<'m> {
             }
         }
         for (p_row, k_row) in p.iter_mut().zip(&k_gain).take(n) {
-            let mut acc = [0.0; MAX_AUGMENTED];
+            let mut kr = [0.0; MAX_SENSORS];
             for (kia, r_row) in k_row.iter().zip(&r_used).take(m) {
-                for (rab, kt_row) in r_row.iter().zip(&kt).take(m) {
-                    let t = kia * rab;
-                    for (acc_j, kjb) in acc.iter_mut().zip(kt_row).take(n) {
-                        *acc_j += t * kjb;
-                    }
+                for (krb, rab) in kr.iter_mut().zip(r_row).take(m) {
+                    *krb += kia * rab;
+                }
+            }
+            let mut acc = [0.0; MAX_AUGMENTED];
+            for (krb, kt_row) in kr.iter().zip(&kt).take(m) {
+                for (acc_j, kjb) in acc.iter_mut().zip(kt_row) {
+                    *acc_j += krb * kjb;
                 }
             }
             for (pij, acc_j) in p_row.iter_mut().zip(&acc).take(n) {
@@ -1498,12 +1500,14 @@ impl<'m> VectorEkf<'m> {
         let span = &self.span;
         let mut scaled = [[0.0; MAX_AUGMENTED]; MAX_AUGMENTED];
         let mut finite = true;
+        // The lower triangle (each entry is its mirror's value), then the upper.
         for (i, (row, si)) in scaled.iter_mut().zip(span).enumerate().take(n) {
-            for (j, (v, sj)) in row.iter_mut().zip(span).enumerate().take(n) {
+            for (j, (v, sj)) in row.iter_mut().zip(span).enumerate().take(i + 1) {
                 *v = 0.5 * (at2(p, i, j) + at2(p, j, i)) / (si * sj);
                 finite &= v.is_finite();
             }
         }
+        mirror_lower(&mut scaled, n);
         // `p` from a scaled covariance: `m_ij span_i span_j`, zero outside the leading block.
         let unscale = |m: &AugMatrix, p: &mut AugMatrix| {
             *p = [[0.0; MAX_AUGMENTED]; MAX_AUGMENTED];
