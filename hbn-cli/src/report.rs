@@ -204,6 +204,13 @@ impl Renderer {
                     }
                 ))
             }
+            Event::NoState { file, path } => ui.warn(format!(
+                "`{}` has no topic `{}` for the state ({path}): it trains with its state \
+                 latent, from u and y alone, beside the logs that have it \
+                 (expectation-maximisation; docs/slow-camera.md)",
+                file.display(),
+                path.topic
+            )),
             Event::LogsRead { .. } => {
                 if let Some(msg) = self.when_logs_read.take() {
                     ui.notice(msg);

@@ -198,6 +198,14 @@ pub enum Event<'a> {
         /// The largest gap allowed (s).
         max_gap_s: f64,
     },
+    /// A training log has no topic of the state's path: it joins training with its state
+    /// latent, from `u` and `y` alone ([`hbn_model::HysteresisModel::fit_latent`]).
+    NoState {
+        /// The log.
+        file: &'a Path,
+        /// The state's path.
+        path: &'a SignalPath,
+    },
     /// Every log was read and passed its checks; training starts.
     LogsRead {
         /// Trajectories (logs) to train on.
@@ -594,6 +602,27 @@ fn align(
         sparse,
         aligned,
     })
+}
+
+impl LogData {
+    /// This log with a signal that was not recorded inserted at position `at` of its
+    /// signals: NaN on the grid, no samples (sparse, with none; [`LogData::sparse`]), no
+    /// native rate. A training log without the state's topic becomes a run whose state is
+    /// latent throughout.
+    pub fn with_unrecorded(mut self, at: usize, path: &SignalPath) -> Self {
+        let n = self.len();
+        let at = at.min(self.paths.len());
+        self.paths.insert(at, path.clone());
+        self.native_rates.insert(at, None);
+        self.samples_in_grid.insert(at, 0);
+        self.samples_recorded.insert(at, 0);
+        self.dropouts.insert(at, vec![false; n]);
+        self.sparse.insert(at, Some(Vec::new()));
+        self.aligned
+            .columns
+            .insert(at.min(self.aligned.columns.len()), vec![f64::NAN; n]);
+        self
+    }
 }
 
 /// A signal with samples at fewer than this fraction of the grid's points is measured sparsely

@@ -101,14 +101,44 @@ pub fn train_from_logs(
     ];
     let mut rate = opts.rate_hz;
     let mut data = Vec::with_capacity(logs.len());
+    // The first log without the state's topic, reported if no log has it.
+    let mut missing_state = None;
     for file in logs {
         // Without a rate, the sensor's (position 2) sets the grid; later logs take the first's.
         let grid = rate.map_or(GridRate::SlowestOf(&[2]), GridRate::Given);
-        let split = load_log_pieces(file, &paths, grid, &opts, MIN_PIECE_SAMPLES, observe)?;
+        let split = match load_log_pieces(file, &paths, grid, &opts, MIN_PIECE_SAMPLES, observe) {
+            // A log without the state's topic (only u and y recorded) joins with its state
+            // latent; a missing field of a topic that is there stays an error (a typo).
+            Err(e) if lacks_topic(&e, &signals.state.topic) => {
+                missing_state.get_or_insert(e);
+                observe(Event::NoState {
+                    file,
+                    path: &signals.state,
+                });
+                let io_paths = [signals.input.clone(), signals.output.clone()];
+                let grid = rate.map_or(GridRate::SlowestOf(&[1]), GridRate::Given);
+                let mut split =
+                    load_log_pieces(file, &io_paths, grid, &opts, MIN_PIECE_SAMPLES, observe)?;
+                split.pieces = split
+                    .pieces
+                    .into_iter()
+                    .map(|p| p.with_unrecorded(1, &signals.state))
+                    .collect();
+                split
+            }
+            other => other?,
+        };
         for piece in split.pieces {
             rate = Some(piece.rate_hz());
             data.push(piece);
         }
+    }
+    if let Some(e) = missing_state
+        && data
+            .iter()
+            .all(|d| d.samples_recorded.get(1).is_none_or(|&n| n == 0))
+    {
+        return Err(e);
     }
     // The state is what the model learns from: refuse to train on a sliver of it.
     let state_samples: usize = data
@@ -220,6 +250,14 @@ pub fn train_from_logs(
         HysteresisModel::fit_checked(&seqs, &params, &mut on_training)?
     };
     Ok(Trained { model, logs: data })
+}
+
+/// Whether `e` is a log's lack of `topic`.
+fn lacks_topic(e: &PipelineError, topic: &str) -> bool {
+    matches!(e, PipelineError::Read {
+        source: hbn_io::IoError::MissingTopic { topic: t, .. },
+        ..
+    } if t == topic)
 }
 
 /// The state's measurements of a log whose state is measured sparsely
