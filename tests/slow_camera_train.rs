@@ -1,7 +1,7 @@
 //! Training from a log whose state is a slow camera with dropped frames, end to end through the
 //! `hbn` binary: `hbn simulate --state-rate --state-drop`, `hbn train` (expectation-maximisation
 //! over the latent samples, said in a warning and recorded in the model file), `hbn estimate
-//! --smooth --csv` on a full-rate test log.
+//! --smooth --csv` on a full-rate test log, `hbn eval` on a camera log (scored at its frames).
 
 mod run_hbn;
 
@@ -86,6 +86,38 @@ fn a_slow_camera_log_trains_by_em_and_estimates() {
         "{header}"
     );
     assert_eq!(out.lines().count(), 601);
+    // `hbn eval` on a camera log scores at the camera's frames only, and says so.
+    let camera_test = dir.path().join("camera_test.mcap");
+    ok(&[
+        "simulate",
+        "--system",
+        "duhem",
+        "--steps",
+        "600",
+        "--seed",
+        "2",
+        "--state-rate",
+        "20",
+        "--out",
+        &s(&camera_test),
+    ]);
+    let scored = ok(&["eval", "--model", &s(&model), "--log", &s(&camera_test)]);
+    assert!(
+        scored.stdout.contains("scored at the state's 120 frames"),
+        "{}",
+        scored.stdout
+    );
+    let json = ok(&[
+        "eval",
+        "--model",
+        &s(&model),
+        "--log",
+        &s(&camera_test),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&json.stdout).expect("json");
+    assert_eq!(v["state_frames"], 120, "{v}");
+    assert_eq!(v["calibration"]["ekf"]["samples"], 120, "{v}");
     // A log with the state at every sample trains as before: no EM, nothing recorded.
     let full = dir.path().join("full.mcap");
     ok(&[

@@ -4,7 +4,6 @@
 use std::path::Path;
 
 use anyhow::Context;
-use hbn_model::metrics::{calibration, nrmse, rmse};
 use hbn_model::{HysteresisModel, VectorModel};
 use hbn_pipeline::{Evaluation, LogOption, Method, Score, SignalChoice, evaluate_log};
 
@@ -86,6 +85,15 @@ pub fn table(
     if !smoothed.is_empty() {
         s.push_str("smoothed: each sample estimated from the whole log (docs/smoothing.md)\n");
     }
+    if let Some(frames) = ev.log.state_frames() {
+        s.push_str(&format!(
+            "scored at the state's {} frames (it is measured at {:.0}% of the {} samples; \
+             between frames the log holds no state to compare with)\n",
+            frames.len(),
+            100.0 * frames.len() as f64 / ev.log.len().max(1) as f64,
+            ev.log.len()
+        ));
+    }
     s
 }
 
@@ -108,19 +116,18 @@ fn smoothed_scores(
         &mut |_| {},
     )
     .map_err(|e| report::error(e, opts.time_source))?;
-    let x_ref = ev.log.column(1);
     ev.estimates
         .iter()
         .map(|(mode, _)| {
             let est = hbn_pipeline::smooth_pieces(model, &split.pieces, 0, 2, *mode).with_context(
                 || format!("smoothing `{}` with {mode} failed", args.log.display()),
             )?;
-            Ok(Score {
-                method: Method::Filter(*mode),
-                rmse: rmse(&est.x, x_ref),
-                nrmse: nrmse(&est.x, x_ref),
-                calibration: Some(calibration(&est.x, &est.x_std, x_ref)),
-            })
+            Ok(hbn_pipeline::score_against_log(
+                Method::Filter(*mode),
+                &est.x,
+                Some(&est.x_std),
+                &ev.log,
+            ))
         })
         .collect()
 }

@@ -75,8 +75,9 @@ pub struct Evaluation {
 impl Evaluation {
     /// JSON: `{"rmse": {..}, "nrmse": {..}, "calibration": {method: {coverage_1sigma,
     /// coverage_2sigma, mean_nees, nlpd, samples}}, "samples": N, "rate_hz": ..,
-    /// "duration_s": .., "signals": [paths]}` (the samples are the span where every signal read
-    /// has data).
+    /// "duration_s": .., "signals": [paths], "state_frames": F}` (the samples are the span
+    /// where every signal read has data; `state_frames` is the number of the state's frames
+    /// scored where it is measured sparsely, `null` where every sample is).
     pub fn to_json(&self) -> Value {
         let mut r = Map::new();
         let mut n = Map::new();
@@ -89,14 +90,61 @@ impl Evaluation {
             }
         }
         let signals: Vec<String> = self.log.paths.iter().map(|p| p.to_string()).collect();
+        let frames = self.log.state_frames().map(<[_]>::len);
         json!({"rmse": r, "nrmse": n, "calibration": c, "samples": self.log.len(),
                "rate_hz": self.log.rate_hz(), "duration_s": self.log.duration_s(),
-               "signals": signals})
+               "signals": signals, "state_frames": frames})
+    }
+}
+
+impl LogData {
+    /// The frames of the state (column 1) when it is measured sparsely
+    /// ([`LogData::sparse`]: a camera slower than the grid, or dropping many frames); `None`
+    /// when it is measured at about every grid sample.
+    pub fn state_frames(&self) -> Option<&[hbn_io::GridSample]> {
+        self.sparse
+            .get(1)?
+            .as_deref()
+            .filter(|frames| !frames.is_empty())
+    }
+}
+
+/// `series` (one value per grid sample) at the time of `frame`, interpolated between the grid
+/// samples around it; NaN past the series' end.
+fn at_frame(series: &[f64], frame: &hbn_io::GridSample) -> f64 {
+    let after = series.get(frame.k).copied().unwrap_or(f64::NAN);
+    match frame.k.checked_sub(1).and_then(|k| series.get(k)) {
+        Some(&before) if frame.weight < 1.0 => frame.weight * after + (1.0 - frame.weight) * before,
+        _ => after,
+    }
+}
+
+/// Scores `method`'s estimate `x` (with standard deviation `x_std`, if it has one) against the
+/// state logged in `log` (column 1). Where the state is measured sparsely
+/// ([`LogData::state_frames`]) only its frames count, each against the estimate interpolated
+/// to the frame's time: the grid's values between frames are interpolations, not
+/// measurements. Otherwise every grid sample counts.
+pub fn score_against_log(method: Method, x: &[f64], x_std: Option<&[f64]>, log: &LogData) -> Score {
+    let score = |x: &[f64], x_std: Option<&[f64]>, reference: &[f64]| Score {
+        method,
+        rmse: rmse(x, reference),
+        nrmse: nrmse(x, reference),
+        calibration: x_std.map(|sd| calibration(x, sd, reference)),
+    };
+    match log.state_frames() {
+        Some(frames) => {
+            let at = |s: &[f64]| -> Vec<f64> { frames.iter().map(|f| at_frame(s, f)).collect() };
+            let reference: Vec<f64> = frames.iter().map(|f| f.value).collect();
+            let sd = x_std.map(at);
+            score(&at(x), sd.as_deref(), &reference)
+        }
+        None => score(x, x_std, log.column(1)),
     }
 }
 
 /// Reads `u`, `x`, `y` from `file` at the model's rate, runs each of `modes` and the open-loop
-/// simulation, and scores them against the logged `x`.
+/// simulation, and scores them against the logged `x` ([`score_against_log`]: at the state's
+/// frames only where it is measured sparsely).
 pub fn evaluate_log(
     model: &HysteresisModel,
     file: &Path,
@@ -108,34 +156,108 @@ pub fn evaluate_log(
     let which = [LogOption::Input, LogOption::State, LogOption::Output];
     let split = read_pieces_at_model_rate(model, file, signals, &which, log_options, observe)?;
     let log = join_pieces(&split.pieces).ok_or(PipelineError::NoModes)?;
-    let (u, x_ref) = (log.column(0), log.column(1));
+    let u = log.column(0);
     let mut scores = Vec::new();
     let mut estimates = Vec::new();
     for &mode in modes {
         // The filter reads u and y (columns 0 and 2); each piece between long gaps restarts it.
         let est = estimate_pieces(model, &split.pieces, 0, 2, mode)?;
-        scores.push(Score {
-            method: Method::Filter(mode),
-            rmse: rmse(&est.x, x_ref),
-            nrmse: nrmse(&est.x, x_ref),
-            calibration: Some(calibration(&est.x, &est.x_std, x_ref)),
-        });
+        scores.push(score_against_log(
+            Method::Filter(mode),
+            &est.x,
+            Some(&est.x_std),
+            &log,
+        ));
         estimates.push((mode, est));
     }
     let mut open_loop = Vec::with_capacity(u.len());
     for piece in &split.pieces {
         open_loop.extend(model.simulate_open_loop(piece.column(0))?);
     }
-    scores.push(Score {
-        method: Method::OpenLoop,
-        rmse: rmse(&open_loop, x_ref),
-        nrmse: nrmse(&open_loop, x_ref),
-        calibration: None,
-    });
+    scores.push(score_against_log(Method::OpenLoop, &open_loop, None, &log));
     Ok(Evaluation {
         log,
         estimates,
         open_loop,
         scores,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hbn_io::{Aligned, GridSample};
+
+    /// A 10-sample log whose state column holds `state`, measured sparsely at `frames` if
+    /// given.
+    fn log(state: Vec<f64>, frames: Option<Vec<GridSample>>) -> LogData {
+        let n = state.len();
+        LogData {
+            file: "log.mcap".into(),
+            paths: ["/u.data", "/x.data", "/y.data"]
+                .iter()
+                .map(|p| p.parse().unwrap())
+                .collect(),
+            native_rates: vec![Some(100.0), Some(30.0), Some(100.0)],
+            samples_in_grid: vec![n, 3, n],
+            samples_recorded: vec![n, 3, n],
+            dropouts: vec![vec![false; n]; 3],
+            sparse: vec![None, frames, None],
+            aligned: Aligned {
+                rate_hz: 100.0,
+                t0_ns: 0,
+                t_s: (0..n).map(|k| k as f64 * 0.01).collect(),
+                columns: vec![vec![0.0; n], state, vec![0.0; n]],
+            },
+        }
+    }
+
+    #[test]
+    fn a_sparse_state_is_scored_at_its_frames_only() {
+        // The estimate is the ramp k / 10; the frames measure it exactly, at a grid sample
+        // and between two; the grid's state column holds nonsense between them.
+        let x: Vec<f64> = (0..10).map(|k| k as f64 / 10.0).collect();
+        let sd = vec![0.05; 10];
+        let frames = vec![
+            GridSample {
+                k: 0,
+                weight: 1.0,
+                value: 0.0,
+            },
+            GridSample {
+                k: 4,
+                weight: 0.5,
+                value: 0.35,
+            },
+            GridSample {
+                k: 9,
+                weight: 1.0,
+                value: 0.9,
+            },
+        ];
+        let nonsense = vec![1e3; 10];
+        let sparse = log(nonsense.clone(), Some(frames));
+        let s = score_against_log(Method::Filter(Mode::Ekf), &x, Some(&sd), &sparse);
+        assert!(s.rmse < 1e-12, "{s:?}");
+        let c = s.calibration.unwrap();
+        assert_eq!(c.samples, 3);
+        assert_eq!(c.coverage_2sigma, 1.0);
+        // One frame off by 0.09: RMSE over the three frames.
+        let mut off = sparse.clone();
+        if let Some(Some(f)) = off.sparse.get_mut(1) {
+            f[1].value += 0.09;
+        }
+        let s = score_against_log(Method::OpenLoop, &x, None, &off);
+        assert!(
+            (s.rmse - (0.09f64 * 0.09 / 3.0).sqrt()).abs() < 1e-12,
+            "{s:?}"
+        );
+        assert!((s.nrmse - s.rmse / 0.9).abs() < 1e-12, "{s:?}");
+        assert!(s.calibration.is_none());
+        // Measured at every sample: the grid's column is the reference.
+        let dense = log(nonsense, None);
+        let s = score_against_log(Method::Filter(Mode::Ekf), &x, Some(&sd), &dense);
+        assert!(s.rmse > 900.0, "{s:?}");
+        assert_eq!(s.calibration.unwrap().samples, 10);
+    }
 }

@@ -40,7 +40,7 @@ pub use estimate::{
     LogEstimate, OUTLIER_WARNING, Outputs, SignalChoice, estimate_log, estimate_log_modes,
     estimate_schema, file_for_mode, read_at_model_rate, read_pieces_at_model_rate, smooth_pieces,
 };
-pub use eval::{Evaluation, Method, Score, evaluate_log};
+pub use eval::{Evaluation, Method, Score, evaluate_log, score_against_log};
 pub use log::{
     CheckedLogOptions, DEFAULT_MIN_COVERAGE, DEFAULT_MIN_STATE_SAMPLES, DROPOUT_FACTOR, Event,
     GridRate, LogData, LogOptions, LogPieces, Observer, RATE_NOTICE_TOLERANCE, join_pieces,
