@@ -995,12 +995,14 @@ impl Accum<'_> {
         self.run_rows::<GRAD>(d, d, kvec, cvec, grad_u)
     }
 
-    /// The pass of [`Accum::run_width`] over rows of `d` features (1..=[`MAX_DIM`]), to the
-    /// same bits, with the gradient of the first `grad_cols` features only (the others are
-    /// left zero). Rows of many features are too wide for one row's sums to keep the CPU
-    /// busy, so with AVX2 the squared distances go four rows at a time
-    /// (`simd::sq_dists_rows4`) and the gradient's sums four columns at a time
-    /// (`simd::weighted_diffs`), each sum in the order of [`Accum::run_width`]'s loops.
+    /// The pass of [`Accum::run_width`] over rows of `d` features (1..=[`MAX_DIM`]), with the
+    /// gradient of the first `grad_cols` features only (the others are left zero), to
+    /// rounding: the sums over the rows (the mean, the gradient's columns) go in four partial
+    /// sums, so that no chain of `n` additions holds the CPU up. Rows of many features are
+    /// too wide for one row's sums to keep the CPU busy, so with AVX2 the squared distances
+    /// go four rows at a time (`simd::sq_dists_rows4`, in [`Accum::run_width`]'s order) and
+    /// the gradient's sums four columns at a time (`simd::weighted_diffs`), to the same bits
+    /// as without AVX2.
     #[inline(always)]
     fn run_rows<const GRAD: bool>(
         &self,
