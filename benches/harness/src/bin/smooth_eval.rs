@@ -7,7 +7,10 @@
 //! two-sided, with `--lookahead` samples of the future, the whole log by default): their
 //! ratio, two-sided / causal, is the most any smoother could gain over the best filter there.
 //! A system whose disturbance propagates (`soft-actuator-load`) has no exact floor; its rows
-//! say so. One JSON object per line, then a table of the means per system, gain and mode.
+//! say so. Every row also gives the nRMSE of the noise-free simulator run from `u` alone (the
+//! true model without the sensor: what the disturbance alone moves the state by); a filter far
+//! above it errs by its model more than by the noise, and no smoother removes that. One JSON
+//! object per line, then a table of the means per system, gain and mode.
 //!
 //! ```text
 //! smooth_eval --systems bouc-wen,duhem,preisach,soft-actuator-load --gains 1,10 --seeds 1,2,3
@@ -65,6 +68,17 @@ struct Row {
     cover_smoothed: f64,
     /// nRMSE of the causal and of the two-sided floor (none where the system has no exact one).
     floors: Option<(f64, f64)>,
+    /// nRMSE of the noise-free simulator run from `u` alone.
+    clean: f64,
+}
+
+/// nRMSE of the noise-free run of `system` on the input of `test` against its logged state.
+fn clean_nrmse(system: SystemKind, test: &hbn_sim::Trajectory) -> Result<f64, SimError> {
+    let config = SimConfig {
+        rate_hz: test.rate_hz,
+        ..SimConfig::new(system)
+    };
+    Ok(nrmse(&hbn_sim::simulate(&config, &test.u)?.x, &test.x))
 }
 
 /// The floors' nRMSE on the test log `test` of `system` at `gain`, `(causal, two-sided)`, or
@@ -121,6 +135,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     );
                 }
                 let floor_ok = floor.as_ref().ok().copied();
+                let clean = clean_nrmse(system, &test)?;
                 let floor_json = |i: usize| floor_ok.map(|f| if i == 0 { f.0 } else { f.1 });
                 for mode in Mode::ALL {
                     let s = model.smooth_with(&test.u, &test.y, &model.ekf_config(mode))?;
@@ -134,6 +149,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         cover_filtered: calibration(&f.x, &f.x_std, &test.x).coverage_2sigma,
                         cover_smoothed: calibration(&sm.x, &sm.x_std, &test.x).coverage_2sigma,
                         floors: floor_ok,
+                        clean,
                     };
                     println!(
                         "{}",
@@ -152,6 +168,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             "nrmse_floor_two_sided": floor_json(1),
                             "floor_ratio": floor_ok.map(|(c, t)| t / c),
                             "floor_note": floor.as_ref().err(),
+                            "nrmse_clean": clean,
                             "jitter_retries": s.states.jitter_retries,
                             "unlinked": s.states.unlinked,
                             "clamped": s.states.clamped,
@@ -164,9 +181,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     println!();
     println!(
-        "| system | gain | mode | nRMSE filtered | nRMSE smoothed | smoothed / filtered | in 2 sd filtered | in 2 sd smoothed | floor causal | floor two-sided | floor two-sided / causal |"
+        "| system | gain | mode | nRMSE filtered | nRMSE smoothed | smoothed / filtered | in 2 sd filtered | in 2 sd smoothed | floor causal | floor two-sided | floor two-sided / causal | noise-free run |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     for &system in &args.systems {
         for &gain in &args.gains {
             for mode in Mode::ALL {
@@ -193,7 +210,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     "- | - | -".to_string()
                 };
                 println!(
-                    "| {} | {gain} | {} | {:.4} | {:.4} | {:.2} | {:.1}% | {:.1}% | {floor_cells} |",
+                    "| {} | {gain} | {} | {:.4} | {:.4} | {:.2} | {:.1}% | {:.1}% | {floor_cells} | {:.4} |",
                     system.name(),
                     mode.name(),
                     mean(&|r| r.filtered),
@@ -201,6 +218,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     mean(&|r| r.smoothed / r.filtered),
                     100.0 * mean(&|r| r.cover_filtered),
                     100.0 * mean(&|r| r.cover_smoothed),
+                    mean(&|r| r.clean),
                 );
             }
         }
