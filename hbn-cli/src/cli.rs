@@ -361,10 +361,21 @@ fn parse_non_negative(s: &str) -> Result<f64, String> {
     }
 }
 
-fn systems_help() -> String {
+/// The width of the name column in the lists of systems: the longest name of either list.
+fn system_name_width() -> usize {
     SystemKind::ALL
         .iter()
-        .map(|k| format!("  {:<15} {}", k.name(), k.description()))
+        .map(|k| k.name().len())
+        .chain(MultiKind::ALL.iter().map(|k| k.name().len()))
+        .max()
+        .unwrap_or(0)
+}
+
+fn systems_help() -> String {
+    let width = system_name_width();
+    SystemKind::ALL
+        .iter()
+        .map(|k| format!("  {:<width$} {}", k.name(), k.description()))
         .collect::<Vec<_>>()
         .join("\n")
 }
@@ -414,9 +425,10 @@ fn parse_sim_system(s: &str) -> Result<SimSystem, String> {
 }
 
 fn multi_systems_help() -> String {
+    let width = system_name_width();
     MultiKind::ALL
         .iter()
-        .map(|k| format!("  {:<15} {}", k.name(), k.description()))
+        .map(|k| format!("  {:<width$} {}", k.name(), k.description()))
         .collect::<Vec<_>>()
         .join("\n")
 }
