@@ -43,8 +43,9 @@ pub use estimate::{
 pub use eval::{Evaluation, Method, Score, evaluate_log, score_against_log};
 pub use log::{
     CheckedLogOptions, DEFAULT_MIN_COVERAGE, DEFAULT_MIN_STATE_SAMPLES, DROPOUT_FACTOR, Event,
-    GridRate, LogData, LogOptions, LogPieces, Observer, RATE_NOTICE_TOLERANCE, join_pieces,
-    load_log, load_log_pieces, model_log_options, parse_signal, parse_time_source, round_rate,
+    GridRate, LogData, LogOptions, LogPieces, Observer, RATE_NOTICE_TOLERANCE, SPARSE_BELOW,
+    join_pieces, load_log, load_log_pieces, model_log_options, parse_signal, parse_time_source,
+    round_rate,
 };
 pub use sim::{
     CameraFrames, MULTI_STATE_TOPIC, MultiSimLog, START_NS, SimLog, StateCamera, log_times,
