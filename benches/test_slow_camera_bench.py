@@ -1,7 +1,7 @@
 """End-to-end test of ``benches/slow_camera.py`` on a tiny grid (one system, one seed, gain 1,
 cameras 100 and 30:0.1, short logs): the table's shape, and ratios finite and positive.
 
-    pytest benches/test_slow_camera.py   # HBN_BIN=/path/to/hbn, else target/release/hbn
+    pytest benches/test_slow_camera_bench.py   # HBN_BIN=/path/to/hbn, else target/release/hbn
 
 Skips, saying so, without the ``hbn`` binary or the hbn wheel (which reads the test log).
 """
