@@ -2102,12 +2102,14 @@ fn simulate<'py>(
     ))
 }
 
-/// The floor under causal estimation on a simulated trajectory
-/// ([`hbn_sim::oracle_estimate`]): the posterior `(mean, std)` of each `x[k]` given `u` and `y`
-/// up to `k`, the true past states and the simulator itself. A system whose disturbance
-/// propagates has none (`ConfigError` on `system`).
+/// The floor under estimation on a simulated trajectory: the posterior `(mean, std)` of each
+/// `x[k]` given `u` and `y` up to `k + lookahead`, the true states around it and the simulator
+/// itself ([`hbn_sim::oracle_estimate`] for lookahead 0, the causal floor;
+/// [`hbn_sim::oracle_smooth_estimate`] otherwise, `None` for the whole log: the floor under
+/// smoothing). A system whose disturbance propagates has none (`ConfigError` on `system`).
 #[pyfunction]
-#[pyo3(signature = (system, u, x, y, noise_gain, rate_hz))]
+#[pyo3(signature = (system, u, x, y, noise_gain, rate_hz, lookahead))]
+#[allow(clippy::too_many_arguments)]
 fn oracle_estimate<'py>(
     py: Python<'py>,
     system: &str,
@@ -2116,6 +2118,7 @@ fn oracle_estimate<'py>(
     y: PyReadonlyArray1<'_, f64>,
     noise_gain: Option<f64>,
     rate_hz: Option<f64>,
+    lookahead: Option<usize>,
 ) -> PyResult<(Arr<'py>, Arr<'py>)> {
     let cfg = sim_config(py, system, None, noise_gain, rate_hz)?;
     let traj = hbn_sim::Trajectory {
@@ -2124,7 +2127,8 @@ fn oracle_estimate<'py>(
         y: slice(&y, "y")?.to_vec(),
         rate_hz: cfg.rate_hz,
     };
-    let est = detached(py, move || match hbn_sim::oracle_estimate(&cfg, &traj) {
+    let lookahead = lookahead.unwrap_or(usize::MAX);
+    let est = detached(py, move || match hbn_sim::oracle_smooth_estimate(&cfg, &traj, lookahead) {
         Ok(est) => Ok(est),
         // A system with no exact floor: the `system` argument is what to change.
         Err(e @ hbn_sim::SimError::NoExactOracle { .. }) => Err(Fail::config("system", &e)),

@@ -1,6 +1,6 @@
-"""hbn.oracle_estimate, the floor under causal estimation on simulated logs: exact on noise-free
-data, a calibrated posterior that uses y, the same figures as the Rust function through the
-step-by-step Simulator, and errors that name what to fix."""
+"""hbn.oracle_estimate, the floors under causal estimation and under smoothing on simulated
+logs: exact on noise-free data, a calibrated posterior that uses y, the same figures as the Rust
+function through the step-by-step Simulator, and errors that name what to fix."""
 
 import numpy as np
 import pytest
@@ -66,3 +66,25 @@ def test_a_propagating_disturbance_has_no_floor():
     with pytest.raises(hbn.ConfigError, match="propagates") as e:
         hbn.oracle_estimate("soft-actuator-load", d["u"], d["x"], d["y"], noise_gain=1.0)
     assert e.value.keyword == "system"
+
+
+def test_the_two_sided_floor_is_never_above_the_causal_one():
+    # Seeing the outputs after k and the true later states can only narrow x[k]'s posterior:
+    # over a log, the two-sided floor's squared error is at most the causal one's, lookahead 0
+    # is the causal floor exactly, and noise-free logs give the state.
+    d = hbn.simulate("duhem", 600, seed=4, noise_gain=3.0)
+    causal = hbn.oracle_estimate("duhem", d["u"], d["x"], d["y"], noise_gain=3.0)
+    zero = hbn.oracle_estimate("duhem", d["u"], d["x"], d["y"], noise_gain=3.0, lookahead=0)
+    whole = hbn.oracle_estimate("duhem", d["u"], d["x"], d["y"], noise_gain=3.0, lookahead=None)
+    some = hbn.oracle_estimate("duhem", d["u"], d["x"], d["y"], noise_gain=3.0, lookahead=20)
+    assert np.array_equal(causal["mean"], zero["mean"])
+    mse = lambda o: float(np.mean((o["mean"] - d["x"]) ** 2))
+    assert mse(whole) <= mse(some) <= mse(causal)
+    assert mse(whole) < mse(causal)
+    clean = hbn.simulate("duhem", 200, seed=4)
+    o = hbn.oracle_estimate("duhem", clean["u"], clean["x"], clean["y"], lookahead=None)
+    assert np.array_equal(o["mean"], clean["x"])
+    for bad in (-1, 2.5, True):
+        with pytest.raises(hbn.ConfigError, match="lookahead") as e:
+            hbn.oracle_estimate("duhem", d["u"], d["x"], d["y"], noise_gain=3.0, lookahead=bad)
+        assert e.value.keyword == "lookahead"

@@ -1844,9 +1844,10 @@ def oracle_estimate(
     y: Any,
     noise_gain: float = _S["noise_gain"],
     rate_hz: float = _S["rate_hz"],
+    lookahead: Optional[int] = 0,
 ) -> Dict[str, np.ndarray]:
-    """The floor under causal state estimation on a simulated log: how low any estimator's
-    error can go.
+    """The floor under state estimation on a simulated log: how low any estimator's error can
+    go.
 
     ``u``, ``x``, ``y``: a trajectory of the simulator ``system`` (from :func:`simulate`,
     :class:`Simulator` or ``hbn simulate``) with the same ``noise_gain`` and ``rate_hz`` (the
@@ -1859,6 +1860,12 @@ def oracle_estimate(
     input lies outside the simulator's range; :class:`ConfigError` for an unknown system, a bad
     setting, or ``"soft-actuator-load"``, whose disturbance propagates through its dynamics: the
     true past states do not pin its current state, so it has no exact floor.
+
+    ``lookahead`` (samples after ``k``; ``None`` for the whole log) gives the floor under
+    smoothing instead: the posterior given also ``y`` up to ``k + lookahead`` and the true
+    later states, which no estimator that sees ``u`` and ``y`` of the whole log (hbn's
+    :meth:`HysteresisModel.smooth`) beats. Its ratio to the causal floor is the most a smoother
+    could gain on the log (``docs/smoothing.md``).
 
     >>> import hbn, numpy as np
     >>> d = hbn.simulate("bouc-wen", 400, seed=3, noise_gain=3.0)
@@ -1874,8 +1881,22 @@ def oracle_estimate(
         _vector(y, "y"),
         _opt_float(noise_gain, "noise_gain"),
         _opt_float(rate_hz, "rate_hz"),
+        _lookahead(lookahead),
     )
     return {"mean": mean, "std": std}
+
+
+def _lookahead(v: Any) -> Optional[int]:
+    """``lookahead`` of :func:`oracle_estimate`: ``None``, or an integer ``>= 0``."""
+    if v is None:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+        error = ConfigError(
+            f"invalid lookahead={v!r}: must be an integer >= 0, or None for the whole log"
+        )
+        error.keyword = "lookahead"
+        raise error
+    return int(v)
 
 
 def list_topics(path: PathLike) -> List[Dict[str, Any]]:

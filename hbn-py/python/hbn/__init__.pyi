@@ -376,6 +376,7 @@ def oracle_estimate(
     y: ArrayLike,
     noise_gain: float = ...,
     rate_hz: float = ...,
+    lookahead: Optional[int] = ...,
 ) -> Dict[str, FloatArray]: ...
 def list_topics(path: PathLike) -> List[Dict[str, Any]]: ...
 def read_mcap(

@@ -320,6 +320,7 @@ def oracle_estimate(
     y: npt.NDArray[np.float64],
     noise_gain: Optional[float],
     rate_hz: Optional[float],
+    lookahead: Optional[int],
 ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
 def systems() -> List[str]: ...
 def read_mcap(
