@@ -2128,11 +2128,13 @@ fn oracle_estimate<'py>(
         rate_hz: cfg.rate_hz,
     };
     let lookahead = lookahead.unwrap_or(usize::MAX);
-    let est = detached(py, move || match hbn_sim::oracle_smooth_estimate(&cfg, &traj, lookahead) {
-        Ok(est) => Ok(est),
-        // A system with no exact floor: the `system` argument is what to change.
-        Err(e @ hbn_sim::SimError::NoExactOracle { .. }) => Err(Fail::config("system", &e)),
-        Err(e) => Err(e.into()),
+    let est = detached(py, move || {
+        match hbn_sim::oracle_smooth_estimate(&cfg, &traj, lookahead) {
+            Ok(est) => Ok(est),
+            // A system with no exact floor: the `system` argument is what to change.
+            Err(e @ hbn_sim::SimError::NoExactOracle { .. }) => Err(Fail::config("system", &e)),
+            Err(e) => Err(e.into()),
+        }
     })?;
     Ok((
         PyArray1::from_vec(py, est.mean),
