@@ -97,18 +97,6 @@ impl Evaluation {
     }
 }
 
-impl LogData {
-    /// The frames of the state (column 1) when it is measured sparsely
-    /// ([`LogData::sparse`]: a camera slower than the grid, or dropping many frames); `None`
-    /// when it is measured at about every grid sample.
-    pub fn state_frames(&self) -> Option<&[hbn_io::GridSample]> {
-        self.sparse
-            .get(1)?
-            .as_deref()
-            .filter(|frames| !frames.is_empty())
-    }
-}
-
 /// `series` (one value per grid sample) at the time of `frame`, interpolated between the grid
 /// samples around it; NaN past the series' end.
 fn at_frame(series: &[f64], frame: &hbn_io::GridSample) -> f64 {

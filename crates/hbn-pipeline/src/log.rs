@@ -301,6 +301,35 @@ pub struct LogData {
 }
 
 impl LogData {
+    /// The frames of the state (column 1) when it is measured sparsely
+    /// ([`LogData::sparse`]: a camera slower than the grid, or dropping many frames); `None`
+    /// when it is measured at about every grid sample.
+    pub fn state_frames(&self) -> Option<&[hbn_io::GridSample]> {
+        self.sparse
+            .get(1)?
+            .as_deref()
+            .filter(|frames| !frames.is_empty())
+    }
+
+    /// This log with a signal that was not recorded inserted at position `at` of its
+    /// signals: NaN on the grid, no samples (sparse, with none; [`LogData::sparse`]), no
+    /// native rate. A training log without the state's topic becomes a run whose state is
+    /// latent throughout.
+    pub fn with_unrecorded(mut self, at: usize, path: &SignalPath) -> Self {
+        let n = self.len();
+        let at = at.min(self.paths.len());
+        self.paths.insert(at, path.clone());
+        self.native_rates.insert(at, None);
+        self.samples_in_grid.insert(at, 0);
+        self.samples_recorded.insert(at, 0);
+        self.dropouts.insert(at, vec![false; n]);
+        self.sparse.insert(at, Some(Vec::new()));
+        self.aligned
+            .columns
+            .insert(at.min(self.aligned.columns.len()), vec![f64::NAN; n]);
+        self
+    }
+
     /// Column `i` (empty if there is none).
     pub fn column(&self, i: usize) -> &[f64] {
         self.aligned.columns.get(i).map_or(&[], |c| c.as_slice())
@@ -602,27 +631,6 @@ fn align(
         sparse,
         aligned,
     })
-}
-
-impl LogData {
-    /// This log with a signal that was not recorded inserted at position `at` of its
-    /// signals: NaN on the grid, no samples (sparse, with none; [`LogData::sparse`]), no
-    /// native rate. A training log without the state's topic becomes a run whose state is
-    /// latent throughout.
-    pub fn with_unrecorded(mut self, at: usize, path: &SignalPath) -> Self {
-        let n = self.len();
-        let at = at.min(self.paths.len());
-        self.paths.insert(at, path.clone());
-        self.native_rates.insert(at, None);
-        self.samples_in_grid.insert(at, 0);
-        self.samples_recorded.insert(at, 0);
-        self.dropouts.insert(at, vec![false; n]);
-        self.sparse.insert(at, Some(Vec::new()));
-        self.aligned
-            .columns
-            .insert(at.min(self.aligned.columns.len()), vec![f64::NAN; n]);
-        self
-    }
 }
 
 /// A signal with samples at fewer than this fraction of the grid's points is measured sparsely
