@@ -479,6 +479,24 @@ pub struct VectorStepOutput {
     pub flags: Flags,
 }
 
+/// The prediction phase of one vector step, as [`VectorEkf::predict`] returns it: what an
+/// offline smoother records beside the filtered state (the vector twin of
+/// [`crate::StepPrediction`]). Entries beyond the augmented dimension `2 dx + dy` are zero.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VectorPrediction {
+    /// Predicted mean `z_k^- = [x_k^-, x_{k-1}, s_k^-]` (before the update with `y_k`).
+    pub z: [f64; MAX_AUGMENTED],
+    /// Predicted covariance `P_k^-`, bounded as the step bounds it.
+    pub p: AugMatrix,
+    /// Cross-covariance `C_k = cov(z_{k-1}, z_k^-)` of the filtered previous state with the
+    /// predicted one: `P_{k-1} F_k^T` when the prediction is linearised (the EKF, and the
+    /// random walk the step falls back to), the sigma points' cross-covariance in the
+    /// unscented mode.
+    pub cross: AugMatrix,
+    /// Guards that fired during the prediction.
+    pub flags: Flags,
+}
+
 /// One linearised GP (its gradient goes into the caller's array).
 #[derive(Clone, Copy, Debug)]
 struct Local {
@@ -576,7 +594,7 @@ impl<'m> VectorEkf<'m> {
             }
         }
         let pred = match self.config.mode {
-            Mode::Ukf => self.predict_unscented(st, scratch, &mut flags),
+            Mode::Ukf => self.predict_unscented(st, scratch, &mut flags, None),
             Mode::Ekf | Mode::EkfBlr => self.predict_linearised(st, scratch, &mut flags),
         };
         self.bound_covariance(&mut st.p, &mut flags);
@@ -599,6 +617,54 @@ impl<'m> VectorEkf<'m> {
             st.lost_run = 0;
         }
         self.output(st, &pred, &upd, flags)
+    }
+
+    /// The prediction phase of the next step from `state` (the filtered state after the last
+    /// step), exactly as [`VectorEkf::step`] computes it, without updating anything
+    /// ([`VectorPrediction`]). The next step does not depend on it; an offline smoother calls
+    /// it before each step. Allocation-free, panic-free, bounded time; `scratch` as for
+    /// [`VectorEkf::step`].
+    pub fn predict(&self, state: &VectorState, scratch: &mut [f64]) -> VectorPrediction {
+        let n = self.model.dims.augmented().min(MAX_AUGMENTED);
+        let mut st = *state;
+        let mut flags = 0u32;
+        let mut cross = [[0.0; MAX_AUGMENTED]; MAX_AUGMENTED];
+        let mut unscented = false;
+        let pred = match self.config.mode {
+            Mode::Ukf => {
+                let before = flags;
+                let pred = self.predict_unscented(&mut st, scratch, &mut flags, Some(&mut cross));
+                unscented = (flags & !before) & Flags::MODEL_INVALID == 0;
+                pred
+            }
+            Mode::Ekf | Mode::EkfBlr => self.predict_linearised(&mut st, scratch, &mut flags),
+        };
+        if !unscented {
+            // P_{k-1} F^T.
+            for a in 0..n {
+                for b in 0..n {
+                    let mut acc = 0.0;
+                    for c in 0..n {
+                        acc += at2(&state.p, a, c) * at2(&pred.jacobian, b, c);
+                    }
+                    set2(&mut cross, a, b, acc);
+                }
+            }
+        }
+        self.bound_covariance(&mut st.p, &mut flags);
+        VectorPrediction {
+            z: st.z,
+            p: st.p,
+            cross,
+            flags: Flags(flags),
+        }
+    }
+
+    /// Span of each component of the augmented state `[x_k, x_{k-1}, s_k]` (its box's width;
+    /// 1 beyond `2 dx + dy`): the units in which the covariance bounds `p_min` and `p_max`
+    /// apply, `P_ij / (span_i span_j)`.
+    pub fn spans(&self) -> &[f64; MAX_AUGMENTED] {
+        &self.span
     }
 
     /// The step's report from the state after the update.
@@ -1156,11 +1222,16 @@ impl<'m> VectorEkf<'m> {
     /// the points clamped to the box, the covariance that of the points as they are (as in
     /// [`crate::Ekf`]), plus `q_s` on the sensors. The noises come from the GP variances at
     /// the mean; the reported Jacobian is the EKF's at the mean.
+    ///
+    /// With `cross`, it also writes the cross-covariance of the state before the prediction
+    /// with the predicted one (left as it is where the prediction falls back to the
+    /// linearised one or the random walk).
     fn predict_unscented(
         &self,
         st: &mut VectorState,
         scratch: &mut [f64],
         flags: &mut u32,
+        cross: Option<&mut AugMatrix>,
     ) -> Predicted {
         let d = self.model.dims;
         let (dx, dy) = (d.states, d.sensors);
@@ -1274,6 +1345,21 @@ impl<'m> VectorEkf<'m> {
                 for b in 0..n {
                     let db = at1(point, b) - w * at1(&free_sum, b);
                     add2(&mut p, a, b, w * da * db);
+                }
+            }
+        }
+        if let Some(c) = cross {
+            // cov(z_{k-1}, z_k^-): the points' deviations in `z` are `+-sqrt(L) S_{a, col}`
+            // (they sum to zero, so the predicted points need no centring).
+            *c = [[0.0; MAX_AUGMENTED]; MAX_AUGMENTED];
+            for (idx, point) in points.iter().enumerate().take(count) {
+                let col = idx / 2;
+                let sign = if idx % 2 == 0 { spread } else { -spread };
+                for a in 0..n {
+                    let da = w * sign * at_s(&l, a, col);
+                    for b in 0..n {
+                        add2(c, a, b, da * at1(point, b));
+                    }
                 }
             }
         }

@@ -312,3 +312,83 @@ fn a_filter_held_at_the_box_edge_relocalises() {
         assert_eq!(run(0.6), (0, 0), "{mode:?}");
     }
 }
+
+/// [`VectorEkf::predict`] is the step's prediction phase: with every sensor missing the step
+/// moves the state exactly to it, its sensors' part is the step's predicted measurement, and
+/// its cross-covariance is `P F^T` for the EKF. For the UKF at a small covariance the sigma
+/// points' cross-covariance agrees with `P F^T` (the cubature rule is exact to second order).
+#[test]
+fn predict_is_the_steps_prediction() {
+    let dims = Dims::new(2, 2, 3).unwrap();
+    let plays = Plays::new(&[0.1]).unwrap();
+    let m = model(dims, plays, true, 3);
+    let views = m.views();
+    let n = dims.augmented();
+    let times_ft = |p: &[[f64; MAX_AUGMENTED]; MAX_AUGMENTED],
+                    f: &[[f64; MAX_AUGMENTED]; MAX_AUGMENTED]| {
+        let mut c = [[0.0; MAX_AUGMENTED]; MAX_AUGMENTED];
+        for a in 0..n {
+            for b in 0..n {
+                c[a][b] = (0..n).map(|k| p[a][k] * f[b][k]).sum();
+            }
+        }
+        c
+    };
+    for mode in [Mode::Ekf, Mode::Ukf] {
+        let ekf = VectorEkf::new(views.view(dims, plays), config(dims, mode)).unwrap();
+        let mut scratch = vec![0.0; ekf.scratch_len()];
+        let mut state = None;
+        for k in 0..30 {
+            let t = k as f64 * 0.1;
+            let u = [0.4 + 0.2 * t.sin(), 0.5 - 0.1 * t];
+            let y = if k % 3 == 2 {
+                [f64::NAN; 3]
+            } else {
+                [0.3 + 0.05 * t.cos(), 0.5, 0.4]
+            };
+            let Some(before) = state else {
+                ekf.step(&mut state, &mut scratch, &u, &y);
+                continue;
+            };
+            let pred = ekf.predict(&before, &mut scratch);
+            let out = ekf.step(&mut state, &mut scratch, &u, &y);
+            for j in 0..dims.sensors {
+                assert_eq!(pred.z[2 * dims.states + j], out.y_pred[j], "{mode:?} {k}");
+            }
+            assert_eq!(pred.flags.0 & !out.flags.0, 0, "{mode:?} {k}");
+            if y[0].is_nan() {
+                let after = state.unwrap();
+                assert_eq!((pred.z, pred.p), (after.z, after.p), "{mode:?} {k}");
+            }
+            if mode == Mode::Ekf {
+                assert_eq!(pred.cross, times_ft(&before.p, &out.jacobian), "{k}");
+            }
+            // The UKF at a hundred-thousandth of the covariance.
+            if mode == Mode::Ukf {
+                let mut small = before;
+                for row in small.p.iter_mut() {
+                    for v in row.iter_mut() {
+                        *v *= 1e-5;
+                    }
+                }
+                let pred = ekf.predict(&small, &mut scratch);
+                let mut lin_state = Some(small);
+                let lin = VectorEkf::new(views.view(dims, plays), config(dims, Mode::Ekf))
+                    .unwrap()
+                    .step(&mut lin_state, &mut scratch, &u, &y);
+                let linear = times_ft(&small.p, &lin.jacobian);
+                let scale = linear.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
+                for a in 0..n {
+                    for b in 0..n {
+                        assert!(
+                            (pred.cross[a][b] - linear[a][b]).abs() < 1e-3 * scale,
+                            "{k}: cross[{a}][{b}] {} vs {}",
+                            pred.cross[a][b],
+                            linear[a][b]
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
