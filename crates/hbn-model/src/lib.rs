@@ -54,6 +54,7 @@ pub mod smooth;
 pub mod tuning;
 pub mod vector;
 mod vector_filter;
+mod vector_smooth;
 
 pub use dataset::{Dataset, MIN_SAMPLES, Sequence, Table, build_dataset};
 pub use error::{DataError, ModelError, ModelFileProblem, Signal};
@@ -82,3 +83,4 @@ pub use vector::{
     SignalNames, VectorEstimate, VectorModel, VectorSequence, VectorSummary, VectorValidationRow,
 };
 pub use vector_filter::VectorFilter;
+pub use vector_smooth::VectorSmoothing;

@@ -18,10 +18,10 @@ use std::path::Path;
 use std::time::Instant;
 
 use hbn_core::vector::{
-    Dims, MAX_SENSORS, MAX_STATES, VectorConfig, VectorEkf, VectorInitPrior, VectorView,
-    vector_state_information,
+    AugMatrix, Dims, MAX_AUGMENTED, MAX_SENSORS, MAX_STATES, VectorConfig, VectorEkf,
+    VectorInitPrior, VectorPrediction, VectorView, vector_state_information,
 };
-use hbn_core::{GpView, Mode, PlayState, Plays};
+use hbn_core::{Flags, GpView, Mode, PlayState, Plays};
 use hbn_gp::GaussianProcess;
 use serde::{Deserialize, Serialize};
 
@@ -149,6 +149,22 @@ pub struct VectorEstimate {
     /// the measurements said (next to) nothing about it (module docs of
     /// [`hbn_core::vector::vector_state_information`]).
     pub unobservable: Vec<f64>,
+}
+
+/// One step of a recorded filter run: the filtered augmented state after it and the
+/// prediction it started from (`None` at the first sample and where the filter re-started).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RecordedStep {
+    pub(crate) z: [f64; MAX_AUGMENTED],
+    pub(crate) p: AugMatrix,
+    pub(crate) link: Option<VectorPrediction>,
+}
+
+/// A recorded filter run ([`VectorModel::run`]) and the span of each augmented component.
+#[derive(Clone, Debug)]
+pub(crate) struct Recorded {
+    pub(crate) spans: [f64; MAX_AUGMENTED],
+    pub(crate) steps: Vec<RecordedStep>,
 }
 
 impl VectorEstimate {
@@ -769,6 +785,19 @@ impl VectorModel {
 
     /// Runs the filter over `u` (`T x du`) and `y` (`T x dy`, non-finite values missing).
     pub fn estimate(&self, u: &[f64], y: &[f64], mode: Mode) -> Result<VectorEstimate, ModelError> {
+        self.run(u, y, mode, false).map(|(out, _)| out)
+    }
+
+    /// The filter over a sequence ([`VectorModel::estimate`]); with `record`, also what the
+    /// smoother needs at each step (the prediction before it, through
+    /// [`VectorEkf::predict`], and the filtered state after it).
+    pub(crate) fn run(
+        &self,
+        u: &[f64],
+        y: &[f64],
+        mode: Mode,
+        record: bool,
+    ) -> Result<(VectorEstimate, Option<Recorded>), ModelError> {
         let d = self.dims;
         let t = u.len() / d.inputs;
         if !u.len().is_multiple_of(d.inputs) || y.len() != t * d.sensors {
@@ -822,13 +851,30 @@ impl VectorModel {
         let mut rs = Vec::with_capacity(OBSERVABILITY_WINDOW);
         let mut windows = 0usize;
         let spans: Vec<f64> = self.x_stats.iter().map(|s| s.span().max(1e-12)).collect();
+        let mut recorded = record.then(|| Recorded {
+            spans: *ekf.spans(),
+            steps: Vec::with_capacity(t),
+        });
         for k in 0..t {
+            let prediction = match (&recorded, &state) {
+                (Some(_), Some(st)) => Some(ekf.predict(st, &mut scratch)),
+                _ => None,
+            };
             let o = ekf.step(
                 &mut state,
                 &mut scratch,
                 &u[k * d.inputs..(k + 1) * d.inputs],
                 &y[k * d.sensors..(k + 1) * d.sensors],
             );
+            if let (Some(rec), Some(st)) = (recorded.as_mut(), &state) {
+                // A re-start (or the first sample) does not follow from the prediction.
+                let restarted = o.flags.has(Flags::RELOCALISED) || o.flags.has(Flags::INITIALISED);
+                rec.steps.push(RecordedStep {
+                    z: st.z,
+                    p: st.p,
+                    link: prediction.filter(|_| !restarted),
+                });
+            }
             out.x.extend_from_slice(&o.x[..d.states]);
             out.x_std.extend_from_slice(&o.x_std[..d.states]);
             for row in o.x_cov.iter().take(d.states) {
@@ -864,7 +910,7 @@ impl VectorModel {
                 *f /= windows as f64;
             }
         }
-        Ok(out)
+        Ok((out, recorded))
     }
 
     /// The model as JSON text (the model file).
