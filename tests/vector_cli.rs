@@ -1,8 +1,8 @@
 //! A vector model through the CLI: `hbn simulate --system finger`, `hbn train` with repeated
 //! `--input`, `--state` and `--output` flags (and with none, finding the simulated log's
 //! signals, and with sensor inputs given per sensor), `hbn estimate --csv [--covariance]` with
-//! the per-component columns and `--out` with arrays, `hbn eval`'s table per component and
-//! plot, and `hbn inspect` listing every GP.
+//! the per-component columns and `--out` with arrays, `--smooth` in `hbn estimate` and
+//! `hbn eval`, `hbn eval`'s table per component and plot, and `hbn inspect` listing every GP.
 
 use std::path::Path;
 
@@ -213,6 +213,78 @@ fn a_finger_trains_and_estimates_through_the_cli() {
     .expect("read the estimate's second component");
     let csv_x1: Vec<f64> = rows.iter().map(|r| r[3].parse().expect("x1")).collect();
     assert_eq!(x1[0].value, csv_x1);
+    // `--smooth`: the CSV's estimate from the whole log (a band never wider than the
+    // filter's, the same last sample), and a smoothed row per mode in `hbn eval`.
+    let smooth_csv = d.path().join("smoothed.csv");
+    let (r, out) = hbn(&[
+        "estimate",
+        "--model",
+        s(&model),
+        "--log",
+        s(&test),
+        "--csv",
+        s(&smooth_csv),
+        "--covariance",
+        "--smooth",
+    ]);
+    r.expect("estimate --smooth");
+    assert!(out.contains("(smoothed)"), "{out}");
+    let smoothed: Vec<Vec<f64>> = std::fs::read_to_string(&smooth_csv)
+        .expect("smoothed csv")
+        .lines()
+        .skip(1)
+        .map(|l| {
+            l.split(',')
+                .take(6)
+                .map(|v| v.parse().expect("number"))
+                .collect()
+        })
+        .collect();
+    assert_eq!(smoothed.len(), rows.len());
+    let mut moved = 0;
+    for (sm, f) in smoothed.iter().zip(&rows) {
+        let f: Vec<f64> = f
+            .iter()
+            .take(6)
+            .map(|v| v.parse().expect("number"))
+            .collect();
+        for i in 0..2 {
+            let (x, sd, fx, fsd) = (sm[1 + 2 * i], sm[2 + 2 * i], f[1 + 2 * i], f[2 + 2 * i]);
+            assert!(x.is_finite() && sd <= fsd * (1.0 + 1e-9), "{sm:?} vs {f:?}");
+            moved += usize::from((x - fx).abs() > 1e-9 * fx.abs().max(1.0));
+        }
+    }
+    assert!(
+        moved > 1000,
+        "only {moved} smoothed values differ from the filter's"
+    );
+    let (last, flast) = (&smoothed[smoothed.len() - 1], &rows[rows.len() - 1]);
+    let flast_x0: f64 = flast[1].parse().expect("x0");
+    assert!((last[1] - flast_x0).abs() <= 1e-12 * flast_x0.abs().max(1.0));
+    let (r, out) = hbn(&["eval", "--model", s(&model), "--log", s(&test), "--smooth"]);
+    r.expect("eval --smooth");
+    assert_eq!(out.matches("\n  ekf smoothed").count(), 2, "{out}");
+    assert!(
+        out.contains("each sample estimated from the whole log"),
+        "{out}"
+    );
+    let (r, out) = hbn(&[
+        "-q",
+        "eval",
+        "--model",
+        s(&model),
+        "--log",
+        s(&test),
+        "--smooth",
+        "--json",
+    ]);
+    r.expect("eval --smooth --json");
+    let v: serde_json::Value = serde_json::from_str(&out).expect("JSON");
+    let runs = v["runs"].as_array().expect("runs");
+    assert!(
+        runs.iter().any(|r| r["smoothed"] == true) && runs.iter().any(|r| r["smoothed"] == false),
+        "{out}"
+    );
     // Sensor inputs given per sensor are kept.
     let model3 = d.path().join("finger3.json");
     let (r, out) = hbn(&[

@@ -734,8 +734,8 @@ pub struct EstimateArgs {
     pub csv: Option<PathBuf>,
     /// Smooth: estimate each sample from the whole log (the filter forward, then a
     /// Rauch-Tung-Striebel pass backward) instead of from the samples up to it. x and x_std
-    /// in the outputs are the smoothed ones, the other columns the filter's. Offline, scalar
-    /// models only; docs/smoothing.md.
+    /// (and a vector model's covariances) in the outputs are the smoothed ones, the other
+    /// columns the filter's. Offline; docs/smoothing.md.
     #[arg(long)]
     pub smooth: bool,
     /// Print the summary as JSON.
@@ -781,7 +781,7 @@ pub struct EvalArgs {
     #[arg(long)]
     pub plot: Option<PathBuf>,
     /// Also score each mode's smoothed estimate (each sample estimated from the whole log): a
-    /// row `<mode> smoothed` after the mode's. Scalar models only; docs/smoothing.md.
+    /// row `<mode> smoothed` after the mode's; docs/smoothing.md.
     #[arg(long)]
     pub smooth: bool,
     /// Print JSON instead of a table.

@@ -84,10 +84,14 @@ fn run_vector(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<()> {
     let signals = hbn_pipeline::model_signals(&model, &args.input, &args.output)?;
     let opts = vector_log_options(&model, &args.read);
     let mut render = Renderer::default();
-    let result =
-        hbn_pipeline::estimate_vector_log(&model, &args.log, &signals, mode, opts, &mut |e| {
-            render.event(ui, e)
-        });
+    let pass = if args.smooth {
+        hbn_pipeline::smooth_vector_log
+    } else {
+        hbn_pipeline::estimate_vector_log
+    };
+    let result = pass(&model, &args.log, &signals, mode, opts, &mut |e| {
+        render.event(ui, e)
+    });
     render.finish();
     let run = result
         .map_err(|e| report::error(e, opts.time_source))
@@ -112,8 +116,9 @@ fn run_vector(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<()> {
         .filter_map(|f| f.as_ref())
         .map(|f| format!("; wrote `{}`", f.display()))
         .collect();
+    let smoothed = if args.smooth { " (smoothed)" } else { "" };
     let mut text = format!(
-        "estimated {} state components over {} samples of `{}` with {}{wrote}\n",
+        "estimated {} state components over {} samples of `{}` with {}{smoothed}{wrote}\n",
         d.states,
         e.len(),
         args.log.display(),
@@ -165,6 +170,7 @@ fn vector_summary_json(
         "estimates": [{
             "mode": e.mode.name(),
             "default_mode": e.mode == model.default_mode(),
+            "smoothed": args.smooth,
             "mean_nis": mean_nis,
             "flags": flags,
             "unobservable": e.unobservable,
@@ -173,10 +179,6 @@ fn vector_summary_json(
         }],
     })
 }
-
-/// The error of `--smooth` with a vector model.
-pub const SMOOTH_SCALAR_ONLY: &str = "--smooth takes scalar models: smoothing a vector model is \
-     not built; run without --smooth for the filter's estimate";
 
 /// Writes each run to `outputs` (one run) or to its mode's files ([`Outputs::for_mode`]),
 /// removing the files already written if one fails.
@@ -304,9 +306,6 @@ pub fn run(ui: &mut Ui<'_>, args: &EstimateArgs) -> anyhow::Result<Vec<LogEstima
         }
     }
     if is_vector_model(&args.model) {
-        if args.smooth {
-            anyhow::bail!("{SMOOTH_SCALAR_ONLY}");
-        }
         run_vector(ui, args)?;
         return Ok(Vec::new());
     }

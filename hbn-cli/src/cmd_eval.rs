@@ -245,9 +245,6 @@ pub fn run(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<()> {
         crate::check_output(p, "plot")?;
     }
     if crate::cmd_estimate::is_vector_model(&args.model) {
-        if args.smooth {
-            anyhow::bail!("{}", crate::cmd_estimate::SMOOTH_SCALAR_ONLY);
-        }
         return run_vector(ui, args);
     }
     run_scalar(ui, args).map(|_| ())
@@ -334,12 +331,25 @@ pub fn vector_tables(
     verbose: bool,
 ) -> String {
     let names = model.signal_names();
+    let labels: Vec<String> = ev
+        .runs
+        .iter()
+        .map(|run| {
+            let star = if run.mode == model.default_mode() {
+                "*"
+            } else {
+                ""
+            };
+            format!("{}{star}", run.label())
+        })
+        .collect();
+    let width = labels.iter().map(String::len).max().unwrap_or(0).max(11);
     let mut s = String::new();
     for i in 0..model.dims().states {
         let name = names.states.get(i).map_or("", String::as_str);
         s.push_str(&format!("state component {i} ({name}):\n"));
         s.push_str(&format!(
-            "  {:<11} {:>10} {:>8} {:>8}",
+            "  {:<width$} {:>10} {:>8} {:>8}",
             "method", "RMSE", "nRMSE", "in 2 sd"
         ));
         if verbose {
@@ -349,19 +359,13 @@ pub fn vector_tables(
             ));
         }
         s.push('\n');
-        for run in &ev.runs {
+        for (run, label) in ev.runs.iter().zip(&labels) {
             let Some(sc) = run.scores.get(i) else {
                 continue;
             };
-            let star = if run.mode == model.default_mode() {
-                "*"
-            } else {
-                ""
-            };
             let c = &sc.calibration;
             s.push_str(&format!(
-                "  {:<11} {:>10.6} {:>8.4} {:>7.1}%",
-                format!("{}{star}", run.mode.name()),
+                "  {label:<width$} {:>10.6} {:>8.4} {:>7.1}%",
                 sc.rmse,
                 sc.nrmse,
                 100.0 * c.coverage_2sigma
@@ -379,6 +383,9 @@ pub fn vector_tables(
     }
     if ev.runs.iter().any(|r| r.mode == model.default_mode()) {
         s.push_str("* the model's default mode\n");
+    }
+    if ev.runs.iter().any(|r| r.smoothed) {
+        s.push_str("smoothed: each sample estimated from the whole log (docs/smoothing.md)\n");
     }
     s
 }
@@ -407,10 +414,15 @@ fn run_vector(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<()> {
         .collect();
     let opts = crate::cmd_estimate::vector_log_options(&model, &args.read);
     let mut render = Renderer::default();
-    let result =
-        hbn_pipeline::evaluate_vector_log(&model, &args.log, &signals, &modes, opts, &mut |e| {
-            render.event(ui, e)
-        });
+    let result = hbn_pipeline::evaluate_vector_log(
+        &model,
+        &args.log,
+        &signals,
+        &modes,
+        args.smooth,
+        opts,
+        &mut |e| render.event(ui, e),
+    );
     render.finish();
     let ev = result
         .map_err(|e| report::error(e, opts.time_source))
@@ -437,7 +449,11 @@ fn run_vector(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<()> {
                         })
                     })
                     .collect();
-                serde_json::json!({"mode": r.mode.name(), "components": comps})
+                serde_json::json!({
+                    "mode": r.mode.name(),
+                    "smoothed": r.smoothed,
+                    "components": comps,
+                })
             })
             .collect();
         let v = serde_json::json!({
@@ -510,7 +526,7 @@ fn vector_plot(
                     .iter()
                     .enumerate()
                     .map(|(m, r)| ModeSeries {
-                        label: r.mode.name().to_owned(),
+                        label: r.label(),
                         x: &xs[m],
                         x_std: &ss[m],
                         nrmse: r.scores[i].nrmse,

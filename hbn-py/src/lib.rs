@@ -1536,6 +1536,22 @@ impl VectorModelCore {
         vector_estimate_dict(py, est)
     }
 
+    /// Smooths row-major `u` and `y` as `estimate` takes them (`VectorModel::smooth`); returns
+    /// the dict of `estimate` with the smoothed `x`, `x_std` and `x_cov`.
+    #[pyo3(signature = (u, y, mode))]
+    fn smooth<'py>(
+        &self,
+        py: Python<'py>,
+        u: PyReadonlyArray1<'_, f64>,
+        y: PyReadonlyArray1<'_, f64>,
+        mode: Option<&str>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let mode = parse_mode(py, mode, self.inner.default_mode())?;
+        let (u, y) = (slice(&u, "u")?.to_vec(), slice(&y, "y")?.to_vec());
+        let est = detached(py, || Ok(self.inner.smooth(&u, &y, mode)?))?;
+        vector_estimate_dict(py, est)
+    }
+
     /// Reads the inputs and outputs from a log at the model's rate (the model's message paths
     /// unless given, one per signal in order), runs the filter and optionally writes the CSV
     /// and MCAP of `hbn estimate --csv --out`; returns `(t, dict of per-sample arrays)`.

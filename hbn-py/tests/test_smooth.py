@@ -40,13 +40,3 @@ def test_smooth_checks_its_arguments(trained):
         model.smooth(test["u"], test["y"][:-1])
     with pytest.raises(ValueError, match="unknown mode"):
         model.smooth(test["u"], test["y"], mode="kalman")
-
-
-def test_a_vector_model_says_smoothing_takes_scalar_models():
-    t = np.arange(200) * 0.05
-    u = np.column_stack([np.sin(t), np.cos(0.7 * t)])
-    x = np.column_stack([0.5 * u[:, 0] + 0.1 * u[:, 1], 0.3 * u[:, 1]])
-    y = np.column_stack([x[:, 0] + 0.1 * x[:, 1], x[:, 1]])
-    model = hbn.HysteresisModel.fit(u, x, y, max_points=60, n_starts=1, max_iters=20, seed=0)
-    with pytest.raises(ValueError, match="smooth takes scalar models"):
-        model.smooth(u, y)

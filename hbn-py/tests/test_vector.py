@@ -45,6 +45,26 @@ def bits(a):
     return np.ascontiguousarray(a, dtype=np.float64).view(np.uint64)
 
 
+def test_a_vector_model_smooths(vector):
+    model, (u, x, y) = vector
+    for mode in ("ekf", "ukf"):
+        est = model.estimate(u, y, mode=mode)
+        smo = model.smooth(u, y, mode=mode)
+        assert smo.x.shape == est.x.shape == (200, 2) and smo.x_cov.shape == (200, 2, 2)
+        np.testing.assert_array_equal(smo.nis, est.nis)
+        assert np.all(np.isfinite(smo.x)) and np.all(smo.x_std <= est.x_std * (1 + 1e-9))
+        np.testing.assert_allclose(smo.x[-1], est.x[-1], rtol=1e-12)
+        diag = np.sqrt(np.diagonal(smo.x_cov, axis1=1, axis2=2))
+        np.testing.assert_allclose(diag, smo.x_std, rtol=1e-12)
+        assert np.abs(smo.x - est.x).max() > 1e-9
+        for i in range(2):
+            assert nrmse(smo.x[:, i], x[:, i]) < 0.05, (mode, i)
+    with pytest.raises(ValueError, match="scalar"):
+        model.smooth(u, y, mode="ekf-blr")
+    with pytest.raises(ValueError, match="equal lengths"):
+        model.smooth(u, y[:-1])
+
+
 def test_2d_arrays_train_a_vector_model_that_tracks_both_components(vector):
     model, (u, x, y) = vector
     assert model.is_vector and model.dims == (2, 2, 3)

@@ -378,13 +378,11 @@ fn predict_is_the_steps_prediction() {
                     .step(&mut lin_state, &mut scratch, &u, &y);
                 let linear = times_ft(&small.p, &lin.jacobian);
                 let scale = linear.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
-                for a in 0..n {
-                    for b in 0..n {
+                for (a, (row, lin_row)) in pred.cross.iter().zip(&linear).enumerate().take(n) {
+                    for (b, (c, l)) in row.iter().zip(lin_row).enumerate().take(n) {
                         assert!(
-                            (pred.cross[a][b] - linear[a][b]).abs() < 1e-3 * scale,
-                            "{k}: cross[{a}][{b}] {} vs {}",
-                            pred.cross[a][b],
-                            linear[a][b]
+                            (c - l).abs() < 1e-3 * scale,
+                            "{k}: cross[{a}][{b}] {c} vs {l}"
                         );
                     }
                 }

@@ -60,5 +60,5 @@ pub use train::{
 pub use vector::{
     ComponentScore, TrainedVector, VECTOR_ESTIMATE_SCHEMA, VectorEvaluation, VectorLogEstimate,
     VectorModeRun, VectorSignals, default_signals, estimate_vector_log, evaluate_vector_log,
-    model_signals, train_vector_from_logs, vector_csv, vector_estimate_schema,
+    model_signals, smooth_vector_log, train_vector_from_logs, vector_csv, vector_estimate_schema,
 };

@@ -281,6 +281,36 @@ pub fn estimate_vector_log(
     log_options: LogOptions,
     observe: &mut Observer<'_>,
 ) -> Result<VectorLogEstimate, PipelineError> {
+    let (log, u, y) = read_for_estimate(model, file, signals, log_options, observe)?;
+    let estimate = model.estimate(&u, &y, mode)?;
+    Ok(VectorLogEstimate { log, estimate })
+}
+
+/// [`estimate_vector_log`] smoothed ([`VectorModel::smooth`]): each sample estimated from the
+/// whole log. The estimate's `x`, `x_std` and `x_cov` are the smoothed ones, its other fields
+/// the filter's.
+pub fn smooth_vector_log(
+    model: &VectorModel,
+    file: &Path,
+    signals: &VectorSignals,
+    mode: Mode,
+    log_options: LogOptions,
+    observe: &mut Observer<'_>,
+) -> Result<VectorLogEstimate, PipelineError> {
+    let (log, u, y) = read_for_estimate(model, file, signals, log_options, observe)?;
+    let estimate = model.smooth(&u, &y, mode)?;
+    Ok(VectorLogEstimate { log, estimate })
+}
+
+/// The log's inputs and outputs at the model's rate, and `u` (`T x du`) and `y` (`T x dy`,
+/// NaN inside a sensor's dropout) row-major.
+fn read_for_estimate(
+    model: &VectorModel,
+    file: &Path,
+    signals: &VectorSignals,
+    log_options: LogOptions,
+    observe: &mut Observer<'_>,
+) -> Result<(LogData, Vec<f64>, Vec<f64>), PipelineError> {
     let d = model.dims();
     let opts = log_options.check()?;
     let paths: Vec<SignalPath> = signals
@@ -291,17 +321,22 @@ pub fn estimate_vector_log(
         .collect();
     let log = load_log(file, &paths, Some(model.rate_hz()), &opts, observe)?;
     let u = rows(&log, 0, d.inputs);
-    let mut y = rows(&log, d.inputs, d.sensors);
-    // Samples inside a sensor's dropout are interpolated, not measured: left out.
-    for (j, drop) in log.dropouts.iter().skip(d.inputs).enumerate() {
+    let y = measured_rows(&log, d.inputs, d.sensors);
+    Ok((log, u, y))
+}
+
+/// Columns `first..first + count` of the log as rows, with the samples inside each column's
+/// dropout (interpolated, not measured) NaN: left out of the filter's update.
+fn measured_rows(log: &LogData, first: usize, count: usize) -> Vec<f64> {
+    let mut y = rows(log, first, count);
+    for (j, drop) in log.dropouts.iter().skip(first).take(count).enumerate() {
         for (k, dropped) in drop.iter().enumerate() {
-            if *dropped && let Some(v) = y.get_mut(k * d.sensors + j) {
+            if *dropped && let Some(v) = y.get_mut(k * count + j) {
                 *v = f64::NAN;
             }
         }
     }
-    let estimate = model.estimate(&u, &y, mode)?;
-    Ok(VectorLogEstimate { log, estimate })
+    y
 }
 
 /// The CSV of a vector estimate: `t`, then per state component `x{i}`, `x{i}_std`; with
@@ -460,10 +495,24 @@ pub struct ComponentScore {
 pub struct VectorModeRun {
     /// The mode.
     pub mode: Mode,
+    /// Whether the estimate is the smoothed one ([`VectorModel::smooth`]) rather than the
+    /// filter's.
+    pub smoothed: bool,
     /// The estimate.
     pub estimate: VectorEstimate,
     /// One score per state component.
     pub scores: Vec<ComponentScore>,
+}
+
+impl VectorModeRun {
+    /// The mode's name, followed by ` smoothed` for a smoothed run (`ekf`, `ukf smoothed`).
+    pub fn label(&self) -> String {
+        if self.smoothed {
+            format!("{} smoothed", self.mode.name())
+        } else {
+            self.mode.name().to_owned()
+        }
+    }
 }
 
 /// A vector model evaluated on a log: the logged state and each mode's run.
@@ -483,12 +532,14 @@ impl VectorEvaluation {
 }
 
 /// Runs `model` over a log in each of `modes` and scores every state component against the
-/// logged state (`signals.states`).
+/// logged state (`signals.states`). With `smooth`, each mode's run is followed by its smoothed
+/// run ([`VectorModel::smooth`]).
 pub fn evaluate_vector_log(
     model: &VectorModel,
     file: &Path,
     signals: &VectorSignals,
     modes: &[Mode],
+    smooth: bool,
     log_options: LogOptions,
     observe: &mut Observer<'_>,
 ) -> Result<VectorEvaluation, PipelineError> {
@@ -499,18 +550,9 @@ pub fn evaluate_vector_log(
     let opts = log_options.check()?;
     let log = load_log(file, &signals.all(), Some(model.rate_hz()), &opts, observe)?;
     let u = rows(&log, 0, d.inputs);
-    let mut y = rows(&log, d.inputs + d.states, d.sensors);
-    for (j, drop) in log.dropouts.iter().skip(d.inputs + d.states).enumerate() {
-        for (k, dropped) in drop.iter().enumerate() {
-            if *dropped && let Some(v) = y.get_mut(k * d.sensors + j) {
-                *v = f64::NAN;
-            }
-        }
-    }
-    let mut runs = Vec::with_capacity(modes.len());
-    for &mode in modes {
-        let estimate = model.estimate(&u, &y, mode)?;
-        let scores = (0..d.states)
+    let y = measured_rows(&log, d.inputs + d.states, d.sensors);
+    let score = |estimate: &VectorEstimate| -> Vec<ComponentScore> {
+        (0..d.states)
             .map(|i| {
                 let truth = log.column(d.inputs + i);
                 let (x, s) = (estimate.component(i), estimate.component_std(i));
@@ -520,12 +562,31 @@ pub fn evaluate_vector_log(
                     calibration: calibration(&x, &s, truth),
                 }
             })
-            .collect();
-        runs.push(VectorModeRun {
-            mode,
-            estimate,
-            scores,
-        });
+            .collect()
+    };
+    let mut runs = Vec::with_capacity(modes.len() * (1 + usize::from(smooth)));
+    for &mode in modes {
+        if smooth {
+            let both = model.smooth_with(&u, &y, mode)?;
+            for (smoothed, estimate) in [(false, both.filtered), (true, both.estimate)] {
+                let scores = score(&estimate);
+                runs.push(VectorModeRun {
+                    mode,
+                    smoothed,
+                    estimate,
+                    scores,
+                });
+            }
+        } else {
+            let estimate = model.estimate(&u, &y, mode)?;
+            let scores = score(&estimate);
+            runs.push(VectorModeRun {
+                mode,
+                smoothed: false,
+                estimate,
+                scores,
+            });
+        }
     }
     Ok(VectorEvaluation { log, runs })
 }

@@ -1174,13 +1174,8 @@ class HysteresisModel:
         True
         """
         if isinstance(self._core, _hbn.VectorModelCore):
-            du, _, dy = self.dims
-            um, ym = self._columns(u, "u", du), self._columns(y, "y", dy)
-            if um.shape[0] != ym.shape[0]:
-                raise DataError(
-                    f"u and y must have equal lengths (got {um.shape[0]} and {ym.shape[0]})"
-                )
-            fields = self._core.estimate(um.ravel(), ym.ravel(), _opt_str(mode))
+            um, ym = self._vector_rows(u, y)
+            fields = self._core.estimate(um, ym, _opt_str(mode))
             return Estimate(fields, self._mode_name(mode))
         ua, ya = _signal(u, "u"), _signal(y, "y")
         columns = ua.ndim == 2 or ya.ndim == 2
@@ -1197,10 +1192,11 @@ class HysteresisModel:
         :meth:`estimate` uses the samples up to it. The filter runs forward, then a
         Rauch-Tung-Striebel pass runs backward (extended for ``"ekf"`` and ``"ekf-blr"``,
         unscented for ``"ukf"``); offline, about twice the cost of :meth:`estimate`. Arguments
-        as for :meth:`estimate` (scalar models only).
+        as for :meth:`estimate`.
 
-        Returns what :meth:`estimate` returns, with the smoothed ``x`` and ``x_std``; the other
-        fields (``y_pred``, ``innovation``, ``nis``, ``flags``, ...) are the forward filter's.
+        Returns what :meth:`estimate` returns, with the smoothed ``x`` and ``x_std`` (and, for
+        a vector model, ``x_cov``); the other fields (``y_pred``, ``innovation``, ``nis``,
+        ``flags``, ...) are the forward filter's.
         The smoothed ``x_std`` is at most the filter's. docs/smoothing.md says when smoothing
         gains much and when little.
 
@@ -1212,10 +1208,9 @@ class HysteresisModel:
         True
         """
         if isinstance(self._core, _hbn.VectorModelCore):
-            raise ConfigError(
-                "smooth takes scalar models: smoothing a vector model is not built; "
-                "use estimate for the filter's estimate"
-            )
+            um, ym = self._vector_rows(u, y)
+            fields = self._core.smooth(um, ym, _opt_str(mode))
+            return Estimate(fields, self._mode_name(mode))
         ua, ya = _signal(u, "u"), _signal(y, "y")
         columns = ua.ndim == 2 or ya.ndim == 2
         if columns:
@@ -1225,6 +1220,17 @@ class HysteresisModel:
             for k in ("x", "x_std", "y_pred", "innovation"):
                 fields[k] = fields[k].reshape(-1, 1)
         return Estimate(fields, self._mode_name(mode))
+
+    def _vector_rows(self, u: Any, y: Any) -> Tuple[np.ndarray, np.ndarray]:
+        """``u`` and ``y`` of a vector model as flat row-major arrays, checked against the
+        model's sizes and each other's length (:class:`DataError` otherwise)."""
+        du, _, dy = self.dims
+        um, ym = self._columns(u, "u", du), self._columns(y, "y", dy)
+        if um.shape[0] != ym.shape[0]:
+            raise DataError(
+                f"u and y must have equal lengths (got {um.shape[0]} and {ym.shape[0]})"
+            )
+        return um.ravel(), ym.ravel()
 
     def _columns(self, a: Any, name: str, width: int) -> np.ndarray:
         """``a`` as a ``(T, width)`` array (a 1-D array is one column); :class:`DataError`

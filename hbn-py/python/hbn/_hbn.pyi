@@ -241,6 +241,9 @@ class VectorModelCore:
     def estimate(
         self, u: npt.NDArray[np.float64], y: npt.NDArray[np.float64], mode: Optional[str]
     ) -> Dict[str, np.ndarray]: ...
+    def smooth(
+        self, u: npt.NDArray[np.float64], y: npt.NDArray[np.float64], mode: Optional[str]
+    ) -> Dict[str, np.ndarray]: ...
     def estimate_log(
         self,
         path: str,
