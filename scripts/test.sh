@@ -80,7 +80,7 @@ echo "   first time; pip -v shows cargo's progress) and install it"
 
 echo "== Python tests (the wheel, then the baselines of benches/baselines; the LSTM skips without torch)"
 HBN_BIN="$ROOT/target/release/hbn" "$VENV/bin/python" -m pytest -q hbn-py/tests
-HBN_BIN="$ROOT/target/release/hbn" "$VENV/bin/python" -m pytest -q benches/baselines benches/test_slow_camera_bench.py benches/test_unmeasured_logs.py
+HBN_BIN="$ROOT/target/release/hbn" "$VENV/bin/python" -m pytest -q benches/baselines benches/test_slow_camera_bench.py benches/test_unmeasured_logs.py benches/test_more_data.py
 
 echo "== Every code block of the READMEs, ARCHITECTURE.md, CONTRIBUTING.md and docs/ (shell with target/release/hbn on"
 echo "   PATH, Python with the wheel; Rust blocks ran above as doctests)"
