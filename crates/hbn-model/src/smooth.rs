@@ -101,6 +101,11 @@ pub struct Smoothed<const N: usize> {
     pub unlinked: usize,
     /// Smoothed covariances whose eigenvalues were clamped into the [`CovarianceBounds`].
     pub clamped: usize,
+    /// Steps that kept their filtered state because the smoothed one departed from it by more
+    /// than [`departure_gate`] (in the filtered covariance's Mahalanobis metric): the sign of a
+    /// linearisation the model's error has made wrong, whose correction the backward pass would
+    /// otherwise carry, amplified, to the samples before.
+    pub gated: usize,
 }
 
 impl<const N: usize> Smoothed<N> {
@@ -218,12 +223,28 @@ fn bounded<const N: usize>(
     out.iter().all(|v| v.is_finite()).then_some(out)
 }
 
+/// The largest squared Mahalanobis distance, in the filtered covariance's metric, by which a
+/// smoothed state may depart from the filtered one of `n` components: the chi-square quantile
+/// with `n` degrees of freedom at an upper tail of `1e-6` (Wilson-Hilferty). Under the model
+/// the departure `m_k^s - m_k` has covariance `P_k - P_k^s`, at most `P_k`, so a model that is
+/// right crosses it about once in a million steps; a linearisation the model's error has made
+/// wrong crosses it by far (the gain `G_k = C_{k+1} (P_{k+1}^-)^{-1}` can exceed 1, and a
+/// wrong correction then grows as it runs backward).
+pub fn departure_gate(n: usize) -> f64 {
+    const Z: f64 = 4.753_424_3; // standard normal upper quantile at 1e-6
+    let n = n.max(1) as f64;
+    let a = 2.0 / (9.0 * n);
+    n * (1.0 - a + Z * a.sqrt()).powi(3)
+}
+
 /// The Rauch-Tung-Striebel backward pass over a forward filter's records (module docs). The
 /// last sample's smoothed state is its filtered one. Where a step cannot be smoothed (no
 /// [`Link`] to the next, `P_{k+1}^-` not positive definite after the jitter retries, or values
 /// that are not finite) it keeps its filtered state and the pass goes on from there: the
-/// smoother adds no NaN where the filter has none. Every smoothed covariance is symmetric with
-/// its eigenvalues in `bounds`.
+/// smoother adds no NaN where the filter has none. A step whose smoothed state departs from
+/// its filtered one beyond [`departure_gate`] keeps its filtered state too
+/// ([`Smoothed::gated`]). Every smoothed covariance is symmetric with its eigenvalues in
+/// `bounds`.
 pub fn rts<const N: usize>(records: &[FilterRecord<N>], bounds: CovarianceBounds) -> Smoothed<N> {
     let n = records.len();
     let mut out = Smoothed {
@@ -237,6 +258,7 @@ pub fn rts<const N: usize>(records: &[FilterRecord<N>], bounds: CovarianceBounds
         .iter()
         .map(|r| bounded(r.p_filt, bounds, &mut out.clamped).unwrap_or(r.p_filt))
         .collect();
+    let gate = departure_gate(N);
     for k in (0..n.saturating_sub(1)).rev() {
         let (Some(now), Some(next)) = (records.get(k), records.get(k + 1)) else {
             continue;
@@ -259,17 +281,35 @@ pub fn rts<const N: usize>(records: &[FilterRecord<N>], bounds: CovarianceBounds
         let smoothed = smoothed.and_then(|(mean, cov, lag)| {
             Some((mean, bounded(cov, bounds, &mut out.clamped)?, lag))
         });
-        match smoothed {
+        // The gate: a departure the filtered covariance makes implausible is refused.
+        let smoothed = match smoothed {
             Some((mean, cov, lag)) => {
-                if let (Some(m), Some(p), Some(l)) = (
-                    out.mean.get_mut(k),
-                    out.cov.get_mut(k),
-                    out.lag_one.get_mut(k),
-                ) {
-                    (*m, *p, *l) = (mean, cov, lag);
+                let departure = mean - now.m_filt;
+                let d2 = factor(&now.p_filt, &mut out.jitter_retries)
+                    .map(|c| departure.dot(&c.solve(&departure)));
+                match d2 {
+                    Some(d2) if d2.is_finite() && d2 <= gate => Some((mean, cov, lag)),
+                    // An unfactorisable filtered covariance leaves nothing to judge by.
+                    None => Some((mean, cov, lag)),
+                    Some(_) => {
+                        out.gated += 1;
+                        None
+                    }
                 }
             }
-            None => out.unlinked += 1,
+            None => {
+                out.unlinked += 1;
+                None
+            }
+        };
+        if let Some((mean, cov, lag)) = smoothed
+            && let (Some(m), Some(p), Some(l)) = (
+                out.mean.get_mut(k),
+                out.cov.get_mut(k),
+                out.lag_one.get_mut(k),
+            )
+        {
+            (*m, *p, *l) = (mean, cov, lag);
         }
     }
     out
@@ -686,6 +726,39 @@ mod tests {
         assert_eq!(whole.cov[..60], first.cov[..]);
         assert_eq!(whole.lag_one[59], Matrix3::zeros());
         assert_eq!(whole.unlinked, 1);
+    }
+
+    /// A wrong linearisation (a gain of 5 backward) would carry a large correction at the next
+    /// step, amplified, to this one: 15 filtered standard deviations away. The gate keeps the
+    /// filtered state there; a correction the filtered covariance makes plausible passes.
+    #[test]
+    fn an_implausible_departure_keeps_the_filtered_state() {
+        use nalgebra::{Matrix1, Vector1};
+        let record = |m: f64, p: f64, link: Option<(f64, f64, f64)>| FilterRecord::<1> {
+            m_filt: Vector1::new(m),
+            p_filt: Matrix1::new(p),
+            link: link.map(|(m_pred, p_pred, cross)| Link {
+                m_pred: Vector1::new(m_pred),
+                p_pred: Matrix1::new(p_pred),
+                cross: Matrix1::new(cross),
+            }),
+        };
+        for (next, gated) in [(3.0, 1), (0.2, 0)] {
+            let records = [
+                record(0.0, 1.0, None),
+                record(next, 0.01, Some((0.0, 0.02, 0.1))),
+            ];
+            let got = rts(&records, CovarianceBounds::default());
+            assert_eq!(got.gated, gated, "{got:?}");
+            let expected = if gated == 1 { 0.0 } else { 5.0 * next };
+            assert!((got.mean[0][0] - expected).abs() < 1e-12, "{got:?}");
+        }
+        // The gate is about the chi-square quantile at 1e-6 (23.9 for 1 component, 30.7 for
+        // 3, 43.4 for 10), from above.
+        for (n, q) in [(1, 23.93), (3, 30.66), (10, 43.37)] {
+            let g = departure_gate(n);
+            assert!(g >= q && g < 1.2 * q, "{n}: {g} vs {q}");
+        }
     }
 
     #[test]

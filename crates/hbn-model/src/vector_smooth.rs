@@ -42,6 +42,9 @@ pub struct VectorSmoothing {
     pub unlinked: usize,
     /// Smoothed covariances whose eigenvalues were clamped into the filter's bounds.
     pub clamped: usize,
+    /// Steps that kept their filtered state because the smoothed one departed from it
+    /// implausibly far ([`crate::smooth::departure_gate`]).
+    pub gated: usize,
 }
 
 impl VectorModel {
@@ -101,6 +104,7 @@ impl VectorModel {
             jitter_retries: scaled.jitter_retries,
             unlinked: scaled.unlinked,
             clamped: scaled.clamped,
+            gated: scaled.gated,
         })
     }
 }
@@ -113,6 +117,7 @@ struct Flat {
     jitter_retries: usize,
     unlinked: usize,
     clamped: usize,
+    gated: usize,
 }
 
 /// [`rts`] at the augmented dimension `n` (3 to [`MAX_AUGMENTED`]).
@@ -162,6 +167,7 @@ fn smooth_n<const N: usize>(recorded: &Recorded, bounds: CovarianceBounds) -> Fl
         jitter_retries,
         unlinked,
         clamped,
+        gated,
     } = rts(&records, bounds);
     let raw_matrices = |ps: &[SMatrix<f64, N, N>]| -> Vec<f64> {
         let mut out = Vec::with_capacity(ps.len() * N * N);
@@ -182,5 +188,6 @@ fn smooth_n<const N: usize>(recorded: &Recorded, bounds: CovarianceBounds) -> Fl
         jitter_retries,
         unlinked,
         clamped,
+        gated,
     }
 }

@@ -171,6 +171,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             "nrmse_clean": clean,
                             "jitter_retries": s.states.jitter_retries,
                             "unlinked": s.states.unlinked,
+                            "gated": s.states.gated,
                             "clamped": s.states.clamped,
                         })
                     );
