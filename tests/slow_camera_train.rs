@@ -147,3 +147,69 @@ fn a_slow_camera_log_trains_by_em_and_estimates() {
     let text = std::fs::read_to_string(&plain).expect("model file");
     assert!(!text.contains("\"latent\""));
 }
+
+/// A vector model (the finger) trained from a 10 Hz camera says that it trained on the state
+/// interpolated between the frames, and how much of it was measured.
+#[test]
+fn a_vector_model_says_its_camera_state_was_interpolated() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (log, model) = (
+        dir.path().join("finger.mcap"),
+        dir.path().join("finger.hbn"),
+    );
+    ok(&[
+        "simulate",
+        "--system",
+        "finger",
+        "--steps",
+        "1200",
+        "--seed",
+        "2",
+        "--state-rate",
+        "10",
+        "--out",
+        &s(&log),
+    ]);
+    let run = ok(&[
+        "train",
+        "--log",
+        &s(&log),
+        "--max-points",
+        "120",
+        "--out",
+        &s(&model),
+    ]);
+    assert!(
+        run.stdout
+            .contains("the state was measured at 10% of the grid's samples (120 frames)")
+            && run.stdout.contains("interpolated between them"),
+        "{}",
+        run.stdout
+    );
+    // A camera at the sensor's rate: no such warning.
+    ok(&[
+        "simulate",
+        "--system",
+        "finger",
+        "--steps",
+        "1200",
+        "--seed",
+        "2",
+        "--out",
+        &s(&log),
+    ]);
+    let run = ok(&[
+        "train",
+        "--log",
+        &s(&log),
+        "--max-points",
+        "120",
+        "--out",
+        &s(&model),
+    ]);
+    assert!(
+        !run.stdout.contains("the state was measured at"),
+        "{}",
+        run.stdout
+    );
+}

@@ -225,6 +225,25 @@ pub fn train_vector_from_logs(
         .collect();
     let mut model = VectorModel::fit_with_sensors(&seqs, &params, signals.names(), sensor_inputs)?;
     model.set_read_options(opts.time_source.name(), opts.max_gap_s);
+    // A state measured sparsely (its first component's frames stand for all: one camera).
+    let frames: Vec<Option<usize>> = data
+        .iter()
+        .map(|d| {
+            d.sparse
+                .get(state_col)
+                .and_then(|s| s.as_ref())
+                .map(Vec::len)
+        })
+        .collect();
+    if frames.iter().any(Option::is_some) {
+        let samples: usize = data.iter().map(LogData::len).sum();
+        let measured: usize = frames
+            .iter()
+            .zip(&data)
+            .map(|(f, d)| f.unwrap_or(d.len()))
+            .sum();
+        model.note_sparse_state(measured, samples);
+    }
     Ok(TrainedVector { model, logs: data })
 }
 
