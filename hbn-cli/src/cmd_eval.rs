@@ -665,18 +665,4 @@ mod tests {
         assert_eq!(f.last(), s.last());
         assert!(f.iter().zip(&s).filter(|(a, b)| a != b).count() > f.len() / 2);
     }
-
-    #[test]
-    fn smooth_with_a_vector_model_names_the_flag() {
-        let dir = tempfile::tempdir().unwrap();
-        let model = dir.path().join("vector.hbn");
-        let tag = hbn_model::vector::VECTOR_MODEL_FORMAT;
-        std::fs::write(&model, format!("{{\"format\": \"{tag}\"}}")).unwrap();
-        let model = model.to_str().unwrap();
-        for cmd in ["estimate", "eval"] {
-            let (r, _) = hbn(&[cmd, "--model", model, "--log", "none.mcap", "--smooth"]);
-            let msg = format!("{:#}", r.unwrap_err());
-            assert!(msg.contains("--smooth takes scalar models"), "{cmd}: {msg}");
-        }
-    }
 }

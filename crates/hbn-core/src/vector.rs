@@ -481,7 +481,7 @@ pub struct VectorStepOutput {
 
 /// The prediction phase of one vector step, as [`VectorEkf::predict`] returns it: what an
 /// offline smoother records beside the filtered state (the vector twin of
-/// [`crate::StepPrediction`]). Entries beyond the augmented dimension `2 dx + dy` are zero.
+/// [`crate::ekf::StepPrediction`]). Entries beyond the augmented dimension `2 dx + dy` are zero.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VectorPrediction {
     /// Predicted mean `z_k^- = [x_k^-, x_{k-1}, s_k^-]` (before the update with `y_k`).
