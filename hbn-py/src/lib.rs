@@ -36,7 +36,7 @@ use hbn_pipeline::{
     LogOption, LogOptions, OptionError, Outputs, PipelineError, SignalChoice, TrainSignals,
     VectorSignals,
 };
-use hbn_sim::{SimConfig, SimError, Simulator, SystemKind};
+use hbn_sim::{MultiConfig, MultiKind, SimConfig, SimError, Simulator, SystemKind};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
 use pyo3::exceptions::{
     PyException, PyFileNotFoundError, PyOSError, PyRuntimeError, PyTypeError, PyValueError,
@@ -2118,6 +2118,54 @@ fn simulate<'py>(
     ))
 }
 
+/// Simulates a multi-signal system (`hbn_sim::MultiKind`: several inputs, a vector state,
+/// several sensors) under random inputs: `(u, x, y, (du, dx, dy))`, each signal row-major
+/// `(T, d)` flattened. `None` settings take the simulator's defaults.
+#[pyfunction]
+#[pyo3(signature = (system, steps, seed, noise_gain, rate_hz))]
+#[allow(clippy::type_complexity)]
+fn simulate_multi<'py>(
+    py: Python<'py>,
+    system: &str,
+    steps: usize,
+    seed: Option<u64>,
+    noise_gain: Option<f64>,
+    rate_hz: Option<f64>,
+) -> PyResult<(Arr<'py>, Arr<'py>, Arr<'py>, (usize, usize, usize))> {
+    let kind = MultiKind::from_str(system).map_err(|e| raise(py, e))?;
+    let d = MultiConfig::new(kind);
+    let cfg = MultiConfig {
+        noise_gain: noise_gain.unwrap_or(d.noise_gain),
+        rate_hz: rate_hz.unwrap_or(d.rate_hz),
+        seed: seed.unwrap_or(d.seed),
+        ..d
+    };
+    let t = detached(py, move || Ok(hbn_sim::simulate_multi_random(&cfg, steps)?))?;
+    let rows = |signals: &[Vec<f64>]| -> Vec<f64> {
+        let n = signals.first().map_or(0, Vec::len);
+        (0..n)
+            .flat_map(|k| {
+                signals
+                    .iter()
+                    .map(move |s| s.get(k).copied().unwrap_or(f64::NAN))
+            })
+            .collect()
+    };
+    let dims = (kind.inputs(), kind.states(), kind.sensors());
+    Ok((
+        PyArray1::from_vec(py, rows(&t.u)),
+        PyArray1::from_vec(py, rows(&t.x)),
+        PyArray1::from_vec(py, rows(&t.y)),
+        dims,
+    ))
+}
+
+/// Names of the multi-signal simulators.
+#[pyfunction]
+fn multi_systems() -> Vec<&'static str> {
+    MultiKind::ALL.iter().map(|k| k.name()).collect()
+}
+
 /// The floor under estimation on a simulated trajectory: the posterior `(mean, std)` of each
 /// `x[k]` given `u` and `y` up to `k + lookahead`, the true states around it and the simulator
 /// itself ([`hbn_sim::oracle_estimate`] for lookahead 0, the causal floor;
@@ -2363,6 +2411,8 @@ fn _hbn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(load_model, m)?)?;
     m.add_function(wrap_pyfunction!(model_from_bytes, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(simulate_multi, m)?)?;
+    m.add_function(wrap_pyfunction!(multi_systems, m)?)?;
     m.add_function(wrap_pyfunction!(oracle_estimate, m)?)?;
     m.add_function(wrap_pyfunction!(systems, m)?)?;
     m.add_function(wrap_pyfunction!(score, m)?)?;

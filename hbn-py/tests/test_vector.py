@@ -251,6 +251,23 @@ def finger_logs(tmp_path_factory):
     return exe, logs
 
 
+def test_simulate_gives_the_finger_of_the_cli(finger_logs):
+    _, (_, test) = finger_logs
+    assert hbn.MULTI_SYSTEMS == ("finger", "arm")
+    d = hbn.simulate("finger", 300, seed=2, noise_gain=1)
+    assert d["u"].shape == (300, 2) and d["x"].shape == (300, 2) and d["y"].shape == (300, 3)
+    # The samples of `hbn simulate --system finger --steps 300 --seed 2 --noise-gain 1` (to the
+    # rounding of reading them back on a grid).
+    logged = hbn.read_mcap(test, {"x0": "/state.x0", "x1": "/state.x1", "y2": "/sensor2.data"})
+    for got, want in ((logged["x0"], d["x"][:, 0]), (logged["x1"], d["x"][:, 1]),
+                      (logged["y2"], d["y"][:, 2])):
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
+    arm = hbn.simulate("ARM", 50, seed=1)
+    assert arm["x"].shape == (50, 3) and arm["y"].shape == (50, 4)
+    with pytest.raises(ValueError, match="system"):
+        hbn.simulate("hand", 50)
+
+
 def test_from_logs_with_lists_of_paths_trains_on_the_finger(finger_logs, tmp_path):
     exe, (train, test) = finger_logs
     inputs = ["/input0.data", "/input1.data"]

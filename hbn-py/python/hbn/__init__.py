@@ -95,6 +95,7 @@ __all__ = [
     "ConfigError",
     "TrainingError",
     "SYSTEMS",
+    "MULTI_SYSTEMS",
     "KERNELS",
     "DEFAULT_INDUCING",
     "MODES",
@@ -113,8 +114,12 @@ TrainingError = _hbn.TrainingError
 FilterOutput = _hbn.FilterOutput
 VectorFilterOutput = _hbn.VectorFilterOutput
 
-#: Names accepted by ``simulate(system=...)``.
+#: Names accepted by ``simulate(system=...)``: one input, one state, one sensor.
 SYSTEMS: Tuple[str, ...] = tuple(_hbn.systems())
+#: Multi-signal systems ``simulate(system=...)`` also takes: several inputs, a vector state and
+#: several sensors (``"finger"``: 2 chambers, a planar tip, 3 strain sensors; ``"arm"``: 3
+#: chambers, a spatial tip, 4 sensors).
+MULTI_SYSTEMS: Tuple[str, ...] = tuple(_hbn.multi_systems())
 #: Kernel names accepted by ``kernel=``.
 KERNELS: str = _hbn.kernel_names()
 #: Inducing points per GP of the default model's sparse candidate (``HysteresisModel.fit``
@@ -1825,13 +1830,27 @@ def simulate(
     ``"preisach"``, ``"duhem"``, ``"soft-actuator"``, ``"soft-actuator-load"``: the soft
     actuator under a supply-pressure disturbance that propagates through its dynamics).
     ``noise_gain``: the thesis' noise gain (0 = noise-free). Returns ``{"u", "x", "y"}`` arrays of ``steps`` samples (the data of
-    ``hbn simulate`` with the same settings).
+    ``hbn simulate`` with the same settings). A multi-signal system (one of
+    :data:`MULTI_SYSTEMS`) gives ``(steps, d)`` arrays, one column per input, state component
+    and sensor, ready for :meth:`HysteresisModel.fit`.
 
     >>> import hbn
     >>> d = hbn.simulate("bouc-wen", 100, seed=3, noise_gain=1.0)
     >>> sorted(d), d["x"].shape
     (['u', 'x', 'y'], (100,))
+    >>> f = hbn.simulate("finger", 100, seed=3)
+    >>> f["u"].shape, f["x"].shape, f["y"].shape
+    ((100, 2), (100, 2), (100, 3))
     """
+    if str(system).strip().lower() in MULTI_SYSTEMS:
+        u, x, y, (du, dx, dy) = _hbn.simulate_multi(
+            str(system),
+            _count(steps, "steps"),
+            _count(seed, "seed"),
+            _opt_float(noise_gain, "noise_gain"),
+            _opt_float(rate_hz, "rate_hz"),
+        )
+        return {"u": u.reshape(-1, du), "x": x.reshape(-1, dx), "y": y.reshape(-1, dy)}
     u, x, y = _hbn.simulate(
         str(system),
         _count(steps, "steps"),

@@ -34,6 +34,7 @@ __all__ = [
     "ConfigError",
     "TrainingError",
     "SYSTEMS",
+    "MULTI_SYSTEMS",
     "KERNELS",
     "DEFAULT_INDUCING",
     "MODES",
@@ -42,6 +43,7 @@ __all__ = [
 
 __version__: str
 SYSTEMS: Tuple[str, ...]
+MULTI_SYSTEMS: Tuple[str, ...]
 KERNELS: str
 DEFAULT_INDUCING: int
 MODES: Tuple[str, ...]

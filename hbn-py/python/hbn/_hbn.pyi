@@ -316,6 +316,19 @@ def simulate(
     noise_gain: Optional[float],
     rate_hz: Optional[float],
 ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
+def simulate_multi(
+    system: str,
+    steps: int,
+    seed: Optional[int],
+    noise_gain: Optional[float],
+    rate_hz: Optional[float],
+) -> Tuple[
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    Tuple[int, int, int],
+]: ...
+def multi_systems() -> List[str]: ...
 def oracle_estimate(
     system: str,
     u: npt.NDArray[np.float64],
