@@ -15,6 +15,7 @@
 //! ```text
 //! camera_eval --systems bouc-wen,duhem,preisach --gains 0,1,10 --seeds 1,2,3 --cameras 30:0.1,10
 //! ```
+use hbn_harness::parse;
 use std::time::Instant;
 
 use clap::Parser;
@@ -51,14 +52,6 @@ struct Args {
     /// Leave out the `interpolated` model (EM's first fit is the same model).
     #[arg(long)]
     no_interpolated: bool,
-}
-
-/// A value of `T` by its `FromStr`, the error as text (for clap).
-fn parse<T: std::str::FromStr>(s: &str) -> Result<T, String>
-where
-    T::Err: std::fmt::Display,
-{
-    s.parse().map_err(|e: T::Err| e.to_string())
 }
 
 /// `RATE[:DROP]`.

@@ -24,6 +24,7 @@
 //!   (`ExploreParams::criterion`), `explore-ramps-alphaA` (the seeking weight's end
 //!   `ExploreParams::alpha_end` = A, its start at most A).
 use clap::Parser;
+use hbn_harness::parse;
 use hbn_model::explore::{Criterion, ExploreParams, Explorer, Strategy};
 use hbn_model::{HbnParams, HysteresisModel, Sequence, metrics::nrmse};
 use hbn_sim::{
@@ -49,14 +50,6 @@ struct Args {
         default_value = "random-ramps,random-walk,explore-ramps,explore-steps"
     )]
     methods: Vec<String>,
-}
-
-/// A value of `T` by its `FromStr`, the error as text (for clap).
-fn parse<T: std::str::FromStr>(s: &str) -> Result<T, String>
-where
-    T::Err: std::fmt::Display,
-{
-    s.parse().map_err(|e: T::Err| e.to_string())
 }
 
 /// The explorer's settings for `method` and `seed`.

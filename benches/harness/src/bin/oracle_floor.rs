@@ -10,6 +10,7 @@
 //! oracle_floor --systems bouc-wen,duhem --gains 0,1,10 --seeds 1,2,3 [--steps 1000]
 //! ```
 use clap::Parser;
+use hbn_harness::parse;
 use hbn_model::metrics::{calibration, nrmse};
 use hbn_sim::{DEFAULT_MAX_INCREMENT, InputKind, SimConfig, SimError, SystemKind, generate_input};
 
@@ -28,14 +29,6 @@ struct Args {
     /// Samples of each test log.
     #[arg(long, default_value_t = 1000)]
     steps: usize,
-}
-
-/// A value of `T` by its `FromStr`, the error as text (for clap).
-fn parse<T: std::str::FromStr>(s: &str) -> Result<T, String>
-where
-    T::Err: std::fmt::Display,
-{
-    s.parse().map_err(|e: T::Err| e.to_string())
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

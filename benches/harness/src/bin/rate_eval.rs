@@ -35,6 +35,7 @@
 //! rate_eval --systems bouc-wen,duhem,preisach --gains 0,1,10 --seeds 1,2,3 > rates.jsonl
 //! rate_eval --tables rates.jsonl
 //! ```
+use hbn_harness::parse;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -90,14 +91,6 @@ struct Args {
     /// instead of running.
     #[arg(long, num_args = 1..)]
     tables: Vec<PathBuf>,
-}
-
-/// A value of `T` by its `FromStr`, the error as text (for clap).
-fn parse<T: std::str::FromStr>(s: &str) -> Result<T, String>
-where
-    T::Err: std::fmt::Display,
-{
-    s.parse().map_err(|e: T::Err| e.to_string())
 }
 
 /// How a rig records: each topic's rate (Hz).

@@ -17,6 +17,7 @@
 //! ```
 use clap::Parser;
 use hbn_core::Mode;
+use hbn_harness::parse;
 use hbn_model::metrics::{calibration, nrmse};
 use hbn_model::{HbnParams, HysteresisModel};
 use hbn_pipeline::experiment::{ExperimentConfig, test_trajectory, training_set};
@@ -47,14 +48,6 @@ struct Args {
     /// Samples of the future the two-sided floor reads (default: the whole log).
     #[arg(long)]
     lookahead: Option<usize>,
-}
-
-/// A value of `T` by its `FromStr`, the error as text (for clap).
-fn parse<T: std::str::FromStr>(s: &str) -> Result<T, String>
-where
-    T::Err: std::fmt::Display,
-{
-    s.parse().map_err(|e: T::Err| e.to_string())
 }
 
 /// One scored case.

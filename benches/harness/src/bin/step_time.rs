@@ -20,6 +20,7 @@
 //! in the step.
 use clap::Parser;
 use hbn_core::{Estimator, Mode};
+use hbn_harness::parse;
 use hbn_model::{HysteresisModel, VectorModel};
 use hbn_pipeline::{
     LogOption, LogOptions, SignalChoice, estimate_vector_log, model_signals, read_at_model_rate,
@@ -43,14 +44,6 @@ struct Args {
     /// Passes over the log per model and mode.
     #[arg(long, default_value_t = 15)]
     passes: usize,
-}
-
-/// A value of `T` by its `FromStr`, the error as text (for clap).
-fn parse<T: std::str::FromStr>(s: &str) -> Result<T, String>
-where
-    T::Err: std::fmt::Display,
-{
-    s.parse().map_err(|e: T::Err| e.to_string())
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

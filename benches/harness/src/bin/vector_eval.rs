@@ -27,6 +27,7 @@
 use clap::{Parser, ValueEnum};
 use hbn_core::Mode;
 use hbn_core::vector::Dims;
+use hbn_harness::{parse, rows};
 use hbn_model::metrics::{calibration, nrmse};
 use hbn_model::{HbnParams, HysteresisModel, Sequence, VectorModel, VectorSequence};
 use hbn_sim::{MultiConfig, MultiKind, MultiTrajectory, simulate_multi_random};
@@ -84,22 +85,6 @@ struct Args {
     /// Clear the folder when the scalar model or its defaults change.
     #[arg(long)]
     scalar_cache: Option<PathBuf>,
-}
-
-/// A value of `T` by its `FromStr`, the error as text (for clap).
-fn parse<T: std::str::FromStr>(s: &str) -> Result<T, String>
-where
-    T::Err: std::fmt::Display,
-{
-    s.parse().map_err(|e: T::Err| e.to_string())
-}
-
-/// Row-major `(T, d)` from component-major signals.
-fn rows(signals: &[Vec<f64>]) -> Vec<f64> {
-    let t = signals.first().map_or(0, Vec::len);
-    (0..t)
-        .flat_map(|k| signals.iter().map(move |s| s[k]))
-        .collect()
 }
 
 /// Geometric mean of the finite positive values (`NaN` when there are none).

@@ -40,6 +40,7 @@ use hbn_core::vector::Dims;
 use hbn_core::{KernelSpec, Plays, Want};
 use hbn_gp::likelihood::{Likelihood, LikelihoodData, noise_of, param_of_noise};
 use hbn_gp::{GaussianProcess, GpError, GpParams, Hyperparameters, SparseParams};
+use hbn_harness::{parse, rows};
 use hbn_model::vector::{sensor_rows, transition_rows};
 use hbn_model::{GpRole, HbnParams, VectorSequence};
 use hbn_sim::{MultiConfig, MultiKind, MultiTrajectory, simulate_multi_random};
@@ -143,22 +144,6 @@ struct Args {
     /// Also write the report as JSON to this file.
     #[arg(long)]
     out: Option<PathBuf>,
-}
-
-/// A value of `T` by its `FromStr`, the error as text (for clap).
-fn parse<T: std::str::FromStr>(s: &str) -> Result<T, String>
-where
-    T::Err: std::fmt::Display,
-{
-    s.parse().map_err(|e: T::Err| e.to_string())
-}
-
-/// Row-major `(T, d)` from component-major signals.
-fn rows(signals: &[Vec<f64>]) -> Vec<f64> {
-    let t = signals.first().map_or(0, Vec::len);
-    (0..t)
-        .flat_map(|k| signals.iter().map(move |s| s[k]))
-        .collect()
 }
 
 /// Component `i` of row-major targets with `width` per row.

@@ -11,6 +11,7 @@
 use clap::Parser;
 use hbn_core::Mode;
 use hbn_core::vector::Dims;
+use hbn_harness::{parse, rows};
 use hbn_model::metrics::{calibration, nrmse};
 use hbn_model::{HbnParams, VectorModel, VectorSequence};
 use hbn_sim::{MultiConfig, MultiKind, simulate_multi_random};
@@ -34,22 +35,6 @@ struct Args {
     /// Samples of the test run.
     #[arg(long, default_value_t = 3000)]
     test_steps: usize,
-}
-
-/// A value of `T` by its `FromStr`, the error as text (for clap).
-fn parse<T: std::str::FromStr>(s: &str) -> Result<T, String>
-where
-    T::Err: std::fmt::Display,
-{
-    s.parse().map_err(|e: T::Err| e.to_string())
-}
-
-/// Row-major `(T, d)` from component-major signals.
-fn rows(signals: &[Vec<f64>]) -> Vec<f64> {
-    let t = signals.first().map_or(0, Vec::len);
-    (0..t)
-        .flat_map(|k| signals.iter().map(move |s| s[k]))
-        .collect()
 }
 
 /// Column `i` of a row-major `(T, d)` array.
