@@ -192,6 +192,25 @@ fn sparse_note(report: &LatentReport) -> String {
     )
 }
 
+/// The warning training gives about a state measured sparsely: how much was measured and what
+/// expectation-maximisation did ([`em_rounds`]; no rounds: there was no held-out data to judge
+/// a refit by).
+pub(crate) fn latent_warning(report: &LatentReport) -> String {
+    if report.rounds.is_empty() {
+        return format!(
+            "{}; without held-out data to judge a refit by, the model trained on the state \
+             interpolated between them{}",
+            sparse_note(report),
+            if report.unmeasured_runs > 0 {
+                " (the runs without a measured state are left out)"
+            } else {
+                ""
+            }
+        );
+    }
+    em_note(report)
+}
+
 /// What expectation-maximisation did ([`sparse_note`] first).
 fn em_note(report: &LatentReport) -> String {
     let first = report.rounds.first();
@@ -223,6 +242,67 @@ fn em_note(report: &LatentReport) -> String {
             }
         ),
     }
+}
+
+/// The rounds of expectation-maximisation after a first fit (`first`, which took `first_s`
+/// seconds of the training that started at `t0`): each round refits (`refit(best, round)`:
+/// the E-step and the M-step) and is kept while `held_out` (NLPD, nRMSE at the measured
+/// samples) improves by the rule of model selection, within [`MAX_ROUNDS`] and [`TIME_BUDGET`].
+/// The rounds go into `report`; none when the first fit has no held-out score.
+pub(crate) fn em_rounds<M>(
+    first: M,
+    t0: Instant,
+    first_s: f64,
+    held_out: impl Fn(&M) -> Option<(f64, f64)>,
+    mut refit: impl FnMut(&M, usize) -> Result<M, ModelError>,
+    report: &mut LatentReport,
+) -> Result<M, ModelError> {
+    let Some((mut best_nlpd, first_nrmse)) = held_out(&first) else {
+        return Ok(first);
+    };
+    report.rounds.push(EmRound {
+        round: 0,
+        nlpd: best_nlpd,
+        nrmse: first_nrmse,
+        improved: true,
+    });
+    let mut best = first;
+    let mut round_s = 0.0f64;
+    for round in 1..=MAX_ROUNDS {
+        let elapsed = t0.elapsed().as_secs_f64();
+        // A refit of one configuration costs at most the first fit; until a round has run,
+        // assume it does.
+        let next = if round_s > 0.0 { round_s } else { first_s };
+        if elapsed + next > TIME_BUDGET * first_s {
+            break;
+        }
+        let t_round = Instant::now();
+        let candidate = refit(&best, round)?;
+        round_s = t_round.elapsed().as_secs_f64();
+        let Some((nlpd, nrmse)) = held_out(&candidate) else {
+            break;
+        };
+        // The rule of model selection: a lower held-out NLPD, and no less accurate than the
+        // first fit held out (NLPD alone can prefer a wide band around a worse mean).
+        let improved = nlpd < best_nlpd && nrmse <= first_nrmse;
+        report.rounds.push(EmRound {
+            round,
+            nlpd,
+            nrmse,
+            improved,
+        });
+        if !improved {
+            break;
+        }
+        best_nlpd = nlpd;
+        best = candidate;
+    }
+    Ok(best)
+}
+
+/// The random draws of round `round`'s latent paths, from the training seed.
+pub(crate) fn round_rng(seed: u64, round: usize) -> Rng {
+    Rng::new(seed ^ (round as u64).wrapping_mul(SEED_STRIDE))
 }
 
 impl HysteresisModel {
@@ -309,7 +389,7 @@ impl HysteresisModel {
             })
             .collect();
         let seqs: Vec<Sequence<'_>> = runs.iter().map(|r| r.seq).collect();
-        let mut best = Self::fit_checked(&measured, params, observe)?;
+        let best = Self::fit_checked(&measured, params, observe)?;
         let first_s = t0.elapsed().as_secs_f64();
         let samples: usize = seqs.iter().map(|s| s.u.len()).sum();
         let observed: usize = seqs
@@ -322,29 +402,6 @@ impl HysteresisModel {
             rounds: Vec::new(),
             unmeasured_runs: runs.len() - measured.len(),
         };
-        let Some((mut best_nlpd, nrmse)) = held_out(&best) else {
-            let warning = format!(
-                "{}; without held-out data to judge a refit by, the model trained on the state \
-                 interpolated between them{}",
-                sparse_note(&report),
-                if report.unmeasured_runs > 0 {
-                    " (the runs without a measured state are left out)"
-                } else {
-                    ""
-                }
-            );
-            let summary = best.summary_mut();
-            summary.warnings.push(warning);
-            summary.latent = Some(report);
-            return Ok(best);
-        };
-        report.rounds.push(EmRound {
-            round: 0,
-            nlpd: best_nlpd,
-            nrmse,
-            improved: true,
-        });
-        let first_nrmse = nrmse;
         // What the first fit chose among: a refit trains its choice only.
         let candidates = best
             .summary()
@@ -358,60 +415,40 @@ impl HysteresisModel {
         let x_stats = best.stats().1;
         let range = x_stats.max - x_stats.min;
         let frame_var = (FRAME_STD * range).powi(2).max(f64::MIN_POSITIVE);
-        let mut round_s = 0.0f64;
-        for round in 1..=MAX_ROUNDS {
-            let elapsed = t0.elapsed().as_secs_f64();
-            // A refit of one configuration costs at most the first fit; until a round has run,
-            // assume it does.
-            let next = if round_s > 0.0 { round_s } else { first_s };
-            if elapsed + next > TIME_BUDGET * first_s {
-                break;
-            }
-            let t_round = Instant::now();
-            let config = best.ekf_config(best.default_mode());
-            // One path per run drawn from the smoothed distribution: the refit sees the latent
-            // states' spread, where the smoothed means would show it a trajectory smoother
-            // than the state and a noise too small.
-            let mut rng = Rng::new(refit.seed ^ (round as u64).wrapping_mul(SEED_STRIDE));
-            let smoothed: Vec<Vec<f64>> = runs
-                .iter()
-                .map(|r| {
-                    best.smooth_frames(r.seq.u, r.seq.y, r.frames, frame_var, &config)
-                        .map(|s| {
-                            s.states
-                                .sample_path(|| rng.normal())
-                                .iter()
-                                .map(|z| z.x)
-                                .collect()
-                        })
-                })
-                .collect::<Result<_, _>>()?;
-            let seqs: Vec<Sequence<'_>> = runs
-                .iter()
-                .zip(&smoothed)
-                .map(|(r, x)| Sequence { x, ..r.seq })
-                .collect();
-            let candidate = Self::fit_checked(&seqs, &refit, observe)?;
-            round_s = t_round.elapsed().as_secs_f64();
-            let Some((nlpd, nrmse)) = held_out(&candidate) else {
-                break;
-            };
-            // The rule of model selection: a lower held-out NLPD, and no less accurate than
-            // the first fit held out (NLPD alone can prefer a wide band around a worse mean).
-            let improved = nlpd < best_nlpd && nrmse <= first_nrmse;
-            report.rounds.push(EmRound {
-                round,
-                nlpd,
-                nrmse,
-                improved,
-            });
-            if !improved {
-                break;
-            }
-            best_nlpd = nlpd;
-            best = candidate;
-        }
-        let warning = em_note(&report);
+        let mut best = em_rounds(
+            best,
+            t0,
+            first_s,
+            held_out,
+            |best, round| {
+                let config = best.ekf_config(best.default_mode());
+                // One path per run drawn from the smoothed distribution: the refit sees the
+                // latent states' spread, where the smoothed means would show it a trajectory
+                // smoother than the state and a noise too small.
+                let mut rng = round_rng(refit.seed, round);
+                let smoothed: Vec<Vec<f64>> = runs
+                    .iter()
+                    .map(|r| {
+                        best.smooth_frames(r.seq.u, r.seq.y, r.frames, frame_var, &config)
+                            .map(|s| {
+                                s.states
+                                    .sample_path(|| rng.normal())
+                                    .iter()
+                                    .map(|z| z.x)
+                                    .collect()
+                            })
+                    })
+                    .collect::<Result<_, _>>()?;
+                let seqs: Vec<Sequence<'_>> = runs
+                    .iter()
+                    .zip(&smoothed)
+                    .map(|(r, x)| Sequence { x, ..r.seq })
+                    .collect();
+                Self::fit_checked(&seqs, &refit, observe)
+            },
+            &mut report,
+        )?;
+        let warning = latent_warning(&report);
         let summary = best.summary_mut();
         summary.warnings.push(warning);
         if let Some(v) = summary.validation.as_mut()

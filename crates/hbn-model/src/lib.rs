@@ -54,6 +54,7 @@ pub mod smooth;
 pub mod tuning;
 pub mod vector;
 mod vector_filter;
+pub mod vector_latent;
 mod vector_smooth;
 
 pub use dataset::{Dataset, MIN_SAMPLES, Sequence, Table, build_dataset};
@@ -83,4 +84,5 @@ pub use vector::{
     SignalNames, VectorEstimate, VectorModel, VectorSequence, VectorSummary, VectorValidationRow,
 };
 pub use vector_filter::VectorFilter;
+pub use vector_latent::VectorLatentRun;
 pub use vector_smooth::VectorSmoothing;

@@ -19,7 +19,7 @@
 //! in the tests). docs/smoothing.md says when smoothing gains and when it does not.
 
 use hbn_core::{CoreError, Ekf, EkfConfig, Flags, Mode};
-use nalgebra::{Cholesky, DMatrix, Matrix3, SMatrix, SVector, SymmetricEigen, Vector3};
+use nalgebra::{Cholesky, DMatrix, DVector, Matrix3, SMatrix, SVector, SymmetricEigen, Vector3};
 
 use crate::estimate::Estimate;
 use crate::filter::Tracker;
@@ -120,7 +120,7 @@ impl<const N: usize> Smoothed<N> {
     }
 }
 
-impl Smoothed<3> {
+impl<const N: usize> Smoothed<N> {
     /// A path drawn from the smoothed distribution of the whole sequence, `p(z_{0..T} | y)`, by
     /// sampling backwards: `z_T` from its marginal, then each `z_k` given the `z_{k+1}` drawn,
     /// `N(m_k + J_k (z_{k+1} - m_{k+1}), P_k - J_k C_k^T)` with `C_k` the lag-one
@@ -129,14 +129,15 @@ impl Smoothed<3> {
     /// its negative eigenvalues (round-off) are taken as zero; where `P_{k+1}` cannot be
     /// inverted, `z_k` is drawn from its marginal. Training on such paths sees the latent
     /// states' uncertainty, which the smoothed means hide.
-    pub fn sample_path(&self, mut normal: impl FnMut() -> f64) -> Vec<Vector3<f64>> {
+    pub fn sample_path(&self, mut normal: impl FnMut() -> f64) -> Vec<SVector<f64, N>> {
         let n = self.mean.len();
-        let mut out = vec![Vector3::zeros(); n];
-        let mut draw = |mean: Vector3<f64>, cov: Matrix3<f64>| {
+        let mut out = vec![SVector::<f64, N>::zeros(); n];
+        let mut draw = |mean: SVector<f64, N>, cov: SMatrix<f64, N, N>| {
             let sym = 0.5 * (cov + cov.transpose());
-            let eig = SymmetricEigen::new(sym);
-            let e = Vector3::from_fn(|i, _| eig.eigenvalues[i].max(0.0).sqrt() * normal());
-            let z = mean + eig.eigenvectors * e;
+            let eig = SymmetricEigen::new(DMatrix::from_fn(N, N, |i, j| sym[(i, j)]));
+            let e = DVector::from_fn(N, |i, _| eig.eigenvalues[i].max(0.0).sqrt() * normal());
+            let step = eig.eigenvectors * e;
+            let z = mean + SVector::<f64, N>::from_fn(|i, _| step[i]);
             if z.iter().all(|v| v.is_finite()) {
                 z
             } else {
@@ -148,7 +149,11 @@ impl Smoothed<3> {
         };
         out[last] = draw(self.mean[last], self.cov[last]);
         for k in (0..last).rev() {
-            let c = self.lag_one.get(k).copied().unwrap_or_else(Matrix3::zeros);
+            let c = self
+                .lag_one
+                .get(k)
+                .copied()
+                .unwrap_or_else(SMatrix::<f64, N, N>::zeros);
             let next_inv = self.cov[k + 1].try_inverse();
             out[k] = match next_inv {
                 Some(inv) if c.iter().any(|v| *v != 0.0) => {

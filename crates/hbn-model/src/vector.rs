@@ -19,15 +19,17 @@ use std::time::Instant;
 
 use hbn_core::vector::{
     AugMatrix, Dims, MAX_AUGMENTED, MAX_SENSORS, MAX_STATES, VectorConfig, VectorEkf,
-    VectorInitPrior, VectorPrediction, VectorView, vector_state_information,
+    VectorInitPrior, VectorPrediction, VectorState, VectorView, vector_state_information,
 };
 use hbn_core::{Flags, GpView, Mode, PlayState, Plays};
 use hbn_gp::GaussianProcess;
+use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{DataError, ModelError, ModelFileProblem, Signal};
 use crate::model::{GpRole, OUTLIER_GATE, SignalStats};
 use crate::params::{CheckedHbnParams, ConfigError, HbnParams, Param, Problem, SensorInputs};
+use crate::smooth::StateFrame;
 
 /// The model file's tag.
 pub const VECTOR_MODEL_FORMAT: &str = "hbn-vector-model";
@@ -55,12 +57,38 @@ pub struct VectorSequence<'a> {
     pub y: &'a [f64],
     /// Sizes.
     pub dims: Dims,
+    /// Where each state component was measured, `T x dx` row-major as `x`; `None` when every
+    /// component was measured at every sample. Elsewhere `x` holds a stand-in (interpolated
+    /// between the measurements, or a path drawn from the smoothed states): the GPs train on
+    /// it, but held-out scores compare the filter with measured values only.
+    pub observed: Option<&'a [bool]>,
 }
 
 impl<'a> VectorSequence<'a> {
     /// A trajectory of `dims`; checked by [`VectorSequence::validate`] when training.
     pub fn new(u: &'a [f64], x: &'a [f64], y: &'a [f64], dims: Dims) -> Self {
-        Self { u, x, y, dims }
+        Self {
+            u,
+            x,
+            y,
+            dims,
+            observed: None,
+        }
+    }
+
+    /// The same trajectory with component `i` of the state measured at sample `k` only where
+    /// `observed[k * dx + i]` is true ([`VectorSequence::observed`]).
+    pub fn with_observed(self, observed: &'a [bool]) -> Self {
+        Self {
+            observed: Some(observed),
+            ..self
+        }
+    }
+
+    /// Whether component `i` of `x_k` was measured.
+    pub fn is_observed(&self, k: usize, i: usize) -> bool {
+        self.observed
+            .is_none_or(|o| o.get(k * self.dims.states + i).copied().unwrap_or(false))
     }
 
     /// Samples.
@@ -86,6 +114,15 @@ impl<'a> VectorSequence<'a> {
                 u: self.u.len() / d.inputs.max(1),
                 x: self.x.len() / d.states.max(1),
                 y: self.y.len() / d.sensors.max(1),
+            });
+        }
+        if let Some(o) = self.observed
+            && o.len() != self.x.len()
+        {
+            return Err(DataError::ObservedLength {
+                trajectory: index,
+                observed: o.len(),
+                samples: self.x.len(),
             });
         }
         if t < crate::MIN_SAMPLES {
@@ -120,6 +157,9 @@ impl<'a> VectorSequence<'a> {
             x: &self.x[from * d.states..to * d.states],
             y: &self.y[from * d.sensors..to * d.sensors],
             dims: d,
+            observed: self
+                .observed
+                .map(|o| o.get(from * d.states..to * d.states).unwrap_or(&[])),
         }
     }
 }
@@ -225,6 +265,10 @@ pub struct VectorSummary {
     /// Per component, the fraction of the first training trajectory's windows in which it
     /// was unobservable.
     pub unobservable: Vec<f64>,
+    /// How much of the state was measured and what expectation-maximisation did, when the
+    /// state was measured only sometimes ([`VectorModel::fit_latent`]).
+    #[serde(default)]
+    pub latent: Option<crate::latent::LatentReport>,
 }
 
 /// A trained vector HBN (one GP per state component and per sensor).
@@ -623,48 +667,48 @@ impl VectorModel {
         fits: &[Fitted],
     ) -> Result<HeldOut, ModelError> {
         let dx = self.dims.states;
-        let (mut nlpd, mut count) = (0.0, 0usize);
+        // Per component: the measured values scored, their squared errors, `ln sd` and the
+        // normalised errors `|err| / sd`.
+        let mut count = vec![0usize; dx];
         let mut sq = vec![0.0; dx];
+        let mut log_std = vec![0.0; dx];
         let mut normalised = vec![Vec::new(); dx];
-        let mut log_std_sum = 0.0;
         for (parts, fit) in held.iter().zip(fits) {
             let model = self.on_fold(fit);
             for t in parts.iter() {
                 let e = model.estimate(t.u, t.y, model.mode)?;
                 for k in 0..t.len() {
-                    for i in 0..dx {
+                    for i in (0..dx).filter(|&i| t.is_observed(k, i)) {
                         let err = e.x[k * dx + i] - t.x[k * dx + i];
                         let sd = e.x_std[k * dx + i].max(1e-300);
-                        let var = sd * sd;
-                        nlpd +=
-                            0.5 * (2.0 * std::f64::consts::PI * var).ln() + err * err / (2.0 * var);
-                        log_std_sum += sd.ln();
+                        count[i] += 1;
                         sq[i] += err * err;
+                        log_std[i] += sd.ln();
                         normalised[i].push(err.abs() / sd);
                     }
-                    count += 1;
                 }
             }
         }
-        let n = count.max(1) as f64;
         let nrmse = sq
             .iter()
+            .zip(&count)
             .zip(&self.x_stats)
-            .map(|(s, st)| (s / n).sqrt() / st.span().max(1e-12))
+            .map(|((s, c), st)| (s / (*c).max(1) as f64).sqrt() / st.span().max(1e-12))
             .collect();
         // Scored as the model will report: each component's band scaled as training scales it
         // ([`calibration_scale`]), so that a setting is not chosen for widening an
-        // overconfident band, which the scale does anyway. With the scale `c`, a sample's NLPD
-        // gains `ln c` and its squared term is divided by `c^2`.
-        let _uncalibrated = nlpd;
-        let mut nlpd = log_std_sum + 0.5 * (2.0 * std::f64::consts::PI).ln() * (count * dx) as f64;
-        for z in &normalised {
-            let c = calibration_scale(z);
+        // overconfident band, which the scale does anyway. With the scale `c`, a value's NLPD
+        // gains `ln c` and its squared term is divided by `c^2`. Each component's mean NLPD
+        // over its measured values, summed over the components.
+        let mut nlpd = 0.0;
+        for ((z, l), c) in normalised.iter().zip(&log_std).zip(&count) {
+            let scale = calibration_scale(z);
+            let mut sum = l + 0.5 * (2.0 * std::f64::consts::PI).ln() * *c as f64;
             for v in z {
-                nlpd += c.ln() + 0.5 * (v / c) * (v / c);
+                sum += scale.ln() + 0.5 * (v / scale) * (v / scale);
             }
+            nlpd += sum / (*c).max(1) as f64;
         }
-        let nlpd = nlpd / n;
         Ok(HeldOut {
             nlpd: if nlpd.is_finite() {
                 nlpd
@@ -738,6 +782,11 @@ impl VectorModel {
         &self.summary
     }
 
+    /// What training found, to add to.
+    pub(crate) fn summary_mut(&mut self) -> &mut VectorSummary {
+        &mut self.summary
+    }
+
     /// Whether sensor `j` reads its own previous output (else the state only).
     pub fn sensor_reads_output(&self, j: usize) -> Option<bool> {
         self.sensor_reads_output.get(j).copied()
@@ -802,7 +851,8 @@ impl VectorModel {
 
     /// Runs the filter over `u` (`T x du`) and `y` (`T x dy`, non-finite values missing).
     pub fn estimate(&self, u: &[f64], y: &[f64], mode: Mode) -> Result<VectorEstimate, ModelError> {
-        self.run(u, y, mode, false).map(|(out, _)| out)
+        self.run(u, y, mode, false, &Frames::NONE)
+            .map(|(out, _)| out)
     }
 
     /// The filter over a sequence ([`VectorModel::estimate`]); with `record`, also what the
@@ -814,6 +864,7 @@ impl VectorModel {
         y: &[f64],
         mode: Mode,
         record: bool,
+        frames: &Frames<'_>,
     ) -> Result<(VectorEstimate, Option<Recorded>), ModelError> {
         let d = self.dims;
         let t = u.len() / d.inputs;
@@ -872,6 +923,10 @@ impl VectorModel {
             spans: *ekf.spans(),
             steps: Vec::with_capacity(t),
         });
+        // Each component's frames not applied yet.
+        let mut pending: Vec<&[StateFrame]> = (0..d.states)
+            .map(|i| frames.of.get(i).map_or(&[][..], Vec::as_slice))
+            .collect();
         for k in 0..t {
             let prediction = match (&recorded, &state) {
                 (Some(_), Some(st)) => Some(ekf.predict(st, &mut scratch)),
@@ -883,6 +938,17 @@ impl VectorModel {
                 &u[k * d.inputs..(k + 1) * d.inputs],
                 &y[k * d.sensors..(k + 1) * d.sensors],
             );
+            for (i, rest) in pending.iter_mut().enumerate() {
+                let here = rest.partition_point(|f| f.k <= k);
+                let (now, later) = rest.split_at(here);
+                *rest = later;
+                let var = frames.var.get(i).copied().unwrap_or(0.0);
+                if let Some(st) = state.as_mut() {
+                    for f in now.iter().filter(|f| f.k == k) {
+                        frame_update(st, d, i, f, var);
+                    }
+                }
+            }
             if let (Some(rec), Some(st)) = (recorded.as_mut(), &state) {
                 // A re-start (or the first sample) does not follow from the prediction.
                 let restarted = o.flags.has(Flags::RELOCALISED) || o.flags.has(Flags::INITIALISED);
@@ -1066,6 +1132,56 @@ impl VectorModel {
             .map(|s| (1e-4 * s.span() * s.span()).max(1e-18))
             .collect();
         (&self.init_rows, y_scale, INIT_NEIGHBOURS, var_floor)
+    }
+}
+
+/// Measurements of the state for [`VectorModel::run`]: per component, its frames (sorted by
+/// grid sample) and their noise variance.
+pub(crate) struct Frames<'a> {
+    /// Frames of each component.
+    pub of: &'a [Vec<StateFrame>],
+    /// Noise variance of each component's frames.
+    pub var: &'a [f64],
+}
+
+impl Frames<'_> {
+    /// No frames: the filter alone.
+    pub const NONE: Frames<'static> = Frames { of: &[], var: &[] };
+}
+
+/// Updates the filter's state with a frame of component `i`: `value = w x_k[i] + (1 - w)
+/// x_{k-1}[i] + e`, `e ~ N(0, var)` (Joseph form, symmetric). A frame with a non-finite value
+/// or weight, or an update that is not finite, leaves the state as it was.
+fn frame_update(st: &mut VectorState, d: Dims, i: usize, frame: &StateFrame, var: f64) {
+    let w = frame.weight;
+    if !(w.is_finite() && frame.value.is_finite() && var.is_finite() && var > 0.0) {
+        return;
+    }
+    let w = w.clamp(0.0, 1.0);
+    let n = d.augmented();
+    let mut h = DVector::<f64>::zeros(n);
+    h[i] = w;
+    h[d.states + i] = 1.0 - w;
+    let p = DMatrix::from_fn(n, n, |r, c| st.p[r][c]);
+    let z = DVector::from_fn(n, |r, _| st.z[r]);
+    let ph = &p * &h;
+    let s = h.dot(&ph) + var;
+    if !(s.is_finite() && s > 0.0) {
+        return;
+    }
+    let gain = ph / s;
+    let innovation = frame.value - h.dot(&z);
+    let i_kh = DMatrix::<f64>::identity(n, n) - &gain * h.transpose();
+    let p_new = &i_kh * p * i_kh.transpose() + &gain * gain.transpose() * var;
+    let p_new = 0.5 * (&p_new + p_new.transpose());
+    let z_new = z + gain * innovation;
+    if z_new.iter().chain(p_new.iter()).all(|v| v.is_finite()) {
+        for r in 0..n {
+            st.z[r] = z_new[r];
+            for c in 0..n {
+                st.p[r][c] = p_new[(r, c)];
+            }
+        }
     }
 }
 

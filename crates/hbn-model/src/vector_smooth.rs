@@ -12,7 +12,7 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::ModelError;
 use crate::smooth::{CovarianceBounds, FilterRecord, Link, Smoothed, rts};
-use crate::vector::{Recorded, RecordedStep, VectorEstimate, VectorModel};
+use crate::vector::{Frames, Recorded, RecordedStep, VectorEstimate, VectorModel};
 use hbn_core::CoreError;
 
 /// A smoothed run of a [`VectorModel`]: the estimate with the smoothed values, the filter's own,
@@ -64,7 +64,25 @@ impl VectorModel {
         y: &[f64],
         mode: Mode,
     ) -> Result<VectorSmoothing, ModelError> {
-        let (filtered, recorded) = self.run(u, y, mode, true)?;
+        Ok(self.smooth_frames(u, y, mode, &Frames::NONE, None)?.0)
+    }
+
+    /// [`VectorModel::smooth_with`] given measurements of the state as well (each component's
+    /// frames, sorted by grid sample, with their noise variance): the smoothed states of a
+    /// training log whose state was recorded at its own rate, with gaps (the E-step of
+    /// [`VectorModel::fit_latent`]). [`VectorSmoothing::filtered`] is the filter's output at
+    /// each sample before that sample's frames (the frames of earlier samples included).
+    /// With `normal` (standard normal draws), also a path of the state drawn from the
+    /// smoothed distribution ([`crate::smooth::Smoothed::sample_path`]), `T x dx`.
+    pub(crate) fn smooth_frames(
+        &self,
+        u: &[f64],
+        y: &[f64],
+        mode: Mode,
+        frames: &Frames<'_>,
+        normal: Option<&mut dyn FnMut() -> f64>,
+    ) -> Result<(VectorSmoothing, Option<Vec<f64>>), ModelError> {
+        let (filtered, recorded) = self.run(u, y, mode, true, frames)?;
         let Some(recorded) = recorded else {
             return Err(CoreError::InvalidSpec("the filter run recorded nothing").into());
         };
@@ -74,7 +92,7 @@ impl VectorModel {
             min: config.p_min,
             max: config.p_max,
         };
-        let scaled = smooth_scaled(n, &recorded, bounds)?;
+        let scaled = smooth_scaled(n, &recorded, bounds, normal)?;
         let dx = self.dims().states;
         let mut estimate = filtered.clone();
         let scale = |i: usize| config.std_scale.get(i).copied().unwrap_or(1.0);
@@ -94,7 +112,12 @@ impl VectorModel {
                 }
             }
         }
-        Ok(VectorSmoothing {
+        let path = scaled.path.map(|p| {
+            p.chunks_exact(n)
+                .flat_map(|z| z.iter().take(dx).copied())
+                .collect()
+        });
+        let smoothing = VectorSmoothing {
             estimate,
             filtered,
             augmented: n,
@@ -105,7 +128,8 @@ impl VectorModel {
             unlinked: scaled.unlinked,
             clamped: scaled.clamped,
             gated: scaled.gated,
-        })
+        };
+        Ok((smoothing, path))
     }
 }
 
@@ -118,6 +142,8 @@ struct Flat {
     unlinked: usize,
     clamped: usize,
     gated: usize,
+    /// A path drawn from the smoothed distribution, `T x n`, when asked for.
+    path: Option<Vec<f64>>,
 }
 
 /// [`rts`] at the augmented dimension `n` (3 to [`MAX_AUGMENTED`]).
@@ -125,11 +151,12 @@ fn smooth_scaled(
     n: usize,
     recorded: &Recorded,
     bounds: CovarianceBounds,
+    normal: Option<&mut dyn FnMut() -> f64>,
 ) -> Result<Flat, ModelError> {
     macro_rules! at_size {
         ($($size:literal),*) => {
             match n {
-                $($size => Ok(smooth_n::<$size>(recorded, bounds)),)*
+                $($size => Ok(smooth_n::<$size>(recorded, bounds, normal)),)*
                 _ => Err(CoreError::InvalidSpec(
                     "the augmented state of a vector model has 3 to 10 components",
                 )
@@ -140,7 +167,11 @@ fn smooth_scaled(
     at_size!(3, 4, 5, 6, 7, 8, 9, 10)
 }
 
-fn smooth_n<const N: usize>(recorded: &Recorded, bounds: CovarianceBounds) -> Flat {
+fn smooth_n<const N: usize>(
+    recorded: &Recorded,
+    bounds: CovarianceBounds,
+    normal: Option<&mut dyn FnMut() -> f64>,
+) -> Flat {
     let span = &recorded.spans;
     let sp = |i: usize| span.get(i).copied().unwrap_or(1.0);
     let vector = |z: &[f64; MAX_AUGMENTED]| SVector::<f64, N>::from_fn(|i, _| z[i] / sp(i));
@@ -160,6 +191,15 @@ fn smooth_n<const N: usize>(recorded: &Recorded, bounds: CovarianceBounds) -> Fl
             }),
         })
         .collect();
+    let smoothed = rts(&records, bounds);
+    // Drawn where the covariances are scaled, as the backward pass ran.
+    let path = normal.map(|normal| {
+        smoothed
+            .sample_path(normal)
+            .iter()
+            .flat_map(|z| (0..N).map(move |i| z[i] * sp(i)))
+            .collect()
+    });
     let Smoothed {
         mean,
         cov,
@@ -168,7 +208,7 @@ fn smooth_n<const N: usize>(recorded: &Recorded, bounds: CovarianceBounds) -> Fl
         unlinked,
         clamped,
         gated,
-    } = rts(&records, bounds);
+    } = smoothed;
     let raw_matrices = |ps: &[SMatrix<f64, N, N>]| -> Vec<f64> {
         let mut out = Vec::with_capacity(ps.len() * N * N);
         for p in ps {
@@ -189,5 +229,6 @@ fn smooth_n<const N: usize>(recorded: &Recorded, bounds: CovarianceBounds) -> Fl
         unlinked,
         clamped,
         gated,
+        path,
     }
 }
