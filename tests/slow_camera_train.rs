@@ -148,62 +148,99 @@ fn a_slow_camera_log_trains_by_em_and_estimates() {
     assert!(!text.contains("\"latent\""));
 }
 
-/// A vector model (the finger) trained from a 10 Hz camera says that it trained on the state
-/// interpolated between the frames, and how much of it was measured.
+/// A vector model (the finger) trained from a 10 Hz camera treats the samples between the
+/// frames as latent (expectation-maximisation, said in a warning and recorded in the model
+/// file), smooths a full-rate log, and `hbn eval` on a camera log scores at its frames.
 #[test]
-fn a_vector_model_says_its_camera_state_was_interpolated() {
+fn a_vector_model_trains_from_a_camera_by_em() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let (log, model) = (
+    let (log, model, test, csv) = (
         dir.path().join("finger.mcap"),
         dir.path().join("finger.hbn"),
+        dir.path().join("finger_test.mcap"),
+        dir.path().join("finger.csv"),
     );
-    ok(&[
-        "simulate",
-        "--system",
-        "finger",
-        "--steps",
-        "1200",
-        "--seed",
-        "2",
-        "--state-rate",
-        "10",
-        "--out",
-        &s(&log),
-    ]);
+    let finger = |seed: &str, extra: &[&str], out: &std::path::Path| {
+        let mut args = vec![
+            "simulate", "--system", "finger", "--steps", "1200", "--seed", seed,
+        ];
+        args.extend_from_slice(extra);
+        let out = s(out);
+        args.extend_from_slice(&["--out", &out]);
+        ok(&args);
+    };
+    finger("2", &["--state-rate", "10"], &log);
     let run = ok(&[
         "train",
         "--log",
         &s(&log),
         "--max-points",
         "120",
+        "--starts",
+        "1",
         "--out",
         &s(&model),
     ]);
     assert!(
         run.stdout
             .contains("the state was measured at 10% of the grid's samples (120 frames)")
-            && run.stdout.contains("interpolated between them"),
+            && run.stdout.contains("latent")
+            && run.stdout.contains("expectation-maximisation"),
         "{}",
         run.stdout
     );
-    // A camera at the sensor's rate: no such warning.
+    let text = std::fs::read_to_string(&model).expect("model file");
+    let file: serde_json::Value = serde_json::from_str(&text).expect("json");
+    let latent = &file["model"]["summary"]["latent"];
+    let observed = latent["observed"].as_f64().expect("observed");
+    assert!((0.09..0.11).contains(&observed), "{latent}");
+    assert_eq!(latent["frames"], 120, "{latent}");
+    assert_eq!(latent["rounds"][0]["round"], 0, "{latent}");
+    // A full-rate log smooths into the vector CSV columns.
+    finger("3", &[], &test);
     ok(&[
-        "simulate",
-        "--system",
-        "finger",
-        "--steps",
-        "1200",
-        "--seed",
-        "2",
-        "--out",
-        &s(&log),
+        "estimate",
+        "--model",
+        &s(&model),
+        "--log",
+        &s(&test),
+        "--smooth",
+        "--csv",
+        &s(&csv),
     ]);
+    let out = std::fs::read_to_string(&csv).expect("csv");
+    let header = out.lines().next().expect("header");
+    assert!(header.starts_with("t,x0,x0_std,x1,x1_std"), "{header}");
+    assert_eq!(out.lines().count(), 1201);
+    // A camera log is scored at its frames, each component.
+    let camera_test = dir.path().join("camera_test.mcap");
+    finger("4", &["--state-rate", "20"], &camera_test);
+    let scored = ok(&["eval", "--model", &s(&model), "--log", &s(&camera_test)]);
+    assert!(
+        scored.stdout.contains("scored at the state's 240 frames"),
+        "{}",
+        scored.stdout
+    );
+    let json = ok(&[
+        "eval",
+        "--model",
+        &s(&model),
+        "--log",
+        &s(&camera_test),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&json.stdout).expect("json");
+    assert_eq!(v["state_frames"], 240, "{v}");
+    // A camera at the sensor's rate: no EM.
+    finger("2", &[], &log);
     let run = ok(&[
         "train",
         "--log",
         &s(&log),
         "--max-points",
         "120",
+        "--starts",
+        "1",
         "--out",
         &s(&model),
     ]);
@@ -212,4 +249,7 @@ fn a_vector_model_says_its_camera_state_was_interpolated() {
         "{}",
         run.stdout
     );
+    let text = std::fs::read_to_string(&model).expect("model file");
+    let file: serde_json::Value = serde_json::from_str(&text).expect("json");
+    assert!(file["model"]["summary"]["latent"].is_null());
 }

@@ -387,7 +387,21 @@ pub fn vector_tables(
     if ev.runs.iter().any(|r| r.smoothed) {
         s.push_str("smoothed: each sample estimated from the whole log (docs/smoothing.md)\n");
     }
+    if let Some(frames) = vector_state_frames(ev, model) {
+        s.push_str(&format!(
+            "scored at the state's {frames} frames (it is measured at {:.0}% of the {} samples; \
+             between frames the log holds no state to compare with)\n",
+            100.0 * frames as f64 / ev.log.len().max(1) as f64,
+            ev.log.len()
+        ));
+    }
     s
+}
+
+/// The frames of a vector state measured sparsely (a camera; its first component's count), or
+/// `None` when it is measured at about every sample.
+fn vector_state_frames(ev: &hbn_pipeline::VectorEvaluation, model: &VectorModel) -> Option<usize> {
+    ev.log.frames_of(model.dims().inputs).map(<[_]>::len)
 }
 
 /// `hbn eval` with a vector model.
@@ -462,6 +476,7 @@ fn run_vector(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<()> {
             "states": model.signal_names().states,
             "default_mode": model.default_mode().name(),
             "runs": runs,
+            "state_frames": vector_state_frames(&ev, &model),
         });
         ui.line(serde_json::to_string_pretty(&v).context("cannot format JSON")?)?;
     } else {

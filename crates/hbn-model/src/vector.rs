@@ -750,23 +750,6 @@ impl VectorModel {
         self.signal_names = names;
     }
 
-    /// Records that the training state was measured at `frames` of `samples` grid samples only
-    /// (a camera slower than the grid, or dropping frames): a warning in the summary says so
-    /// and what training did (it trained, and scored held out, on the state interpolated
-    /// between the frames; expectation-maximisation over the latent samples,
-    /// [`crate::HysteresisModel::fit_latent`], is built for scalar models).
-    pub fn note_sparse_state(&mut self, frames: usize, samples: usize) {
-        self.summary.warnings.push(format!(
-            "the state was measured at {:.0}% of the grid's samples ({frames} frames); a vector \
-             model trains on the state interpolated between them and scores its held-out data \
-             there too, so the interpolation's straight lines are learned as dynamics (a scalar \
-             model treats those samples as latent): record the state at the sensor's rate where \
-             you can, and check the model with `hbn eval` on a log whose state is measured at \
-             every sample",
-            100.0 * frames as f64 / samples.max(1) as f64
-        ));
-    }
-
     /// Records how the training logs were read (time source name, largest gap in seconds).
     pub fn set_read_options(&mut self, time_source: &str, max_gap_s: f64) {
         self.read_options = Some((time_source.to_owned(), max_gap_s));

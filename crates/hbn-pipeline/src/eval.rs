@@ -99,6 +99,11 @@ impl Evaluation {
 
 /// `series` (one value per grid sample) at the time of `frame`, interpolated between the grid
 /// samples around it; NaN past the series' end.
+/// `series` at the time of each frame (interpolated between the grid samples around it).
+pub(crate) fn at_frames(series: &[f64], frames: &[hbn_io::GridSample]) -> Vec<f64> {
+    frames.iter().map(|f| at_frame(series, f)).collect()
+}
+
 fn at_frame(series: &[f64], frame: &hbn_io::GridSample) -> f64 {
     let after = series.get(frame.k).copied().unwrap_or(f64::NAN);
     match frame.k.checked_sub(1).and_then(|k| series.get(k)) {
@@ -121,7 +126,7 @@ pub fn score_against_log(method: Method, x: &[f64], x_std: Option<&[f64]>, log: 
     };
     match log.state_frames() {
         Some(frames) => {
-            let at = |s: &[f64]| -> Vec<f64> { frames.iter().map(|f| at_frame(s, f)).collect() };
+            let at = |s: &[f64]| at_frames(s, frames);
             let reference: Vec<f64> = frames.iter().map(|f| f.value).collect();
             let sd = x_std.map(at);
             score(&at(x), sd.as_deref(), &reference)

@@ -305,8 +305,15 @@ impl LogData {
     /// ([`LogData::sparse`]: a camera slower than the grid, or dropping many frames); `None`
     /// when it is measured at about every grid sample.
     pub fn state_frames(&self) -> Option<&[hbn_io::GridSample]> {
+        self.frames_of(1)
+    }
+
+    /// The samples of signal `col` as recorded, when it is measured sparsely
+    /// ([`LogData::sparse`]); `None` when it is measured at about every grid sample. A vector
+    /// state's components are its columns after the inputs.
+    pub fn frames_of(&self, col: usize) -> Option<&[hbn_io::GridSample]> {
         self.sparse
-            .get(1)?
+            .get(col)?
             .as_deref()
             .filter(|frames| !frames.is_empty())
     }

@@ -204,27 +204,16 @@ pub fn train_from_logs(
     .with_signals(described);
     let mut on_training =
         |gp, progress: &hbn_gp::FitProgress| observe(Event::Training { gp, progress });
-    let model = if data.iter().any(|d| state_frames(d).is_some()) {
+    let model = if data.iter().any(|d| state_frames(d, 1).is_some()) {
         // The state is latent between its measurements: expectation-maximisation.
         let measured: Vec<(Vec<StateFrame>, Option<Vec<bool>>)> = data
             .iter()
-            .map(|d| match state_frames(d) {
-                Some(frames) => {
-                    let mask = observed_mask(&frames, d.len());
-                    (frames, Some(mask))
-                }
-                None => (
-                    d.column(1)
-                        .iter()
-                        .enumerate()
-                        .map(|(k, &value)| StateFrame {
-                            k,
-                            weight: 1.0,
-                            value,
-                        })
-                        .collect(),
-                    None,
-                ),
+            .map(|d| {
+                let frames = column_frames(d, 1);
+                let mask = state_frames(d, 1)
+                    .is_some()
+                    .then(|| observed_mask(&frames, d.len()));
+                (frames, mask)
             })
             .collect();
         let runs: Vec<LatentRun<'_>> = data
@@ -260,11 +249,11 @@ fn lacks_topic(e: &PipelineError, topic: &str) -> bool {
     } if t == topic)
 }
 
-/// The state's measurements of a log whose state is measured sparsely
+/// The measurements of column `col` (a state) of a log whose state is measured sparsely
 /// ([`LogData::sparse`]), as frames of the smoother; `None` when it is measured about as often
 /// as the grid runs.
-fn state_frames(log: &LogData) -> Option<Vec<StateFrame>> {
-    let samples = log.sparse.get(1)?.as_ref()?;
+pub(crate) fn state_frames(log: &LogData, col: usize) -> Option<Vec<StateFrame>> {
+    let samples = log.sparse.get(col)?.as_ref()?;
     Some(
         samples
             .iter()
@@ -275,6 +264,22 @@ fn state_frames(log: &LogData) -> Option<Vec<StateFrame>> {
             })
             .collect(),
     )
+}
+
+/// The frames of column `col` (a state): its measurements where it is measured sparsely
+/// ([`state_frames`]), else every grid sample's value.
+pub(crate) fn column_frames(log: &LogData, col: usize) -> Vec<StateFrame> {
+    state_frames(log, col).unwrap_or_else(|| {
+        log.column(col)
+            .iter()
+            .enumerate()
+            .map(|(k, &value)| StateFrame {
+                k,
+                weight: 1.0,
+                value,
+            })
+            .collect()
+    })
 }
 
 #[cfg(test)]

@@ -10,13 +10,17 @@ use hbn_core::{Flags, Mode};
 use hbn_io::SignalPath;
 use hbn_model::metrics::{Calibration, calibration, nrmse, rmse};
 use hbn_model::{
-    HbnParams, Problem, SensorInputs, SignalNames, VectorEstimate, VectorModel, VectorSequence,
+    HbnParams, Problem, SensorInputs, SignalNames, StateFrame, VectorEstimate, VectorLatentRun,
+    VectorModel, VectorSequence,
 };
 use serde_json::{Value, json};
 
 use crate::error::{LogOption, OptionError, PipelineError};
+use crate::eval::at_frames;
 use crate::log::{Event, GridRate, LogData, LogOptions, Observer, load_log, load_log_pieces};
-use crate::train::{DEFAULT_INPUT, DEFAULT_OUTPUT, DEFAULT_STATE, MIN_PIECE_SAMPLES};
+use crate::train::{
+    DEFAULT_INPUT, DEFAULT_OUTPUT, DEFAULT_STATE, MIN_PIECE_SAMPLES, column_frames, state_frames,
+};
 
 /// Where the signals of a vector system are in the logs, in order.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -223,27 +227,30 @@ pub fn train_vector_from_logs(
         .iter()
         .map(|(u, x, y)| VectorSequence::new(u, x, y, dims))
         .collect();
-    let mut model = VectorModel::fit_with_sensors(&seqs, &params, signals.names(), sensor_inputs)?;
-    model.set_read_options(opts.time_source.name(), opts.max_gap_s);
-    // A state measured sparsely (its first component's frames stand for all: one camera).
-    let frames: Vec<Option<usize>> = data
+    // A state measured sparsely (a camera slower than the grid, or dropping frames) is latent
+    // between its frames: expectation-maximisation.
+    let sparse = data
         .iter()
-        .map(|d| {
-            d.sparse
-                .get(state_col)
-                .and_then(|s| s.as_ref())
-                .map(Vec::len)
-        })
-        .collect();
-    if frames.iter().any(Option::is_some) {
-        let samples: usize = data.iter().map(LogData::len).sum();
-        let measured: usize = frames
+        .any(|d| (state_col..state_col + dims.states).any(|c| state_frames(d, c).is_some()));
+    let mut model = if sparse {
+        let frames: Vec<Vec<Vec<StateFrame>>> = data
             .iter()
-            .zip(&data)
-            .map(|(f, d)| f.unwrap_or(d.len()))
-            .sum();
-        model.note_sparse_state(measured, samples);
-    }
+            .map(|d| {
+                (state_col..state_col + dims.states)
+                    .map(|c| column_frames(d, c))
+                    .collect()
+            })
+            .collect();
+        let runs: Vec<VectorLatentRun<'_>> = seqs
+            .iter()
+            .zip(&frames)
+            .map(|(seq, frames)| VectorLatentRun { seq: *seq, frames })
+            .collect();
+        VectorModel::fit_latent(&runs, &params, signals.names(), sensor_inputs)?
+    } else {
+        VectorModel::fit_with_sensors(&seqs, &params, signals.names(), sensor_inputs)?
+    };
+    model.set_read_options(opts.time_source.name(), opts.max_gap_s);
     Ok(TrainedVector { model, logs: data })
 }
 
@@ -551,8 +558,10 @@ impl VectorEvaluation {
 }
 
 /// Runs `model` over a log in each of `modes` and scores every state component against the
-/// logged state (`signals.states`). With `smooth`, each mode's run is followed by its smoothed
-/// run ([`VectorModel::smooth`]).
+/// logged state (`signals.states`): at every grid sample, or where the state is measured
+/// sparsely (a camera, [`LogData::frames_of`]) at its frames only, each against the estimate
+/// interpolated to the frame's time. With `smooth`, each mode's run is followed by its
+/// smoothed run ([`VectorModel::smooth`]).
 pub fn evaluate_vector_log(
     model: &VectorModel,
     file: &Path,
@@ -573,12 +582,20 @@ pub fn evaluate_vector_log(
     let score = |estimate: &VectorEstimate| -> Vec<ComponentScore> {
         (0..d.states)
             .map(|i| {
-                let truth = log.column(d.inputs + i);
+                let col = d.inputs + i;
                 let (x, s) = (estimate.component(i), estimate.component_std(i));
+                let (x, s, truth) = match log.frames_of(col) {
+                    Some(frames) => (
+                        at_frames(&x, frames),
+                        at_frames(&s, frames),
+                        frames.iter().map(|f| f.value).collect(),
+                    ),
+                    None => (x, s, log.column(col).to_vec()),
+                };
                 ComponentScore {
-                    rmse: rmse(&x, truth),
-                    nrmse: nrmse(&x, truth),
-                    calibration: calibration(&x, &s, truth),
+                    rmse: rmse(&x, &truth),
+                    nrmse: nrmse(&x, &truth),
+                    calibration: calibration(&x, &s, &truth),
                 }
             })
             .collect()
