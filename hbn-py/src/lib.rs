@@ -1461,9 +1461,7 @@ impl VectorModelCore {
             let seqs: Vec<VectorSequence<'_>> = (0..u.len())
                 .map(|i| VectorSequence::new(&u[i], &x[i], &y[i], dims))
                 .collect();
-            Ok(VectorModel::fit_with_sensors(
-                &seqs, &checked, names, &sensors,
-            )?)
+            Ok(VectorModel::fit_partial(&seqs, &checked, names, &sensors)?)
         })?;
         Ok(Self::wrap(inner))
     }

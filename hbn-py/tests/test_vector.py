@@ -65,6 +65,31 @@ def test_a_vector_model_smooths(vector):
         model.smooth(u, y[:-1])
 
 
+def test_a_vector_state_measured_sometimes_trains_by_em():
+    # The state filmed at every fifth sample, one component's frames partly dropped: NaN
+    # elsewhere. Training runs expectation-maximisation over the latent samples.
+    u, x, y = coupled(300, 1)
+    filmed = np.full_like(x, np.nan)
+    filmed[::5] = x[::5]
+    filmed[100:160:5, 1] = np.nan
+    model = hbn.HysteresisModel.fit(u, filmed, y, **FAST)
+    latent = model.summary["latent"]
+    measured = np.isfinite(filmed).mean()
+    assert abs(latent["observed"] - measured) < 1e-9, latent
+    assert latent["frames"] == 60 and latent["rounds"][0]["round"] == 0, latent
+    assert any("latent" in w for w in model.summary["warnings"])
+    ut, xt, yt = coupled(200, 2)
+    est = model.estimate(ut, yt)
+    for i in range(2):
+        assert nrmse(est.x[:, i], xt[:, i]) < 0.1, i
+    with pytest.raises(hbn.DataError, match="no trajectory has a measured state"):
+        hbn.HysteresisModel.fit(u, np.full_like(x, np.nan), y, **FAST)
+    broken = filmed.copy()
+    broken[7, 0] = np.inf
+    with pytest.raises(hbn.DataError):
+        hbn.HysteresisModel.fit(u, broken, y, **FAST)
+
+
 def test_2d_arrays_train_a_vector_model_that_tracks_both_components(vector):
     model, (u, x, y) = vector
     assert model.is_vector and model.dims == (2, 2, 3)

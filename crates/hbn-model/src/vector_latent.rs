@@ -12,7 +12,7 @@ use std::time::Instant;
 use crate::latent::{
     FRAME_STD, LatentReport, PartialState, em_rounds, latent_warning, observed_mask, round_rng,
 };
-use crate::params::{CheckedHbnParams, HbnParams, SensorInputs};
+use crate::params::{CheckedHbnParams, SensorInputs};
 use crate::smooth::StateFrame;
 use crate::vector::{Frames, SignalNames, VectorModel, VectorSequence};
 use crate::{DataError, ModelError, Signal};
@@ -63,17 +63,19 @@ fn held_out(model: &VectorModel) -> Option<(f64, f64)> {
 }
 
 impl VectorModel {
-    /// [`VectorModel::fit`] for trajectories whose state is NaN where it was not measured (a
-    /// slow or dropping camera; a component may be missing alone): [`VectorModel::fit_latent`]
-    /// over the measured values ([`PartialState::from_gaps`], per component) when some are
-    /// missing, the plain fit otherwise. A trajectory whose state is NaN throughout (only `u`
-    /// and `y` were logged) joins from EM's first refit; when no trajectory has every
-    /// component measured somewhere, the error is [`DataError::NoStateMeasured`].
+    /// [`VectorModel::fit_with_sensors`] for trajectories whose state is NaN where it was not
+    /// measured (a slow or dropping camera; a component may be missing alone):
+    /// [`VectorModel::fit_latent`] over the measured values ([`PartialState::from_gaps`], per
+    /// component) when some are missing, the plain fit otherwise. A trajectory whose state is
+    /// NaN throughout (only `u` and `y` were logged) joins from EM's first refit; when no
+    /// trajectory has every component measured somewhere, the error is
+    /// [`DataError::NoStateMeasured`].
     pub fn fit_partial(
         trajectories: &[VectorSequence<'_>],
-        params: &HbnParams,
+        params: &CheckedHbnParams,
+        names: SignalNames,
+        sensors: &[SensorInputs],
     ) -> Result<Self, ModelError> {
-        let checked = params.clone().check()?;
         // NaN marks a value without a measurement; an infinity is a broken one.
         for (trajectory, t) in trajectories.iter().enumerate() {
             if let Some((index, &value)) = t.x.iter().enumerate().find(|(_, v)| v.is_infinite()) {
@@ -90,7 +92,7 @@ impl VectorModel {
             .iter()
             .all(|t| t.x.iter().all(|v| v.is_finite()))
         {
-            return Self::fit_checked(trajectories, &checked, SignalNames::default());
+            return Self::fit_with_sensors(trajectories, params, names, sensors);
         }
         // Per run: the state interpolated component by component, and each one's frames.
         let parts: Vec<(Vec<f64>, Vec<Vec<StateFrame>>)> = trajectories
@@ -122,7 +124,7 @@ impl VectorModel {
                 frames,
             })
             .collect();
-        Self::fit_latent(&runs, &checked, SignalNames::default(), &[])
+        Self::fit_latent(&runs, params, names, sensors)
     }
 
     /// Learns every GP from runs whose state was measured only at some samples

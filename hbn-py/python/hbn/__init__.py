@@ -1032,9 +1032,10 @@ class HysteresisModel:
         ``{"name", "path", "unit"}`` dicts as values; for a vector model a list of names or
         message paths per key, one per column): ``hbn estimate --model`` then reads ``u`` and
         ``y`` from those message paths. To train from MCAP logs use :meth:`from_logs`, which
-        keeps the logs' rate. For a scalar model, ``x`` may be NaN where the state was not
-        measured (a camera slower than ``u`` and ``y``, or dropped frames): those samples are
-        latent, and training runs expectation-maximisation over them (``docs/slow-camera.md``);
+        keeps the logs' rate. ``x`` may be NaN where the state was not measured (a camera slower
+        than ``u`` and ``y``, or dropped frames; for a vector model, per component): those
+        samples are latent, and training runs expectation-maximisation over them
+        (``docs/slow-camera.md``);
         a trajectory whose ``x`` is NaN throughout (only ``u`` and ``y`` logged) joins its
         refits, beside at least one trajectory with a measured state;
         ``summary["latent"]`` records how much was measured and what each round scored. A
