@@ -16,7 +16,10 @@ What it measures. For every simulator x noise gain x seed (a *cell*) and every c
 * ``hbn estimate --model model.hbn --log TEST --csv`` (the model's default mode) is scored
   against the test log's true state at every 100 Hz sample: nRMSE, RMSE / (max - min) of the
   true state, and the share of samples within 2 standard deviations (``common.nrmse`` and
-  ``common.calibration`` of ``benches/baselines``).
+  ``common.calibration`` of ``benches/baselines``). A multi-signal system (``finger``,
+  ``arm``: a vector model, its state a topic with a field per component, the camera filming
+  every component at once) is scored per component, and its cell's nRMSE and coverage are the
+  means over the components.
 
 It prints the machine, the date, the command and the ``hbn`` binary, then a row per cell and
 camera (system, gain, seed, camera, frames kept, nRMSE, 2-sigma coverage, training seconds),
@@ -60,7 +63,7 @@ import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -68,6 +71,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benches" / "baselines"))
 
 import common  # noqa: E402
+import vector_gp_ekf  # noqa: E402
 
 #: The simulator's rate (Hz): `hbn simulate`'s default, the rate of the sensor and the input.
 SIM_RATE = 100.0
@@ -124,17 +128,46 @@ def simulate(hbn: str, system: str, gain: float, seed: int, steps: int, out: Pat
 
 
 def read_estimate_csv(path: Path) -> Dict[str, np.ndarray]:
-    """The columns ``t``, ``x``, ``x_std`` of a scalar model's ``hbn estimate --csv``."""
+    """The columns ``t``, ``x``, ``x_std`` of ``hbn estimate --csv``; for a vector model's
+    (``x0``, ``x0_std``, ``x1``, ...), ``x`` and ``x_std`` are ``(T, dx)``."""
     with open(path, newline="") as f:
         rows = list(csv.DictReader(f))
 
     def col(name: str) -> np.ndarray:
         return np.array([float(r[name]) if r[name] != "" else math.nan for r in rows], dtype=np.float64)
 
-    return {k: col(k) for k in ("t", "x", "x_std")}
+    names = list(rows[0]) if rows else []
+    if "x" in names or not rows:
+        return {k: col(k) for k in ("t", "x", "x_std")}
+    dx = sum(1 for n in names if re.fullmatch(r"x\d+", n))
+    return {
+        "t": col("t"),
+        "x": np.column_stack([col(f"x{i}") for i in range(dx)]),
+        "x_std": np.column_stack([col(f"x{i}_std") for i in range(dx)]),
+    }
 
 
-def train_and_score(hbn: str, train_log: Path, test_log: Path, truth: common.Log, workdir: Path) -> Dict[str, Any]:
+def read_truth(system: str, test_log: Path) -> Tuple[np.ndarray, float]:
+    """The true state of a test log at every sample (``(T,)``, or ``(T, dx)`` for a
+    multi-signal system) and its rate."""
+    import hbn
+
+    if system in hbn.MULTI_SYSTEMS:
+        _, test = vector_gp_ekf.read_vector_logs([str(test_log)], str(test_log))
+        return test.x, test.rate
+    log = common.read_log(str(test_log), common.DEFAULT_PATHS)
+    return log.x, log.rate
+
+
+def score(x: np.ndarray, x_std: np.ndarray, truth: np.ndarray) -> Tuple[float, float]:
+    """nRMSE and 2-sigma coverage; for a vector state the means over its components."""
+    if truth.ndim == 1:
+        return common.nrmse(x, truth), common.calibration(x, x_std, truth)["coverage_2sigma"]
+    per = [score(x[:, i], x_std[:, i], truth[:, i]) for i in range(truth.shape[1])]
+    return float(np.mean([p[0] for p in per])), float(np.mean([p[1] for p in per]))
+
+
+def train_and_score(hbn: str, train_log: Path, test_log: Path, truth: Tuple[np.ndarray, float], workdir: Path) -> Dict[str, Any]:
     """``hbn train`` (defaults) on ``train_log``, ``hbn estimate --csv`` on ``test_log``,
     scored against ``truth``: ``nrmse``, ``coverage_2sigma``, ``train_seconds``, the mode and
     the training summary."""
@@ -144,13 +177,15 @@ def train_and_score(hbn: str, train_log: Path, test_log: Path, truth: common.Log
     train_seconds = time.perf_counter() - t0
     es = run([hbn, "-q", "estimate", "--model", str(model), "--log", str(test_log), "--csv", str(est)])
     e = read_estimate_csv(est)
-    grid = np.arange(len(truth)) / truth.rate
+    x_true, rate = truth
+    grid = np.arange(len(x_true)) / rate
     if e["t"].shape != grid.shape or not np.allclose(e["t"], grid, rtol=0.0, atol=1e-6):
-        raise ValueError(f"the estimate has {e['t'].size} samples, the test log {grid.size} at {truth.rate:g} Hz")
+        raise ValueError(f"the estimate has {e['t'].size} samples, the test log {grid.size} at {rate:g} Hz")
     mode = re.search(r"\n\s+(\S+) \(the model's default mode\)", "\n" + es.stdout)
+    nrmse, coverage = score(e["x"], e["x_std"], x_true)
     return {
-        "nrmse": common.nrmse(e["x"], truth.x),
-        "coverage_2sigma": common.calibration(e["x"], e["x_std"], truth.x)["coverage_2sigma"],
+        "nrmse": nrmse,
+        "coverage_2sigma": coverage,
         "train_seconds": train_seconds,
         "mode": mode.group(1) if mode else None,
         "train_summary": tr.stdout.strip(),
@@ -232,7 +267,7 @@ def _csv(text: str, kind: type) -> List[Any]:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """The command line (see the module docstring); returns the exit code."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--systems", default="bouc-wen,duhem,preisach", help="scalar systems of `hbn simulate --help`, comma-separated")
+    ap.add_argument("--systems", default="bouc-wen,duhem,preisach", help="systems of `hbn simulate --help` (scalar or multi-signal), comma-separated")
     ap.add_argument("--gains", default="0,1,10", help="noise gains, comma-separated")
     ap.add_argument("--seeds", default="1,2,3", help="seeds, comma-separated (the test log's seed is 1000 + seed)")
     ap.add_argument("--steps", type=int, default=3000, help="samples of a training log (100 Hz)")
@@ -284,7 +319,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 for seed in seeds:
                     test_log = wd / "test.mcap"
                     simulate(a.hbn, system, gain, TEST_SEED_OFFSET + seed, a.test_steps, test_log, None)
-                    truth = common.read_log(str(test_log), common.DEFAULT_PATHS)
+                    truth = read_truth(system, test_log)
                     for cam in cameras:
                         row: Dict[str, Any] = {"system": system, "gain": gain, "seed": seed, "camera": cam.label, "rate": cam.rate, "drop": cam.drop}
                         try:
