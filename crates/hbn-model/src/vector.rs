@@ -1337,3 +1337,79 @@ pub fn sensor_rows(
     }
     (rows, targets)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hbn_sim::{MultiConfig, MultiKind, simulate_multi_random};
+
+    fn rows(signals: &[Vec<f64>]) -> Vec<f64> {
+        let t = signals[0].len();
+        (0..t)
+            .flat_map(|k| signals.iter().map(move |s| s[k]))
+            .collect()
+    }
+
+    /// The held-out score reads the state only where the mask says it was measured: nonsense
+    /// elsewhere changes nothing, and the mask changes what is scored.
+    #[test]
+    fn the_held_out_score_reads_measured_values_only() {
+        let kind = MultiKind::Finger;
+        let dims = Dims::new(kind.inputs(), kind.states(), kind.sensors()).unwrap();
+        let mut cfg = MultiConfig::new(kind);
+        cfg.noise_gain = 1.0;
+        let run = simulate_multi_random(&cfg, 400).unwrap();
+        let (u, x, y) = (rows(&run.u), rows(&run.x), rows(&run.y));
+        let seq = VectorSequence::new(&u, &x, &y, dims);
+        let params = HbnParams {
+            max_points: 80,
+            n_starts: 1,
+            max_iters: 30,
+            ..HbnParams::default()
+        }
+        .check()
+        .unwrap();
+        let plays = Plays::with_lags(&params.memory, &[]).unwrap();
+        let fit = VectorModel::fit_gps(&[seq], &params, &plays, None).unwrap();
+        let model = VectorModel::fit(&[seq], &params).unwrap();
+        // Component 0 measured at every third sample, component 1 at every fifth.
+        let mask: Vec<bool> = (0..x.len())
+            .map(|j| {
+                let (k, i) = (j / 2, j % 2);
+                if i == 0 { k % 3 == 0 } else { k % 5 == 0 }
+            })
+            .collect();
+        let nonsense: Vec<f64> = x
+            .iter()
+            .zip(&mask)
+            .map(|(v, m)| if *m { *v } else { 1e3 })
+            .collect();
+        let score = |x: &[f64], mask: Option<&[bool]>| {
+            let mut held = VectorSequence::new(&u, x, &y, dims);
+            if let Some(m) = mask {
+                held = held.with_observed(m);
+            }
+            model
+                .held_out_score(&[&[held][..]], std::slice::from_ref(&fit))
+                .unwrap()
+        };
+        let (a, b, all) = (
+            score(&x, Some(&mask)),
+            score(&nonsense, Some(&mask)),
+            score(&x, None),
+        );
+        assert_eq!(a.nlpd, b.nlpd);
+        assert_eq!(a.nrmse, b.nrmse);
+        assert_eq!(a.normalised[0].len(), 134);
+        assert_eq!(a.normalised[1].len(), 80);
+        assert_eq!(all.normalised[0].len(), 400);
+        assert!(a.nlpd.is_finite() && a.nlpd != all.nlpd);
+        // A mask of the wrong length is refused.
+        let short = vec![true; 10];
+        let e = VectorSequence::new(&u, &x, &y, dims)
+            .with_observed(&short)
+            .validate(0)
+            .unwrap_err();
+        assert!(matches!(e, DataError::ObservedLength { .. }), "{e}");
+    }
+}
