@@ -99,47 +99,9 @@ pub fn train_from_logs(
         signals.state.clone(),
         signals.output.clone(),
     ];
-    let mut rate = opts.rate_hz;
-    let mut data = Vec::with_capacity(logs.len());
-    // The first log without the state's topic, reported if no log has it.
-    let mut missing_state = None;
-    for file in logs {
-        // Without a rate, the sensor's (position 2) sets the grid; later logs take the first's.
-        let grid = rate.map_or(GridRate::SlowestOf(&[2]), GridRate::Given);
-        let split = match load_log_pieces(file, &paths, grid, &opts, MIN_PIECE_SAMPLES, observe) {
-            // A log without the state's topic (only u and y recorded) joins with its state
-            // latent; a missing field of a topic that is there stays an error (a typo).
-            Err(e) if lacks_topic(&e, &signals.state.topic) => {
-                missing_state.get_or_insert(e);
-                observe(Event::NoState {
-                    file,
-                    path: &signals.state,
-                });
-                let io_paths = [signals.input.clone(), signals.output.clone()];
-                let grid = rate.map_or(GridRate::SlowestOf(&[1]), GridRate::Given);
-                let mut split =
-                    load_log_pieces(file, &io_paths, grid, &opts, MIN_PIECE_SAMPLES, observe)?;
-                split.pieces = split
-                    .pieces
-                    .into_iter()
-                    .map(|p| p.with_unrecorded(1, &signals.state))
-                    .collect();
-                split
-            }
-            other => other?,
-        };
-        for piece in split.pieces {
-            rate = Some(piece.rate_hz());
-            data.push(piece);
-        }
-    }
-    if let Some(e) = missing_state
-        && data
-            .iter()
-            .all(|d| d.samples_recorded.get(1).is_none_or(|&n| n == 0))
-    {
-        return Err(e);
-    }
+    // Without a rate, the sensor's (position 2) sets the grid; later logs take the first's.
+    let data = load_training_logs(logs, &paths, 1..2, &[2], &opts, observe)?;
+    let rate = data.first().map(LogData::rate_hz).or(opts.rate_hz);
     // The state is what the model learns from: refuse to train on a sliver of it.
     let state_samples: usize = data
         .iter()
@@ -239,6 +201,81 @@ pub fn train_from_logs(
         HysteresisModel::fit_checked(&seqs, &params, &mut on_training)?
     };
     Ok(Trained { model, logs: data })
+}
+
+/// The training logs' pieces on one grid: `opts`' rate, or the slowest of the signals at
+/// `sensors` (positions in `paths`) in the first log, which the later logs take. A log without
+/// the topic of the state's signals (`paths[states]`: only `u` and `y` were recorded) joins
+/// with its state latent throughout ([`LogData::with_unrecorded`], [`Event::NoState`]); when
+/// no log has the state, the error is the first log's missing topic. A missing field of a
+/// topic that is there stays an error (a typo).
+pub(crate) fn load_training_logs(
+    logs: &[PathBuf],
+    paths: &[SignalPath],
+    states: std::ops::Range<usize>,
+    sensors: &[usize],
+    opts: &crate::CheckedLogOptions,
+    observe: &mut Observer<'_>,
+) -> Result<Vec<LogData>, PipelineError> {
+    let mut rate = opts.rate_hz;
+    let mut data = Vec::with_capacity(logs.len());
+    // The first log without the state's topic, reported if no log has it.
+    let mut missing_state = None;
+    let state_paths = paths.get(states.clone()).unwrap_or(&[]);
+    // Without the state, the sensors sit `states.len()` positions earlier.
+    let io_sensors: Vec<usize> = sensors
+        .iter()
+        .map(|&i| if i >= states.end { i - states.len() } else { i })
+        .collect();
+    for file in logs {
+        let grid = rate.map_or(GridRate::SlowestOf(sensors), GridRate::Given);
+        let split = match load_log_pieces(file, paths, grid, opts, MIN_PIECE_SAMPLES, observe) {
+            Err(e) if state_paths.iter().any(|p| lacks_topic(&e, &p.topic)) => {
+                missing_state.get_or_insert(e);
+                // Once per topic: a vector state's components are fields of one topic.
+                for (i, path) in state_paths.iter().enumerate() {
+                    if !state_paths[..i].iter().any(|p| p.topic == path.topic) {
+                        observe(Event::NoState { file, path });
+                    }
+                }
+                let io_paths: Vec<SignalPath> = paths
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| !states.contains(i))
+                    .map(|(_, p)| p.clone())
+                    .collect();
+                let grid = rate.map_or(GridRate::SlowestOf(&io_sensors), GridRate::Given);
+                let mut split =
+                    load_log_pieces(file, &io_paths, grid, opts, MIN_PIECE_SAMPLES, observe)?;
+                split.pieces = split
+                    .pieces
+                    .into_iter()
+                    .map(|p| {
+                        state_paths
+                            .iter()
+                            .zip(states.clone())
+                            .fold(p, |p, (path, at)| p.with_unrecorded(at, path))
+                    })
+                    .collect();
+                split
+            }
+            other => other?,
+        };
+        for piece in split.pieces {
+            rate = Some(piece.rate_hz());
+            data.push(piece);
+        }
+    }
+    if let Some(e) = missing_state
+        && data.iter().all(|d| {
+            states
+                .clone()
+                .all(|c| d.samples_recorded.get(c).is_none_or(|&n| n == 0))
+        })
+    {
+        return Err(e);
+    }
+    Ok(data)
 }
 
 /// Whether `e` is a log's lack of `topic`.

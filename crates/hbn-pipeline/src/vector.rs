@@ -17,10 +17,9 @@ use serde_json::{Value, json};
 
 use crate::error::{LogOption, OptionError, PipelineError};
 use crate::eval::at_frames;
-use crate::log::{Event, GridRate, LogData, LogOptions, Observer, load_log, load_log_pieces};
-use crate::train::{
-    DEFAULT_INPUT, DEFAULT_OUTPUT, DEFAULT_STATE, MIN_PIECE_SAMPLES, column_frames, state_frames,
-};
+use crate::log::{Event, GridRate, LogData, LogOptions, Observer, load_log};
+use crate::train::load_training_logs;
+use crate::train::{DEFAULT_INPUT, DEFAULT_OUTPUT, DEFAULT_STATE, column_frames, state_frames};
 
 /// Where the signals of a vector system are in the logs, in order.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -175,19 +174,18 @@ pub fn train_vector_from_logs(
     let opts = log_options.check()?;
     let params = params.check()?;
     let paths = signals.all();
-    let mut rate = opts.rate_hz;
     // Without a rate, the slowest sensor sets the grid; later logs take the first's.
     let sensors: Vec<usize> = (dims.inputs + dims.states..paths.len()).collect();
-    let mut data = Vec::new();
-    for file in logs {
-        let grid = rate.map_or(GridRate::SlowestOf(&sensors), GridRate::Given);
-        let split = load_log_pieces(file, &paths, grid, &opts, MIN_PIECE_SAMPLES, observe)?;
-        for piece in split.pieces {
-            rate = Some(piece.rate_hz());
-            data.push(piece);
-        }
-    }
     let state_col = dims.inputs;
+    let data = load_training_logs(
+        logs,
+        &paths,
+        state_col..state_col + dims.states,
+        &sensors,
+        &opts,
+        observe,
+    )?;
+    let rate = data.first().map(LogData::rate_hz).or(opts.rate_hz);
     let state_samples: usize = data
         .iter()
         .map(|d| d.samples_in_grid.get(state_col).copied().unwrap_or(0))
