@@ -426,6 +426,10 @@ impl HysteresisModel {
                 // latent states' spread, where the smoothed means would show it a trajectory
                 // smoother than the state and a noise too small.
                 let mut rng = round_rng(refit.seed, round);
+                // The measured samples keep the values the first fit had, so that every round's
+                // held-out score compares the filter with the same references (a path drawn
+                // around a frame between two grid samples pins only their mix, not the sample
+                // the mask marks).
                 let smoothed: Vec<Vec<f64>> = runs
                     .iter()
                     .map(|r| {
@@ -434,7 +438,9 @@ impl HysteresisModel {
                                 s.states
                                     .sample_path(|| rng.normal())
                                     .iter()
-                                    .map(|z| z.x)
+                                    .zip(r.seq.x)
+                                    .enumerate()
+                                    .map(|(k, (z, x))| if r.seq.is_observed(k) { *x } else { z.x })
                                     .collect()
                             })
                     })
@@ -647,9 +653,11 @@ mod tests {
     /// A case built for EM: Bouc-Wen at noise gain 1, the state filmed at every fourth sample
     /// (halfway between two grid samples). The model trained on the interpolated state learns
     /// the interpolation's straight lines; EM's refits on paths drawn from the smoothed states
-    /// score better held out round after round (measured: nRMSE 0.0200 -> 0.0172 at the
-    /// measured samples, NLPD -2.64 -> -3.22 nats over four refits) and estimate a fresh run more accurately
-    /// (0.0200 against 0.0205), and the model kept has the best held-out score of its rounds.
+    /// score better held out (measured: nRMSE 0.0200 -> 0.0179 at the measured samples, NLPD
+    /// -2.64 -> -2.85 nats, round 2 of 3 kept) and estimate a fresh run more accurately (0.0166
+    /// against 0.0205; 0.0200 when the refits trained on the drawn path at the measured samples
+    /// too, whose held-out references then moved from round to round), and the model kept has
+    /// the best held-out score of its rounds.
     #[test]
     fn em_improves_on_the_interpolated_state() {
         let cfg = SimConfig {
@@ -714,6 +722,6 @@ mod tests {
         };
         let (a, b) = (score(&interpolated), score(&em));
         eprintln!("interpolated {a}, EM {b}, rounds {:?}", report.rounds);
-        assert!(b < a, "EM {b} against the interpolated state's {a}");
+        assert!(b < 0.9 * a, "EM {b} against the interpolated state's {a}");
     }
 }
