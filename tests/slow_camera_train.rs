@@ -7,6 +7,22 @@ mod run_hbn;
 
 use run_hbn::{ok, s};
 
+/// `hbn eval` of `model` on a camera log: the table says it scored at the state's `frames`
+/// frames, and `--json` gives `state_frames`. Returns the JSON.
+fn scored_at_frames(
+    model: &std::path::Path,
+    log: &std::path::Path,
+    frames: usize,
+) -> serde_json::Value {
+    let scored = ok(&["eval", "--model", &s(model), "--log", &s(log)]);
+    let said = format!("scored at the state's {frames} frames");
+    assert!(scored.stdout.contains(&said), "{}", scored.stdout);
+    let json = ok(&["eval", "--model", &s(model), "--log", &s(log), "--json"]);
+    let v: serde_json::Value = serde_json::from_str(&json.stdout).expect("json");
+    assert_eq!(v["state_frames"], frames, "{v}");
+    v
+}
+
 #[test]
 fn a_slow_camera_log_trains_by_em_and_estimates() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -101,22 +117,7 @@ fn a_slow_camera_log_trains_by_em_and_estimates() {
         "--out",
         &s(&camera_test),
     ]);
-    let scored = ok(&["eval", "--model", &s(&model), "--log", &s(&camera_test)]);
-    assert!(
-        scored.stdout.contains("scored at the state's 120 frames"),
-        "{}",
-        scored.stdout
-    );
-    let json = ok(&[
-        "eval",
-        "--model",
-        &s(&model),
-        "--log",
-        &s(&camera_test),
-        "--json",
-    ]);
-    let v: serde_json::Value = serde_json::from_str(&json.stdout).expect("json");
-    assert_eq!(v["state_frames"], 120, "{v}");
+    let v = scored_at_frames(&model, &camera_test, 120);
     assert_eq!(v["calibration"]["ekf"]["samples"], 120, "{v}");
     // A log with the state at every sample trains as before: no EM, nothing recorded.
     let full = dir.path().join("full.mcap");
@@ -215,22 +216,7 @@ fn a_vector_model_trains_from_a_camera_by_em() {
     // A camera log is scored at its frames, each component.
     let camera_test = dir.path().join("camera_test.mcap");
     finger("4", &["--state-rate", "20"], &camera_test);
-    let scored = ok(&["eval", "--model", &s(&model), "--log", &s(&camera_test)]);
-    assert!(
-        scored.stdout.contains("scored at the state's 240 frames"),
-        "{}",
-        scored.stdout
-    );
-    let json = ok(&[
-        "eval",
-        "--model",
-        &s(&model),
-        "--log",
-        &s(&camera_test),
-        "--json",
-    ]);
-    let v: serde_json::Value = serde_json::from_str(&json.stdout).expect("json");
-    assert_eq!(v["state_frames"], 240, "{v}");
+    scored_at_frames(&model, &camera_test, 240);
     // A camera at the sensor's rate: no EM.
     finger("2", &[], &log);
     let run = ok(&[

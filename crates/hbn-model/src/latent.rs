@@ -300,6 +300,31 @@ pub(crate) fn em_rounds<M>(
     Ok(best)
 }
 
+/// The variance of a frame's measurement noise for a state of training range `range`
+/// ([`FRAME_STD`]).
+pub(crate) fn frame_variance(range: f64) -> f64 {
+    (FRAME_STD * range).powi(2).max(f64::MIN_POSITIVE)
+}
+
+/// Refuses a state with an infinite value ([`crate::DataError::NonFinite`]): NaN marks a
+/// sample without a measurement, an infinity is a broken one. `states`: each trajectory's.
+pub(crate) fn refuse_infinite_states<'a>(
+    states: impl Iterator<Item = &'a [f64]>,
+) -> Result<(), ModelError> {
+    for (trajectory, x) in states.enumerate() {
+        if let Some((index, &value)) = x.iter().enumerate().find(|(_, v)| v.is_infinite()) {
+            return Err(crate::DataError::NonFinite {
+                trajectory,
+                signal: crate::Signal::State,
+                index,
+                value,
+            }
+            .into());
+        }
+    }
+    Ok(())
+}
+
 /// The random draws of round `round`'s latent paths, from the training seed.
 pub(crate) fn round_rng(seed: u64, round: usize) -> Rng {
     Rng::new(seed ^ (round as u64).wrapping_mul(SEED_STRIDE))
@@ -317,18 +342,7 @@ impl HysteresisModel {
         params: &HbnParams,
     ) -> Result<Self, ModelError> {
         let checked = params.clone().check()?;
-        // NaN marks a sample without a measurement; an infinity is a broken one.
-        for (trajectory, t) in trajectories.iter().enumerate() {
-            if let Some((index, &value)) = t.x.iter().enumerate().find(|(_, v)| v.is_infinite()) {
-                return Err(crate::DataError::NonFinite {
-                    trajectory,
-                    signal: crate::Signal::State,
-                    index,
-                    value,
-                }
-                .into());
-            }
-        }
+        refuse_infinite_states(trajectories.iter().map(|t| t.x))?;
         if trajectories
             .iter()
             .all(|t| t.x.iter().all(|v| v.is_finite()))
@@ -413,8 +427,7 @@ impl HysteresisModel {
         // The configuration the first fit chose, trained again on the smoothed states.
         let refit = best.params().clone().check()?;
         let x_stats = best.stats().1;
-        let range = x_stats.max - x_stats.min;
-        let frame_var = (FRAME_STD * range).powi(2).max(f64::MIN_POSITIVE);
+        let frame_var = frame_variance(x_stats.max - x_stats.min);
         let mut best = em_rounds(
             best,
             t0,

@@ -10,12 +10,13 @@
 use std::time::Instant;
 
 use crate::latent::{
-    FRAME_STD, LatentReport, PartialState, em_rounds, latent_warning, observed_mask, round_rng,
+    LatentReport, PartialState, em_rounds, frame_variance, latent_warning, observed_mask,
+    refuse_infinite_states, round_rng,
 };
 use crate::params::{CheckedHbnParams, SensorInputs};
 use crate::smooth::StateFrame;
 use crate::vector::{Frames, SignalNames, VectorModel, VectorSequence};
-use crate::{DataError, ModelError, Signal};
+use crate::{DataError, ModelError};
 
 /// One training run of a vector system whose state was measured at its own times, or not at
 /// all.
@@ -76,18 +77,7 @@ impl VectorModel {
         names: SignalNames,
         sensors: &[SensorInputs],
     ) -> Result<Self, ModelError> {
-        // NaN marks a value without a measurement; an infinity is a broken one.
-        for (trajectory, t) in trajectories.iter().enumerate() {
-            if let Some((index, &value)) = t.x.iter().enumerate().find(|(_, v)| v.is_infinite()) {
-                return Err(DataError::NonFinite {
-                    trajectory,
-                    signal: Signal::State,
-                    index,
-                    value,
-                }
-                .into());
-            }
-        }
+        refuse_infinite_states(trajectories.iter().map(|t| t.x))?;
         if trajectories
             .iter()
             .all(|t| t.x.iter().all(|v| v.is_finite()))
@@ -185,7 +175,7 @@ impl VectorModel {
             .stats()
             .1
             .iter()
-            .map(|s| (FRAME_STD * s.span()).powi(2).max(f64::MIN_POSITIVE))
+            .map(|s| frame_variance(s.span()))
             .collect();
         let mut best = em_rounds(
             best,
