@@ -73,6 +73,33 @@ def test_a_tiny_grid_prints_a_row_per_camera_and_finite_ratios(tmp_path: Path) -
     assert doc["header"]["protocol"]["cameras"] == ["100", "30:0.1"]
 
 
+def test_a_multi_signal_system_is_scored_per_component(tmp_path: Path) -> None:
+    if not HBN.is_file():
+        pytest.skip(f"no hbn binary at {HBN}: build it with `cargo build --release -p hbn-cli` or set HBN_BIN")
+    hbn = pytest.importorskip("hbn", reason="the hbn wheel reads the test log's true state (pip install ./hbn-py)")
+    out = tmp_path / "rows.json"
+    args = ["--systems", "finger", "--gains", "1", "--seeds", "1", "--steps", "600", "--test-steps", "300", "--cameras", "100,30:0.1", "--json", str(out)]
+    p = _run(args, tmp_path)
+    assert p.returncode == 0, p.stdout + p.stderr
+    doc = json.loads(out.read_text())
+    assert [r["camera"] for r in doc["rows"]] == ["100", "30:0.1"]
+    assert not any("error" in r for r in doc["rows"]), doc["rows"]
+    # The cell's nRMSE is the mean of the components' against the test log's true state.
+    test_log = tmp_path / "test.mcap"
+    subprocess.run([str(HBN), "simulate", "--system", "finger", "--steps", "300", "--seed", "1001", "--noise-gain", "1.0", "--out", str(test_log)], check=True, capture_output=True)
+    sys.path.insert(0, str(HERE))
+    import slow_camera
+
+    x_true, rate = slow_camera.read_truth("finger", test_log)
+    assert x_true.shape == (300, 2) and rate == 100.0
+    nrmse, cov = slow_camera.score(x_true + 0.01, x_true * 0 + 0.01, x_true)
+    assert cov == 1.0 and 0.0 < nrmse < 0.1
+    for r in doc["rows"]:
+        assert 0.0 < r["nrmse"] < 1.0 and 0.0 <= r["coverage_2sigma"] <= 1.0, r
+    assert "latent" in doc["rows"][1]["train_summary"]
+    assert hbn.MULTI_SYSTEMS
+
+
 def test_cameras_without_the_reference_or_malformed_are_usage_errors(tmp_path: Path) -> None:
     if not HBN.is_file():
         pytest.skip(f"no hbn binary at {HBN}")
