@@ -21,10 +21,14 @@ What it measures. For every simulator x noise gain x seed (a *cell*) and every c
   every component at once) is scored per component, and its cell's nRMSE and coverage are the
   means over the components.
 
+A camera ``100@SEED`` trains the reference's log again with ``hbn train --seed SEED`` (another
+optimiser start): two models as well informed as each other, whose ratio is the spread that a
+single cell's ratio carries before any frame is missing.
+
 It prints the machine, the date, the command and the ``hbn`` binary, then a row per cell and
 camera (system, gain, seed, camera, frames kept, nRMSE, 2-sigma coverage, training seconds),
 then per camera the geometric mean over cells of nRMSE(camera) / nRMSE(reference), the largest
-cell ratio and the mean over cells of the training-time ratio. The reference is the camera at
+cell ratio, the number of cells above 1.2 and the mean over cells of the training-time ratio. The reference is the camera at
 the simulator's rate without drops (``100``, the state at every sample), which ``--cameras``
 must hold. ``--json FILE`` writes the header, the rows and the summary.
 
@@ -83,30 +87,39 @@ TABLE_HEADER = "| system | gain | seed | camera | frames kept | nRMSE | cov. 2σ
 
 @dataclass(frozen=True)
 class Camera:
-    """A camera of ``--cameras``: ``RATE[:DROP]``."""
+    """A camera of ``--cameras``: ``RATE[:DROP][@SEED]``."""
 
     rate: float
     drop: float
     label: str
+    #: ``hbn train --seed`` (``None``: its default).
+    train_seed: Optional[int] = None
 
     @property
     def is_reference(self) -> bool:
-        """The state at every sample: the simulator's rate, nothing dropped."""
-        return self.rate == SIM_RATE and self.drop == 0.0
+        """The state at every sample: the simulator's rate, nothing dropped, trained with the
+        default seed."""
+        return self.rate == SIM_RATE and self.drop == 0.0 and self.train_seed is None
 
 
 def parse_camera(text: str) -> Camera:
-    """``"30:0.1"`` -> 30 Hz dropping 10% of its frames; ``"10"`` -> 10 Hz, nothing dropped."""
-    rate_s, _, drop_s = text.strip().partition(":")
+    """``"30:0.1"`` -> 30 Hz dropping 10% of its frames; ``"10"`` -> 10 Hz, nothing dropped;
+    ``"100@2"`` -> the state at every sample, the model trained with ``hbn train --seed 2``
+    (two equally informed models: the spread of the ratio itself)."""
+    spec, at, seed_s = text.strip().partition("@")
+    rate_s, _, drop_s = spec.partition(":")
     try:
         rate, drop = float(rate_s), float(drop_s) if drop_s else 0.0
+        train_seed = int(seed_s) if at else None
     except ValueError:
-        raise ValueError(f"camera {text!r}: expected RATE[:DROP], e.g. 30:0.1") from None
+        raise ValueError(f"camera {text!r}: expected RATE[:DROP][@SEED], e.g. 30:0.1 or 100@2") from None
+    if train_seed is not None and train_seed < 0:
+        raise ValueError(f"camera {text!r}: the training seed must be >= 0")
     if not (math.isfinite(rate) and 0.0 < rate <= SIM_RATE):
         raise ValueError(f"camera {text!r}: the rate must be in (0, {SIM_RATE:g}] Hz")
     if not 0.0 <= drop < 1.0:
         raise ValueError(f"camera {text!r}: the drop fraction must be in [0, 1)")
-    return Camera(rate, drop, text.strip())
+    return Camera(rate, drop, text.strip(), train_seed)
 
 
 def run(cmd: Sequence[str]) -> subprocess.CompletedProcess:
@@ -167,13 +180,16 @@ def score(x: np.ndarray, x_std: np.ndarray, truth: np.ndarray) -> Tuple[float, f
     return float(np.mean([p[0] for p in per])), float(np.mean([p[1] for p in per]))
 
 
-def train_and_score(hbn: str, train_log: Path, test_log: Path, truth: Tuple[np.ndarray, float], workdir: Path) -> Dict[str, Any]:
-    """``hbn train`` (defaults) on ``train_log``, ``hbn estimate --csv`` on ``test_log``,
-    scored against ``truth``: ``nrmse``, ``coverage_2sigma``, ``train_seconds``, the mode and
-    the training summary."""
+def train_and_score(
+    hbn: str, train_log: Path, test_log: Path, truth: Tuple[np.ndarray, float], workdir: Path, train_seed: Optional[int] = None
+) -> Dict[str, Any]:
+    """``hbn train`` (defaults, or ``--seed train_seed``) on ``train_log``, ``hbn estimate
+    --csv`` on ``test_log``, scored against ``truth``: ``nrmse``, ``coverage_2sigma``,
+    ``train_seconds``, the mode and the training summary."""
     model, est = workdir / "model.hbn", workdir / "estimate.csv"
+    seed_args = [] if train_seed is None else ["--seed", str(train_seed)]
     t0 = time.perf_counter()
-    tr = run([hbn, "train", "--log", str(train_log), "--out", str(model)])
+    tr = run([hbn, "train", "--log", str(train_log), "--out", str(model), *seed_args])
     train_seconds = time.perf_counter() - t0
     es = run([hbn, "-q", "estimate", "--model", str(model), "--log", str(test_log), "--csv", str(est)])
     e = read_estimate_csv(est)
@@ -208,8 +224,8 @@ def table_row(r: Dict[str, Any]) -> str:
 
 def summarise(rows: Sequence[Dict[str, Any]], cameras: Sequence[Camera]) -> List[Dict[str, Any]]:
     """Per camera, over the cells where it and the reference both scored: the geometric mean
-    and the largest of nRMSE(camera) / nRMSE(reference), and the mean of the training-time
-    ratio."""
+    and the largest of nRMSE(camera) / nRMSE(reference), how many cells exceed 1.2, and the
+    mean of the training-time ratio."""
     ref = next(c for c in cameras if c.is_reference)
     by_cell: Dict[tuple, Dict[str, Dict[str, Any]]] = {}
     for r in rows:
@@ -229,6 +245,7 @@ def summarise(rows: Sequence[Dict[str, Any]], cameras: Sequence[Camera]) -> List
             "camera": cam.label, "rate": cam.rate, "drop": cam.drop, "cells": len(ratios),
             "geo_mean_nrmse_ratio": float(np.exp(np.mean(np.log(ratios)))) if ratios else None,
             "max_nrmse_ratio": max(ratios) if ratios else None,
+            "cells_above_1_2": sum(r > 1.2 for r in ratios),
             "mean_train_time_ratio": float(np.mean(time_ratios)) if time_ratios else None,
         })  # fmt: skip
     return out
@@ -272,7 +289,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument("--seeds", default="1,2,3", help="seeds, comma-separated (the test log's seed is 1000 + seed)")
     ap.add_argument("--steps", type=int, default=3000, help="samples of a training log (100 Hz)")
     ap.add_argument("--test-steps", type=int, default=3000, help="samples of a test log (100 Hz)")
-    ap.add_argument("--cameras", default="100,30:0.1,10", help="cameras RATE[:DROP], comma-separated; must hold 100 (the reference)")
+    ap.add_argument(
+        "--cameras",
+        default="100,30:0.1,10",
+        help="cameras RATE[:DROP][@SEED], comma-separated; must hold 100 (the reference); 100@SEED trains the reference's log again with `hbn train --seed SEED`",
+    )
     ap.add_argument("--hbn", default=str(REPO / "target" / "release" / "hbn"), help="the hbn binary (default: target/release/hbn)")
     ap.add_argument("--json", type=Path, default=None, metavar="FILE", help="write the header, the rows and the summary as JSON")
     a = ap.parse_args(argv)
@@ -321,23 +342,23 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                     simulate(a.hbn, system, gain, TEST_SEED_OFFSET + seed, a.test_steps, test_log, None)
                     truth = read_truth(system, test_log)
                     for cam in cameras:
-                        row: Dict[str, Any] = {"system": system, "gain": gain, "seed": seed, "camera": cam.label, "rate": cam.rate, "drop": cam.drop}
+                        row: Dict[str, Any] = {"system": system, "gain": gain, "seed": seed, "camera": cam.label, "rate": cam.rate, "drop": cam.drop, "train_seed": cam.train_seed}
                         try:
                             train_log = wd / "train.mcap"
                             row.update(simulate(a.hbn, system, gain, seed, a.steps, train_log, cam))
-                            row.update(train_and_score(a.hbn, train_log, test_log, truth, wd))
+                            row.update(train_and_score(a.hbn, train_log, test_log, truth, wd, cam.train_seed))
                         except (RuntimeError, ValueError, OSError) as e:  # one failure must not hide the others
                             row["error"] = str(e)
                         rows.append(row)
                         print(table_row(row), flush=True)
     summary = summarise(rows, cameras)
     print()
-    print("| camera | cells | geo. mean nRMSE / nRMSE(100 Hz) | largest cell ratio | mean train-time ratio |")
-    print("|---|---|---|---|---|")
+    print("| camera | cells | geo. mean nRMSE / nRMSE(100 Hz) | largest cell ratio | cells above 1.2 | mean train-time ratio |")
+    print("|---|---|---|---|---|---|")
     for s in summary:
         print(
             f"| {s['camera']} | {s['cells']} | {_fmt(s['geo_mean_nrmse_ratio'], '.3f')} | {_fmt(s['max_nrmse_ratio'], '.3f')} "
-            f"| {_fmt(s['mean_train_time_ratio'], '.2f')} |"
+            f"| {s['cells_above_1_2']} | {_fmt(s['mean_train_time_ratio'], '.2f')} |"
         )
     failed = sum("error" in r for r in rows)
     print(f"\n{len(rows)} runs ({failed} failed) in {time.perf_counter() - t_start:.0f} s")
