@@ -322,8 +322,19 @@ struct VectorModelFile {
 #[derive(Clone)]
 struct Fitted {
     transitions: Vec<GaussianProcess>,
-    /// Per sensor: with its own previous output, state only.
-    sensors: Vec<[GaussianProcess; 2]>,
+    /// Per sensor: with its own previous output, state only (`None`: not fitted, where the
+    /// sensor's inputs were given).
+    sensors: Vec<[Option<GaussianProcess>; 2]>,
+}
+
+impl Fitted {
+    /// Sensor `j`'s GP with its own previous output among its inputs (`reads`) or without.
+    fn sensor(&self, j: usize, reads: bool) -> Result<&GaussianProcess, ModelError> {
+        self.sensors
+            .get(j)
+            .and_then(|pair| pair[usize::from(!reads)].as_ref())
+            .ok_or_else(unfitted)
+    }
 }
 
 impl VectorModel {
@@ -396,12 +407,12 @@ impl VectorModel {
         let stats = Stats::of(trajectories);
         let mut fold_fits: Vec<Fitted> = Vec::with_capacity(folds.len());
         for (train, _) in &folds {
-            let fit = Self::fit_gps(train, params, &plays, fold_fits.first())?;
+            let fit = Self::fit_gps(train, params, &plays, fold_fits.first(), &fixed)?;
             fold_fits.push(fit);
         }
         let primary = match fold_fits.first() {
             Some(f) => f.clone(),
-            None => Self::fit_gps(trajectories, params, &plays, None)?,
+            None => Self::fit_gps(trajectories, params, &plays, None, &fixed)?,
         };
         let mut model = Self::assemble(
             params,
@@ -411,9 +422,9 @@ impl VectorModel {
             trajectories,
             primary.clone(),
             names,
-        );
+        )?;
         for (j, reads) in fixed.iter().enumerate() {
-            model.sensors[j] = primary.sensors[j][usize::from(!reads)].clone();
+            model.sensors[j] = primary.sensor(j, *reads)?.clone();
             model.sensor_reads_output[j] = *reads;
         }
         let mut validation = Vec::new();
@@ -423,7 +434,7 @@ impl VectorModel {
             model.choose_on_held_out(&held, &fold_fits, !fixed.is_empty(), &mut validation)?;
         }
         // Refit on every sample with the hyperparameters found.
-        let refit = Self::fit_gps(trajectories, params, &plays, Some(&primary))?;
+        let refit = Self::fit_gps(trajectories, params, &plays, Some(&primary), &fixed)?;
         let choice = model.sensor_reads_output.clone();
         model.transitions = refit.transitions;
         model.sensors = refit
@@ -432,9 +443,9 @@ impl VectorModel {
             .zip(&choice)
             .map(|(pair, &reads)| {
                 let [with_y, state_only] = pair;
-                if reads { with_y } else { state_only }
+                if reads { with_y } else { state_only }.ok_or_else(unfitted)
             })
-            .collect();
+            .collect::<Result<_, _>>()?;
         model.summary.trajectories = trajectories.len();
         model.summary.samples = trajectories.iter().map(|t| t.len()).sum();
         model.summary.validation = validation;
@@ -459,14 +470,16 @@ impl VectorModel {
         Ok(model)
     }
 
-    /// Fits every GP on `trajectories`: the transitions and both variants of each sensor.
-    /// With `fixed`, each GP keeps the hyperparameters of its twin there (a refit on other
-    /// data).
+    /// Fits every GP on `trajectories`: the transitions and both variants of each sensor, or
+    /// only the variant `only[j]` says (`true`: with its own previous output) where `only`
+    /// is not empty (the sensor inputs were given). With `fixed`, each GP keeps the
+    /// hyperparameters of its twin there (a refit on other data).
     fn fit_gps(
         trajectories: &[VectorSequence<'_>],
         params: &CheckedHbnParams,
         plays: &Plays,
         fixed: Option<&Fitted>,
+        only: &[bool],
     ) -> Result<Fitted, ModelError> {
         let dims = trajectories[0].dims;
         let (t_rows, t_targets) = transition_rows(trajectories, plays);
@@ -500,29 +513,27 @@ impl VectorModel {
         }
         let mut sensors = Vec::with_capacity(dims.sensors);
         for j in 0..dims.sensors {
-            let mut pair = Vec::with_capacity(2);
-            for (v, reads) in [true, false].into_iter().enumerate() {
+            let mut pair = [None, None];
+            for (slot, reads) in pair.iter_mut().zip([true, false]) {
+                if only.get(j).is_some_and(|given| *given != reads) {
+                    continue;
+                }
                 let (rows, targets) = sensor_rows(trajectories, j, reads);
                 let mut spec = params.sensor_kernel.spec(dims.sensor_dim(reads), [0, 0]);
                 spec.direction = None;
                 let mut g = params.gp_params(spec, GpRole::Sensor);
                 g.seed = params.seed.wrapping_add(100 + j as u64);
                 if let Some(f) = fixed {
-                    g.init = Some(f.sensors[j][v].hyperparameters());
+                    g.init = Some(f.sensor(j, reads)?.hyperparameters());
                     g.optimize = false;
                 }
                 let gp = hbn_gp::fit(&g, &rows, &targets).map_err(|source| ModelError::Gp {
                     which: GpRole::Sensor,
                     source,
                 })?;
-                pair.push(gp);
+                *slot = Some(gp);
             }
-            let state_only = pair.pop();
-            let with_y = pair.pop();
-            match (with_y, state_only) {
-                (Some(a), Some(b)) => sensors.push([a, b]),
-                _ => return Err(unfitted()),
-            }
+            sensors.push(pair);
         }
         Ok(Fitted {
             transitions,
@@ -538,7 +549,7 @@ impl VectorModel {
         trajectories: &[VectorSequence<'_>],
         fitted: Fitted,
         names: SignalNames,
-    ) -> Self {
+    ) -> Result<Self, ModelError> {
         let mut init_rows = Vec::new();
         for t in trajectories {
             for k in 0..t.len() {
@@ -559,11 +570,17 @@ impl VectorModel {
                 .copied()
                 .collect();
         }
-        Self {
+        // Each sensor's variant with its own previous output, or the one fitted.
+        let sensors = fitted
+            .sensors
+            .into_iter()
+            .map(|[with_y, state_only]| with_y.or(state_only).ok_or_else(unfitted))
+            .collect::<Result<_, _>>()?;
+        Ok(Self {
             params: (**params).clone(),
             dims,
             transitions: fitted.transitions,
-            sensors: fitted.sensors.into_iter().map(|[a, _]| a).collect(),
+            sensors,
             sensor_reads_output: vec![true; dims.sensors],
             u_stats: stats.u.clone(),
             x_stats: stats.x.clone(),
@@ -576,7 +593,7 @@ impl VectorModel {
             signal_names: names,
             read_options: None,
             summary: VectorSummary::default(),
-        }
+        })
     }
 
     /// Chooses, on the held-out folds: each sensor's inputs (one sensor at a time: its
@@ -616,7 +633,7 @@ impl VectorModel {
                 let mut candidate = self.clone();
                 candidate.sensor_reads_output[j] = false;
                 if let Some(f) = fits.first() {
-                    candidate.sensors[j] = f.sensors[j][1].clone();
+                    candidate.sensors[j] = f.sensor(j, false)?.clone();
                 }
                 consider(
                     self,
@@ -646,17 +663,17 @@ impl VectorModel {
     }
 
     /// This model's settings (sensor choice, mode, noise scale) with fold `f`'s GPs.
-    fn on_fold(&self, fit: &Fitted) -> Self {
+    fn on_fold(&self, fit: &Fitted) -> Result<Self, ModelError> {
         let mut m = self.clone();
         m.transitions = fit.transitions.clone();
-        m.sensors = fit
-            .sensors
+        m.sensors = self
+            .sensor_reads_output
             .iter()
-            .zip(&self.sensor_reads_output)
-            .map(|(pair, reads)| pair[usize::from(!reads)].clone())
-            .collect();
+            .enumerate()
+            .map(|(j, reads)| fit.sensor(j, *reads).cloned())
+            .collect::<Result<_, _>>()?;
         m.std_scale = vec![1.0; self.dims.states];
-        m
+        Ok(m)
     }
 
     /// The filter's held-out score over every fold with this model's settings (each fold's
@@ -674,7 +691,7 @@ impl VectorModel {
         let mut log_std = vec![0.0; dx];
         let mut normalised = vec![Vec::new(); dx];
         for (parts, fit) in held.iter().zip(fits) {
-            let model = self.on_fold(fit);
+            let model = self.on_fold(fit)?;
             for t in parts.iter() {
                 let e = model.estimate(t.u, t.y, model.mode)?;
                 for k in 0..t.len() {
@@ -1350,6 +1367,56 @@ mod tests {
             .collect()
     }
 
+    /// Sensor inputs given per sensor: only those variants are fitted (an EM refit, or
+    /// `--sensor-inputs`, trains neither more nor less), and the model uses them.
+    #[test]
+    fn given_sensor_inputs_fit_only_those_variants() {
+        let kind = MultiKind::Finger;
+        let dims = Dims::new(kind.inputs(), kind.states(), kind.sensors()).unwrap();
+        let mut cfg = MultiConfig::new(kind);
+        cfg.noise_gain = 1.0;
+        let run = simulate_multi_random(&cfg, 300).unwrap();
+        let (u, x, y) = (rows(&run.u), rows(&run.x), rows(&run.y));
+        let seq = VectorSequence::new(&u, &x, &y, dims);
+        let params = HbnParams {
+            max_points: 60,
+            n_starts: 1,
+            max_iters: 20,
+            ..HbnParams::default()
+        }
+        .check()
+        .unwrap();
+        let plays = Plays::with_lags(&params.memory, &[]).unwrap();
+        let given = [true, false, true];
+        let fit = VectorModel::fit_gps(&[seq], &params, &plays, None, &given).unwrap();
+        let fitted: Vec<[bool; 2]> = fit
+            .sensors
+            .iter()
+            .map(|[a, b]| [a.is_some(), b.is_some()])
+            .collect();
+        assert_eq!(fitted, [[true, false], [false, true], [true, false]]);
+        assert!(fit.sensor(1, true).is_err() && fit.sensor(1, false).is_ok());
+        let both = VectorModel::fit_gps(&[seq], &params, &plays, None, &[]).unwrap();
+        assert!(both.sensors.iter().all(|[a, b]| a.is_some() && b.is_some()));
+        // The variants fitted alone are those fitted beside the others.
+        for (j, reads) in given.iter().enumerate() {
+            assert_eq!(
+                fit.sensor(j, *reads).unwrap().hyperparameters(),
+                both.sensor(j, *reads).unwrap().hyperparameters()
+            );
+        }
+        let sensors = [
+            SensorInputs::Thesis,
+            SensorInputs::State,
+            SensorInputs::Thesis,
+        ];
+        let model =
+            VectorModel::fit_with_sensors(&[seq], &params, SignalNames::default(), &sensors)
+                .unwrap();
+        let reads: Vec<_> = (0..3).map(|j| model.sensor_reads_output(j)).collect();
+        assert_eq!(reads, [Some(true), Some(false), Some(true)]);
+    }
+
     /// The held-out score reads the state only where the mask says it was measured: nonsense
     /// elsewhere changes nothing, and the mask changes what is scored.
     #[test]
@@ -1370,7 +1437,7 @@ mod tests {
         .check()
         .unwrap();
         let plays = Plays::with_lags(&params.memory, &[]).unwrap();
-        let fit = VectorModel::fit_gps(&[seq], &params, &plays, None).unwrap();
+        let fit = VectorModel::fit_gps(&[seq], &params, &plays, None, &[]).unwrap();
         let model = VectorModel::fit(&[seq], &params).unwrap();
         // Component 0 measured at every third sample, component 1 at every fifth.
         let mask: Vec<bool> = (0..x.len())
