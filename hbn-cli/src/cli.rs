@@ -653,7 +653,8 @@ pub struct TrainArgs {
     /// (plays and lags at most 4 in all), or `none`. For creep and viscoelastic relaxation
     /// (soft actuators). Given more than once, the first is the primary set and the others
     /// are tried on held-out data with the sparse candidates (default: `none`, with `1` tried;
-    /// `--lags none` alone trains without lags and tries none). docs/memory.md.
+    /// a vector model tries `0.1` and `1`; `--lags none` alone trains without lags and tries
+    /// none). docs/memory.md.
     #[arg(help_heading = "Model", long, value_parser = parse_lags, value_name = "TAU[,..]|none")]
     pub lags: Vec<Lags>,
     /// Which GPs have a linear prior mean (the targets' least-squares plane on the GP's inputs,

@@ -434,10 +434,39 @@ pub fn vector_text(model: &hbn_model::VectorModel, file: &std::path::Path) -> St
             ));
         }
     }
+    if !s.lags.is_empty() {
+        t.push_str(
+            "lag candidates, trained side by side (the lowest held-out NLPD among those at least \
+             as accurate held out as the first):\n",
+        );
+        for r in &s.lags {
+            let nrmse: Vec<String> = r.nrmse.iter().map(|v| format!("{v:.4}")).collect();
+            let score = match (r.nlpd, &r.error) {
+                (Some(nlpd), _) => format!("NLPD {nlpd:>9.3}  nRMSE {}", nrmse.join(", ")),
+                (None, Some(e)) => format!("failed: {e}"),
+                (None, None) => "no held-out score".to_owned(),
+            };
+            t.push_str(&format!(
+                "  lags {:<12} {score}  {:.1} s{}\n",
+                lag_set(&r.lags),
+                r.seconds,
+                if r.chosen { "  (chosen)" } else { "" }
+            ));
+        }
+    }
     for w in &s.warnings {
         t.push_str(&format!("warning: {w}\n"));
     }
     t
+}
+
+/// A lag set as the CLI prints it: `none`, `1 s`, `0.1 s, 1 s`.
+pub fn lag_set(lags: &[f64]) -> String {
+    if lags.is_empty() {
+        return "none".to_owned();
+    }
+    let each: Vec<String> = lags.iter().map(|t| format!("{t} s")).collect();
+    each.join(", ")
 }
 
 /// `hbn inspect --json` of a vector model.

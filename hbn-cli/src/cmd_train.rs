@@ -165,8 +165,13 @@ fn run_vector(ui: &mut Ui<'_>, args: &TrainArgs, signals: &VectorSignals) -> any
             )
         })
         .collect();
+    let lags = if s.lags.is_empty() && model.lags().is_empty() {
+        String::new()
+    } else {
+        format!(", lags {}", crate::cmd_inspect::lag_set(model.lags()))
+    };
     text.push_str(&format!(
-        "  chosen on held-out data: mode {}, sensors {}\n",
+        "  chosen on held-out data: mode {}, sensors {}{lags}\n",
         model.default_mode(),
         sensors.join(", ")
     ));

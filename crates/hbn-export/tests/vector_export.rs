@@ -10,7 +10,7 @@ use hbn_export::{
     ExportError, Format, ModelTables, Precision, VECTOR_MODES, export_vector,
     vector_f32_variance_errors, vector_model_tables, vector_size_report, vector_size_table,
 };
-use hbn_model::{HbnParams, VectorModel, VectorSequence};
+use hbn_model::{HbnParams, Selection, VectorModel, VectorSequence};
 use hbn_sim::{MultiConfig, MultiKind, simulate_multi_random};
 
 /// Row-major `(T, d)` from component-major signals.
@@ -37,13 +37,27 @@ fn dims() -> Dims {
 
 /// A finger model: sparse with `inducing` points, or exact on at most 120 points.
 fn model(inducing: Option<usize>) -> VectorModel {
+    model_with(inducing, None)
+}
+
+/// [`model`] with the lag set given (`Some`: that set alone, no selection).
+fn model_with(inducing: Option<usize>, lags: Option<Vec<f64>>) -> VectorModel {
     let (u, x, y) = run(1, 800);
+    let d = HbnParams::default();
     let params = HbnParams {
         max_points: 120,
         n_inducing: inducing,
         n_starts: 1,
         max_iters: 30,
-        ..HbnParams::default()
+        lags: lags.clone().unwrap_or_default(),
+        select: match lags {
+            Some(_) => Selection {
+                lags: Vec::new(),
+                ..d.select.clone()
+            },
+            None => d.select.clone(),
+        },
+        ..d
     };
     VectorModel::fit(&[VectorSequence::new(&u, &x, &y, dims())], &params).unwrap()
 }
@@ -87,7 +101,9 @@ fn vector_tables_reproduce_the_model() {
     let (ut, xt, mut yt) = run(9, 400);
     // A missing sensor sample is left out of that step's update, on the tables as in the model.
     yt[50 * d.sensors + 1] = f64::NAN;
-    for m in [model(Some(16)), model(None)] {
+    let lagged = model_with(Some(16), Some(vec![0.1]));
+    assert_eq!(lagged.lags(), [0.1]);
+    for m in [model(Some(16)), model(None), lagged] {
         for mode in VECTOR_MODES {
             let est = m.estimate(&ut, &yt, mode).unwrap();
             let t = vector_model_tables(&m, mode).unwrap();
@@ -96,6 +112,8 @@ fn vector_tables_reproduce_the_model() {
             assert_eq!(tm.config, m.config(mode));
             assert_eq!(tm.dims, d);
             assert!(tm.init.is_some());
+            // The memory operators, lags among them, travel with the tables.
+            assert_eq!(tm.view().plays, m.plays().unwrap());
             let got = steps(&t, &t.reals, &ut, &yt);
             assert_eq!(got.len(), est.len());
             for (k, (x, s, flags)) in got.iter().enumerate() {

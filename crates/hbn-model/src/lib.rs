@@ -76,12 +76,13 @@ pub use params::{
     Candidate, CheckedHbnParams, ConfigError, DEFAULT_EVIDENCE_KERNELS, DEFAULT_INDUCING,
     DEFAULT_LAGS, DEFAULT_MEMORY, FIRMWARE_INDUCING_LADDER, HbnParams, KernelChoice, LinearMean,
     MIN_FIRMWARE_BUDGET, Param, ParamValue, Problem, Selection, SensorInputs, SignalInfo, Signals,
-    UnknownKernel, parse_bytes,
+    UnknownKernel, VECTOR_DEFAULT_LAGS, parse_bytes,
 };
 pub use smooth::{Smoothing, StateFrame};
 pub use tuning::{CandidateRow, FilterTuning, NoiseScales, ValidationReport};
 pub use vector::{
-    SignalNames, VectorEstimate, VectorModel, VectorSequence, VectorSummary, VectorValidationRow,
+    SignalNames, VectorEstimate, VectorLagRow, VectorModel, VectorSequence, VectorSummary,
+    VectorValidationRow,
 };
 pub use vector_filter::VectorFilter;
 pub use vector_latent::VectorLatentRun;

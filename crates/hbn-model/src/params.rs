@@ -212,6 +212,13 @@ pub const DEFAULT_MEMORY: [f64; 2] = [0.05, 0.2];
 /// low-pass filter of the input with a time constant of 1 s (`docs/memory.md`, "Lags").
 pub const DEFAULT_LAGS: [f64; 1] = [1.0];
 
+/// The lag sets a vector model's default selection tries besides none, in place of
+/// [`DEFAULT_LAGS`]: a time constant of 0.1 s (a pneumatic chamber filling behind its valve)
+/// and one of 1 s (creep). A vector model trains one candidate per lag set, side by side, and
+/// keeps the one held-out data prefer (`docs/vector.md`, "Lags"); lag sets given by the caller
+/// ([`Selection::lags`] other than the default, `hbn train --lags`) replace these.
+pub const VECTOR_DEFAULT_LAGS: [[f64; 1]; 2] = [[0.1], [1.0]];
+
 /// What the sensor GP reads ([`HbnParams::sensor_inputs`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]

@@ -269,6 +269,28 @@ pub struct VectorSummary {
     /// state was measured only sometimes ([`VectorModel::fit_latent`]).
     #[serde(default)]
     pub latent: Option<crate::latent::LatentReport>,
+    /// The lag sets trained side by side, one candidate each, in order (empty when only
+    /// one was: [`VectorModel::fit_with_sensors`]).
+    #[serde(default)]
+    pub lags: Vec<VectorLagRow>,
+}
+
+/// One candidate of a vector model's lag selection: its lag set and held-out scores.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VectorLagRow {
+    /// The lags' time constants (s); empty: none.
+    pub lags: Vec<f64>,
+    /// Held-out NLPD of the state, summed over components, of the candidate's final choice
+    /// (`None` when it failed to train or has no held-out score).
+    pub nlpd: Option<f64>,
+    /// Held-out nRMSE of each component.
+    pub nrmse: Vec<f64>,
+    /// Wall-clock seconds of its training.
+    pub seconds: f64,
+    /// Why it failed to train.
+    pub error: Option<String>,
+    /// Whether it became the model.
+    pub chosen: bool,
 }
 
 /// A trained vector HBN (one GP per state component and per sensor).
@@ -359,7 +381,110 @@ impl VectorModel {
 
     /// [`VectorModel::fit_checked`] with each sensor's inputs given: none (chosen on held-out
     /// data, one sensor at a time), one for every sensor, or one per sensor.
+    ///
+    /// With held-out data (`params.validation > 0`) it trains one candidate per lag set
+    /// (the primary [`HbnParams::lags`], then the selection's, [`crate::VECTOR_DEFAULT_LAGS`]
+    /// by default), side by side, and keeps the one with the lowest held-out NLPD among those
+    /// at least as accurate held out (mean nRMSE over components) as the primary, the rule of
+    /// the scalar model's selection; [`VectorSummary::lags`] has the table. A candidate that
+    /// fails to train is reported there; training fails only when the primary fails.
     pub fn fit_with_sensors(
+        trajectories: &[VectorSequence<'_>],
+        params: &CheckedHbnParams,
+        names: SignalNames,
+        sensors: &[SensorInputs],
+    ) -> Result<Self, ModelError> {
+        let sets = lag_sets(params);
+        if sets.len() < 2 || params.validation <= 0.0 {
+            return Self::fit_one(trajectories, params, names, sensors);
+        }
+        let t0 = Instant::now();
+        let fit = |lags: &Vec<f64>| -> (Result<Self, ModelError>, f64) {
+            let t = Instant::now();
+            let one = HbnParams {
+                lags: lags.clone(),
+                select: crate::params::Selection {
+                    lags: Vec::new(),
+                    ..params.select.clone()
+                },
+                ..(**params).clone()
+            };
+            let model = one
+                .check()
+                .map_err(ModelError::from)
+                .and_then(|p| Self::fit_one(trajectories, &p, names.clone(), sensors));
+            (model, t.elapsed().as_secs_f64())
+        };
+        let threads = std::thread::available_parallelism()
+            .map_or(1, |n| n.get())
+            .min(sets.len());
+        let fitted: Vec<(Result<Self, ModelError>, f64)> = if threads < 2 {
+            sets.iter().map(fit).collect()
+        } else {
+            let chunk = sets.len().div_ceil(threads);
+            std::thread::scope(|scope| {
+                let handles: Vec<_> = sets
+                    .chunks(chunk)
+                    .map(|part| {
+                        let n = part.len();
+                        (
+                            scope.spawn(move || part.iter().map(fit).collect::<Vec<_>>()),
+                            n,
+                        )
+                    })
+                    .collect();
+                handles
+                    .into_iter()
+                    .flat_map(|(h, n)| {
+                        h.join().unwrap_or_else(|_| {
+                            std::iter::repeat_with(|| (Err(unfitted_candidate()), 0.0))
+                                .take(n)
+                                .collect()
+                        })
+                    })
+                    .collect()
+            })
+        };
+        let mut rows: Vec<VectorLagRow> = sets
+            .iter()
+            .zip(&fitted)
+            .map(|(lags, (model, seconds))| {
+                let scores = model.as_ref().ok().and_then(|m| m.held_out_best());
+                VectorLagRow {
+                    lags: lags.clone(),
+                    nlpd: scores.as_ref().map(|s| s.0),
+                    nrmse: scores.map(|s| s.1).unwrap_or_default(),
+                    seconds: *seconds,
+                    error: model.as_ref().err().map(ToString::to_string),
+                    chosen: false,
+                }
+            })
+            .collect();
+        let choice = choose_lags(&rows);
+        let mut models: Vec<Option<Self>> = fitted.into_iter().map(|(m, _)| m.ok()).collect();
+        let Some(mut model) = models.get_mut(choice).and_then(Option::take) else {
+            // The primary failed: its error (trained again to report it).
+            return Self::fit_one(trajectories, params, names, sensors);
+        };
+        if let Some(row) = rows.get_mut(choice) {
+            row.chosen = true;
+        }
+        model.summary.lags = rows;
+        model.summary.seconds = t0.elapsed().as_secs_f64();
+        Ok(model)
+    }
+
+    /// The held-out NLPD (summed over components) and nRMSE (per component) of this model's
+    /// final choice on its held-out folds (`None` without held-out data).
+    pub(crate) fn held_out_best(&self) -> Option<(f64, Vec<f64>)> {
+        let row = self.summary.validation.iter().rfind(|r| r.chosen)?;
+        (row.nlpd.is_finite() && row.nrmse.iter().all(|v| v.is_finite()))
+            .then(|| (row.nlpd, row.nrmse.clone()))
+    }
+
+    /// [`VectorModel::fit_with_sensors`] for one lag set (`params.lags`; the selection's lag
+    /// sets are not read).
+    pub(crate) fn fit_one(
         trajectories: &[VectorSequence<'_>],
         params: &CheckedHbnParams,
         names: SignalNames,
@@ -377,7 +502,7 @@ impl VectorModel {
             }
             t.validate(i)?;
         }
-        let plays = Plays::with_lags(&params.memory, &[])?;
+        let plays = Plays::with_lags(&params.memory, &params.lag_coefficients()?)?;
         let t_dim = dims.transition_dim(plays.len());
         if t_dim > hbn_core::MAX_DIM {
             return Err(ModelError::Core(hbn_core::CoreError::InvalidSpec(
@@ -807,9 +932,17 @@ impl VectorModel {
         (&self.u_stats, &self.x_stats, &self.y_stats)
     }
 
+    /// The time constants (s) of the transition's lags ([`HbnParams::lags`]); empty: none.
+    pub fn lags(&self) -> &[f64] {
+        &self.params.lags
+    }
+
     /// The memory operators.
     pub fn plays(&self) -> Result<Plays, ModelError> {
-        Ok(Plays::with_lags(&self.play_radii, &[])?)
+        Ok(Plays::with_lags(
+            &self.play_radii,
+            &self.params.lag_coefficients()?,
+        )?)
     }
 
     /// The filter's settings in `mode`, with the noise and std scales chosen on held-out data.
@@ -1185,6 +1318,55 @@ fn frame_update(st: &mut VectorState, d: Dims, i: usize, frame: &StateFrame, var
     }
 }
 
+/// The lag sets a vector model trains: the primary ([`HbnParams::lags`]), then the
+/// selection's, where the library's default selection ([`crate::DEFAULT_LAGS`]) stands for
+/// [`crate::VECTOR_DEFAULT_LAGS`]; each set once.
+fn lag_sets(params: &HbnParams) -> Vec<Vec<f64>> {
+    let default = [crate::DEFAULT_LAGS.to_vec()];
+    let alternatives: Vec<Vec<f64>> = if params.select.lags == default {
+        crate::VECTOR_DEFAULT_LAGS
+            .iter()
+            .map(|l| l.to_vec())
+            .collect()
+    } else {
+        params.select.lags.clone()
+    };
+    let mut sets = vec![params.lags.clone()];
+    for set in alternatives {
+        if !sets.contains(&set) {
+            sets.push(set);
+        }
+    }
+    sets
+}
+
+/// The candidate `fit_with_sensors` keeps: the lowest held-out NLPD among those scored whose
+/// mean held-out nRMSE is no higher than the primary's (row 0); the primary when it alone
+/// scored or nothing beats it.
+fn choose_lags(rows: &[VectorLagRow]) -> usize {
+    let mean = |r: &VectorLagRow| r.nrmse.iter().sum::<f64>() / r.nrmse.len().max(1) as f64;
+    let Some(primary) = rows.first().filter(|r| r.nlpd.is_some()) else {
+        return 0;
+    };
+    let limit = mean(primary);
+    let mut best = (0, primary.nlpd.unwrap_or(f64::INFINITY));
+    for (i, r) in rows.iter().enumerate().skip(1) {
+        if let Some(nlpd) = r.nlpd
+            && nlpd < best.1
+            && mean(r) <= limit
+        {
+            best = (i, nlpd);
+        }
+    }
+    best.0
+}
+
+fn unfitted_candidate() -> ModelError {
+    ModelError::Core(hbn_core::CoreError::InvalidSpec(
+        "a lag candidate's training stopped unexpectedly",
+    ))
+}
+
 fn unfitted() -> ModelError {
     ModelError::Core(hbn_core::CoreError::InvalidSpec(
         "a sensor GP could not be fitted",
@@ -1365,6 +1547,58 @@ mod tests {
         (0..t)
             .flat_map(|k| signals.iter().map(move |s| s[k]))
             .collect()
+    }
+
+    /// The lag sets trained: the primary, then the selection's, with the library's default
+    /// selection standing for the vector default; each set once.
+    #[test]
+    fn lag_sets_are_the_primary_then_the_selection() {
+        let d = HbnParams::default();
+        assert_eq!(lag_sets(&d), [vec![], vec![0.1], vec![1.0]]);
+        let mut p = d.clone();
+        p.select.lags = vec![vec![0.5], vec![]];
+        assert_eq!(lag_sets(&p), [vec![], vec![0.5]]);
+        p.lags = vec![0.1];
+        p.select.lags = Vec::new();
+        assert_eq!(lag_sets(&p), [vec![0.1]]);
+    }
+
+    /// The choice: the lowest held-out NLPD among the candidates no less accurate held out
+    /// (mean nRMSE) than the primary; the primary when nothing beats it or it has no score.
+    #[test]
+    fn the_lag_choice_follows_the_rule_of_model_selection() {
+        let row = |nlpd: Option<f64>, nrmse: [f64; 2]| VectorLagRow {
+            lags: Vec::new(),
+            nlpd,
+            nrmse: nrmse.to_vec(),
+            seconds: 1.0,
+            error: None,
+            chosen: false,
+        };
+        let primary = row(Some(-4.0), [0.02, 0.04]);
+        // Lower NLPD and as accurate: chosen.
+        assert_eq!(
+            choose_lags(&[primary.clone(), row(Some(-4.5), [0.02, 0.04])]),
+            1
+        );
+        // Lower NLPD but less accurate on average: not chosen.
+        assert_eq!(
+            choose_lags(&[primary.clone(), row(Some(-4.5), [0.01, 0.06])]),
+            0
+        );
+        // The lowest NLPD among the accurate ones, not the first.
+        let rows = [
+            primary.clone(),
+            row(Some(-4.2), [0.02, 0.03]),
+            row(Some(-4.6), [0.02, 0.03]),
+            row(Some(-5.0), [0.05, 0.05]),
+            row(None, [0.0, 0.0]),
+        ];
+        assert_eq!(choose_lags(&rows), 2);
+        assert_eq!(
+            choose_lags(&[row(None, [0.0; 2]), row(Some(-9.0), [0.0; 2])]),
+            0
+        );
     }
 
     /// Sensor inputs given per sensor: only those variants are fitted (an EM refit, or

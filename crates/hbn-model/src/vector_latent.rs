@@ -171,6 +171,10 @@ impl VectorModel {
                 _ => SensorInputs::Thesis,
             })
             .collect();
+        // The lag set the first fit chose (its parameters hold it alone), kept by every refit,
+        // and the table of the lag candidates, kept in the summary.
+        let refit = best.params().clone().check()?;
+        let lag_rows = best.summary().lags.clone();
         let frame_var: Vec<f64> = best
             .stats()
             .1
@@ -225,13 +229,16 @@ impl VectorModel {
                     .zip(&paths)
                     .map(|(r, x)| VectorSequence { x, ..r.seq })
                     .collect();
-                Self::fit_with_sensors(&seqs, params, names.clone(), &chosen)
+                Self::fit_one(&seqs, &refit, names.clone(), &chosen)
             },
             &mut report,
         )?;
         let warning = latent_warning(&report);
         let summary = best.summary_mut();
         summary.warnings.push(warning);
+        if summary.lags.is_empty() {
+            summary.lags = lag_rows;
+        }
         summary.latent = Some(report);
         summary.seconds = t0.elapsed().as_secs_f64();
         Ok(best)

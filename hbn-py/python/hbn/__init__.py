@@ -905,6 +905,7 @@ _TRAINING_PARAMETERS_DOC = """
         transition GP reads after the plays, for creep and relaxation (plays and lags at most 4
         in all). A list of lists: the first set is the primary one, the others are tried on
         held-out data with the sparse candidates; ``[]`` trains without lags and tries none.
+        Left out, a vector model tries none, 0.1 s and 1 s, side by side (``docs/vector.md``).
     linear_mean : {"none", "transition", "both"}
         Which GPs have a linear prior mean (see :class:`GaussianProcess`).
     sensor_inputs : str or list of str
