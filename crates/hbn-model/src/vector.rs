@@ -1670,9 +1670,11 @@ mod tests {
         }
         .check()
         .unwrap();
-        let plays = Plays::with_lags(&params.memory, &[]).unwrap();
-        let fit = VectorModel::fit_gps(&[seq], &params, &plays, None, &[]).unwrap();
         let model = VectorModel::fit(&[seq], &params).unwrap();
+        // The fold's GPs with the lag set the model chose.
+        let chosen = model.params().clone().check().unwrap();
+        let fit =
+            VectorModel::fit_gps(&[seq], &chosen, &model.plays().unwrap(), None, &[]).unwrap();
         // Component 0 measured at every third sample, component 1 at every fifth.
         let mask: Vec<bool> = (0..x.len())
             .map(|j| {
