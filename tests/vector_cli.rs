@@ -68,6 +68,18 @@ fn a_finger_trains_and_estimates_through_the_cli() {
         out.contains("2 inputs, 2 state components, 3 sensors"),
         "{out}"
     );
+    // The lag candidates (none, 0.1 s, 1 s) trained side by side: the summary names the one
+    // kept.
+    let chosen = out
+        .lines()
+        .find(|l| l.contains("chosen on held-out data"))
+        .unwrap_or_default();
+    assert!(
+        ["lags none", "lags 0.1 s", "lags 1 s"]
+            .iter()
+            .any(|l| chosen.ends_with(l)),
+        "{out}"
+    );
     let csv = d.path().join("est.csv");
     let (r, out) = hbn(&[
         "estimate",
@@ -192,6 +204,9 @@ fn a_finger_trains_and_estimates_through_the_cli() {
         "sensor 2",
     ] {
         assert!(out.contains(gp), "{gp}: {out}");
+    }
+    for lags in ["lags none ", "lags 0.1 s ", "lags 1 s ", "(chosen)"] {
+        assert!(out.contains(lags), "{lags}: {out}");
     }
     // The MCAP output carries arrays in the model's order, with the signals' names.
     let mcap = d.path().join("est.mcap");
