@@ -1601,25 +1601,35 @@ mod tests {
         );
     }
 
-    /// Sensor inputs given per sensor: only those variants are fitted (an EM refit, or
-    /// `--sensor-inputs`, trains neither more nor less), and the model uses them.
-    #[test]
-    fn given_sensor_inputs_fit_only_those_variants() {
+    /// A simulated finger run at noise gain 1, row-major: `(dims, u, x, y)`.
+    fn finger_rows(steps: usize) -> (Dims, Vec<f64>, Vec<f64>, Vec<f64>) {
         let kind = MultiKind::Finger;
         let dims = Dims::new(kind.inputs(), kind.states(), kind.sensors()).unwrap();
         let mut cfg = MultiConfig::new(kind);
         cfg.noise_gain = 1.0;
-        let run = simulate_multi_random(&cfg, 300).unwrap();
-        let (u, x, y) = (rows(&run.u), rows(&run.x), rows(&run.y));
-        let seq = VectorSequence::new(&u, &x, &y, dims);
-        let params = HbnParams {
-            max_points: 60,
+        let run = simulate_multi_random(&cfg, steps).unwrap();
+        (dims, rows(&run.u), rows(&run.x), rows(&run.y))
+    }
+
+    /// Defaults with a small support set and a short optimisation, checked.
+    fn quick_params(max_points: usize, max_iters: u64) -> CheckedHbnParams {
+        HbnParams {
+            max_points,
             n_starts: 1,
-            max_iters: 20,
+            max_iters,
             ..HbnParams::default()
         }
         .check()
-        .unwrap();
+        .unwrap()
+    }
+
+    /// Sensor inputs given per sensor: only those variants are fitted (an EM refit, or
+    /// `--sensor-inputs`, trains neither more nor less), and the model uses them.
+    #[test]
+    fn given_sensor_inputs_fit_only_those_variants() {
+        let (dims, u, x, y) = finger_rows(300);
+        let seq = VectorSequence::new(&u, &x, &y, dims);
+        let params = quick_params(60, 20);
         let plays = Plays::with_lags(&params.memory, &[]).unwrap();
         let given = [true, false, true];
         let fit = VectorModel::fit_gps(&[seq], &params, &plays, None, &given).unwrap();
@@ -1655,21 +1665,9 @@ mod tests {
     /// elsewhere changes nothing, and the mask changes what is scored.
     #[test]
     fn the_held_out_score_reads_measured_values_only() {
-        let kind = MultiKind::Finger;
-        let dims = Dims::new(kind.inputs(), kind.states(), kind.sensors()).unwrap();
-        let mut cfg = MultiConfig::new(kind);
-        cfg.noise_gain = 1.0;
-        let run = simulate_multi_random(&cfg, 400).unwrap();
-        let (u, x, y) = (rows(&run.u), rows(&run.x), rows(&run.y));
+        let (dims, u, x, y) = finger_rows(400);
         let seq = VectorSequence::new(&u, &x, &y, dims);
-        let params = HbnParams {
-            max_points: 80,
-            n_starts: 1,
-            max_iters: 30,
-            ..HbnParams::default()
-        }
-        .check()
-        .unwrap();
+        let params = quick_params(80, 30);
         let model = VectorModel::fit(&[seq], &params).unwrap();
         // The fold's GPs with the lag set the model chose.
         let chosen = model.params().clone().check().unwrap();
