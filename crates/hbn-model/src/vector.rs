@@ -461,11 +461,12 @@ impl VectorModel {
             })
             .collect();
         let choice = choose_lags(&rows);
-        let mut models: Vec<Option<Self>> = fitted.into_iter().map(|(m, _)| m.ok()).collect();
-        let Some(mut model) = models.get_mut(choice).and_then(Option::take) else {
-            // The primary failed: its error (trained again to report it).
-            return Self::fit_one(trajectories, params, names, sensors);
-        };
+        // `choice` is the primary (0) unless a candidate that trained beat it; a failed
+        // primary's error is the training's.
+        let mut model = fitted
+            .into_iter()
+            .nth(choice)
+            .map_or_else(|| Err(unfitted_candidate()), |(m, _)| m)?;
         if let Some(row) = rows.get_mut(choice) {
             row.chosen = true;
         }
