@@ -15,6 +15,7 @@
 //!   features mix inputs (Mahalanobis, warping) takes at most 8 inputs.
 
 use std::path::Path;
+use std::sync::OnceLock;
 use std::time::Instant;
 
 use hbn_core::vector::{
@@ -344,9 +345,52 @@ struct VectorModelFile {
 #[derive(Clone)]
 struct Fitted {
     transitions: Vec<GaussianProcess>,
-    /// Per sensor: with its own previous output, state only (`None`: not fitted, where the
-    /// sensor's inputs were given).
-    sensors: Vec<[Option<GaussianProcess>; 2]>,
+    /// Per sensor: with its own previous output, state only.
+    sensors: Vec<SensorPair>,
+}
+
+/// Per sensor: its GP with its own previous output among its inputs, and its GP of the state
+/// only (`None`: not fitted, where the sensor's inputs were given).
+type SensorPair = [Option<GaussianProcess>; 2];
+
+/// Sensor GPs fitted once and shared by the lag candidates of
+/// [`VectorModel::fit_with_sensors`]. A sensor GP's rows (`x_{k-1}`, `x_k`, `y_{k-1}`), settings
+/// and seed do not depend on the transition's lags, so every candidate would fit the same ones:
+/// the first candidate to need a stage's sensor GPs fits them, the others wait for them and
+/// take a copy. Stages: fold `f` for `f < folds`, then the fit on every trajectory (no folds),
+/// then the refit on every trajectory.
+pub(crate) struct SharedSensors {
+    folds: usize,
+    cells: Vec<OnceLock<Option<Vec<SensorPair>>>>,
+}
+
+/// Which fit of [`VectorModel::fit_one`] a set of sensor GPs belongs to.
+#[derive(Clone, Copy)]
+enum Stage {
+    /// Fold `f`'s training part.
+    Fold(usize),
+    /// Every trajectory, hyperparameters optimised (no held-out folds).
+    All,
+    /// Every trajectory with the first fold's hyperparameters.
+    Refit,
+}
+
+impl SharedSensors {
+    fn new(folds: usize) -> Self {
+        Self {
+            folds,
+            cells: (0..folds + 2).map(|_| OnceLock::new()).collect(),
+        }
+    }
+
+    fn cell(&self, stage: Stage) -> Option<&OnceLock<Option<Vec<SensorPair>>>> {
+        self.cells.get(match stage {
+            Stage::Fold(f) if f < self.folds => f,
+            Stage::Fold(_) => return None,
+            Stage::All => self.folds,
+            Stage::Refit => self.folds + 1,
+        })
+    }
 }
 
 impl Fitted {
@@ -396,9 +440,10 @@ impl VectorModel {
     ) -> Result<Self, ModelError> {
         let sets = lag_sets(params);
         if sets.len() < 2 || params.validation <= 0.0 {
-            return Self::fit_one(trajectories, params, names, sensors);
+            return Self::fit_one(trajectories, params, names, sensors, None);
         }
         let t0 = Instant::now();
+        let shared = SharedSensors::new(folds(trajectories).len());
         let fit = |lags: &Vec<f64>| -> (Result<Self, ModelError>, f64) {
             let t = Instant::now();
             let one = HbnParams {
@@ -409,10 +454,9 @@ impl VectorModel {
                 },
                 ..(**params).clone()
             };
-            let model = one
-                .check()
-                .map_err(ModelError::from)
-                .and_then(|p| Self::fit_one(trajectories, &p, names.clone(), sensors));
+            let model = one.check().map_err(ModelError::from).and_then(|p| {
+                Self::fit_one(trajectories, &p, names.clone(), sensors, Some(&shared))
+            });
             (model, t.elapsed().as_secs_f64())
         };
         let threads = std::thread::available_parallelism()
@@ -484,12 +528,14 @@ impl VectorModel {
     }
 
     /// [`VectorModel::fit_with_sensors`] for one lag set (`params.lags`; the selection's lag
-    /// sets are not read).
+    /// sets are not read). With `shared`, the sensor GPs come from there (fitted by whichever
+    /// candidate needs them first).
     pub(crate) fn fit_one(
         trajectories: &[VectorSequence<'_>],
         params: &CheckedHbnParams,
         names: SignalNames,
         sensors: &[SensorInputs],
+        shared: Option<&SharedSensors>,
     ) -> Result<Self, ModelError> {
         let t0 = Instant::now();
         let first = trajectories.first().ok_or(DataError::NoTrajectories)?;
@@ -532,13 +578,21 @@ impl VectorModel {
         };
         let stats = Stats::of(trajectories);
         let mut fold_fits: Vec<Fitted> = Vec::with_capacity(folds.len());
-        for (train, _) in &folds {
-            let fit = Self::fit_gps(train, params, &plays, fold_fits.first(), &fixed)?;
+        let cell = |stage| shared.and_then(|s| s.cell(stage));
+        for (f, (train, _)) in folds.iter().enumerate() {
+            let fit = Self::fit_gps(
+                train,
+                params,
+                &plays,
+                fold_fits.first(),
+                &fixed,
+                cell(Stage::Fold(f)),
+            )?;
             fold_fits.push(fit);
         }
         let primary = match fold_fits.first() {
             Some(f) => f.clone(),
-            None => Self::fit_gps(trajectories, params, &plays, None, &fixed)?,
+            None => Self::fit_gps(trajectories, params, &plays, None, &fixed, cell(Stage::All))?,
         };
         let mut model = Self::assemble(
             params,
@@ -560,7 +614,14 @@ impl VectorModel {
             model.choose_on_held_out(&held, &fold_fits, !fixed.is_empty(), &mut validation)?;
         }
         // Refit on every sample with the hyperparameters found.
-        let refit = Self::fit_gps(trajectories, params, &plays, Some(&primary), &fixed)?;
+        let refit = Self::fit_gps(
+            trajectories,
+            params,
+            &plays,
+            Some(&primary),
+            &fixed,
+            cell(Stage::Refit),
+        )?;
         let choice = model.sensor_reads_output.clone();
         model.transitions = refit.transitions;
         model.sensors = refit
@@ -599,13 +660,15 @@ impl VectorModel {
     /// Fits every GP on `trajectories`: the transitions and both variants of each sensor, or
     /// only the variant `only[j]` says (`true`: with its own previous output) where `only`
     /// is not empty (the sensor inputs were given). With `fixed`, each GP keeps the
-    /// hyperparameters of its twin there (a refit on other data).
+    /// hyperparameters of its twin there (a refit on other data). With `shared`, the sensor
+    /// GPs are those in the cell, fitted here first if it is empty ([`SharedSensors`]).
     fn fit_gps(
         trajectories: &[VectorSequence<'_>],
         params: &CheckedHbnParams,
         plays: &Plays,
         fixed: Option<&Fitted>,
         only: &[bool],
+        shared: Option<&OnceLock<Option<Vec<SensorPair>>>>,
     ) -> Result<Fitted, ModelError> {
         let dims = trajectories[0].dims;
         let (t_rows, t_targets) = transition_rows(trajectories, plays);
@@ -637,6 +700,26 @@ impl VectorModel {
             })?;
             transitions.push(gp);
         }
+        let fit_sensors = || Self::fit_sensors(trajectories, params, fixed, only);
+        // A failed shared fit is fitted again here, so that its error is this fit's.
+        let sensors = match shared.map(|cell| cell.get_or_init(|| fit_sensors().ok())) {
+            Some(Some(sensors)) => sensors.clone(),
+            _ => fit_sensors()?,
+        };
+        Ok(Fitted {
+            transitions,
+            sensors,
+        })
+    }
+
+    /// The sensor GPs of [`VectorModel::fit_gps`].
+    fn fit_sensors(
+        trajectories: &[VectorSequence<'_>],
+        params: &CheckedHbnParams,
+        fixed: Option<&Fitted>,
+        only: &[bool],
+    ) -> Result<Vec<SensorPair>, ModelError> {
+        let dims = trajectories[0].dims;
         let mut sensors = Vec::with_capacity(dims.sensors);
         for j in 0..dims.sensors {
             let mut pair = [None, None];
@@ -661,10 +744,7 @@ impl VectorModel {
             }
             sensors.push(pair);
         }
-        Ok(Fitted {
-            transitions,
-            sensors,
-        })
+        Ok(sensors)
     }
 
     fn assemble(
@@ -1633,7 +1713,7 @@ mod tests {
         let params = quick_params(60, 20);
         let plays = Plays::with_lags(&params.memory, &[]).unwrap();
         let given = [true, false, true];
-        let fit = VectorModel::fit_gps(&[seq], &params, &plays, None, &given).unwrap();
+        let fit = VectorModel::fit_gps(&[seq], &params, &plays, None, &given, None).unwrap();
         let fitted: Vec<[bool; 2]> = fit
             .sensors
             .iter()
@@ -1641,7 +1721,7 @@ mod tests {
             .collect();
         assert_eq!(fitted, [[true, false], [false, true], [true, false]]);
         assert!(fit.sensor(1, true).is_err() && fit.sensor(1, false).is_ok());
-        let both = VectorModel::fit_gps(&[seq], &params, &plays, None, &[]).unwrap();
+        let both = VectorModel::fit_gps(&[seq], &params, &plays, None, &[], None).unwrap();
         assert!(both.sensors.iter().all(|[a, b]| a.is_some() && b.is_some()));
         // The variants fitted alone are those fitted beside the others.
         for (j, reads) in given.iter().enumerate() {
@@ -1662,6 +1742,34 @@ mod tests {
         assert_eq!(reads, [Some(true), Some(false), Some(true)]);
     }
 
+    /// The lag candidates share their sensor GPs ([`SharedSensors`]): the model chosen is the
+    /// one its lag set trains alone, held-out table, GPs and estimates bit for bit.
+    #[test]
+    fn lag_candidates_share_their_sensor_gps() {
+        let (dims, u, x, y) = finger_rows(400);
+        let seq = VectorSequence::new(&u, &x, &y, dims);
+        let params = quick_params(80, 30);
+        let model =
+            VectorModel::fit_with_sensors(&[seq], &params, SignalNames::default(), &[]).unwrap();
+        assert_eq!(model.summary().lags.len(), 3);
+        let chosen = model.params().clone().check().unwrap();
+        let alone =
+            VectorModel::fit_one(&[seq], &chosen, SignalNames::default(), &[], None).unwrap();
+        assert_eq!(model.summary().validation, alone.summary().validation);
+        let hypers = |m: &VectorModel| {
+            let gps = m.transitions.iter().chain(&m.sensors);
+            gps.map(|g| g.hyperparameters()).collect::<Vec<_>>()
+        };
+        assert_eq!(hypers(&model), hypers(&alone));
+        let (a, b) = (
+            model.estimate(&u, &y, model.mode).unwrap(),
+            alone.estimate(&u, &y, alone.mode).unwrap(),
+        );
+        let bits = |v: &[f64]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&a.x), bits(&b.x));
+        assert_eq!(bits(&a.x_std), bits(&b.x_std));
+    }
+
     /// The held-out score reads the state only where the mask says it was measured: nonsense
     /// elsewhere changes nothing, and the mask changes what is scored.
     #[test]
@@ -1672,8 +1780,8 @@ mod tests {
         let model = VectorModel::fit(&[seq], &params).unwrap();
         // The fold's GPs with the lag set the model chose.
         let chosen = model.params().clone().check().unwrap();
-        let fit =
-            VectorModel::fit_gps(&[seq], &chosen, &model.plays().unwrap(), None, &[]).unwrap();
+        let fit = VectorModel::fit_gps(&[seq], &chosen, &model.plays().unwrap(), None, &[], None)
+            .unwrap();
         // Component 0 measured at every third sample, component 1 at every fifth.
         let mask: Vec<bool> = (0..x.len())
             .map(|j| {

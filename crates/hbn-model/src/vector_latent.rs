@@ -229,7 +229,7 @@ impl VectorModel {
                     .zip(&paths)
                     .map(|(r, x)| VectorSequence { x, ..r.seq })
                     .collect();
-                Self::fit_one(&seqs, &refit, names.clone(), &chosen)
+                Self::fit_one(&seqs, &refit, names.clone(), &chosen, None)
             },
             &mut report,
         )?;
