@@ -60,6 +60,8 @@ fn a_finger_trains_and_estimates_through_the_cli() {
         "/sensor2.data",
         "--max-points",
         "200",
+        "--kernel",
+        "matern52,se-ard",
         "--out",
         s(&model),
     ]);
@@ -207,6 +209,22 @@ fn a_finger_trains_and_estimates_through_the_cli() {
     }
     for lags in ["lags none ", "lags 0.1 s ", "lags 1 s ", "(chosen)"] {
         assert!(out.contains(lags), "{lags}: {out}");
+    }
+    // Each GP's kernel chosen by evidence between the two given: a line per GP, one kept.
+    let evidence: Vec<&str> = out
+        .lines()
+        .skip_while(|l| !l.starts_with("kernels chosen by evidence"))
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        .collect();
+    assert_eq!(evidence.len(), 2 + 2 * 3, "{out}");
+    for line in &evidence {
+        assert!(
+            line.contains("matern52 ")
+                && line.contains("se-ard ")
+                && line.matches("(kept)").count() == 1,
+            "{line}"
+        );
     }
     // The MCAP output carries arrays in the model's order, with the signals' names.
     let mcap = d.path().join("est.mcap");

@@ -419,6 +419,28 @@ pub fn vector_text(model: &hbn_model::VectorModel, file: &std::path::Path) -> St
             gp.noise_variance()
         ));
     }
+    if !s.kernel_evidence.is_empty() {
+        t.push_str("kernels chosen by evidence (log marginal likelihood; the highest is kept):\n");
+        let mut rows = s.kernel_evidence.iter().peekable();
+        while let Some(first) = rows.next() {
+            let mut line = vec![first];
+            while let Some(r) = rows.next_if(|r| r.gp == first.gp) {
+                line.push(r);
+            }
+            let each: Vec<String> = line
+                .iter()
+                .map(|r| {
+                    let lml = r.lml.map_or("failed".to_owned(), |l| format!("{l:.2}"));
+                    format!(
+                        "{} {lml}{}",
+                        r.kernel,
+                        if r.chosen { " (kept)" } else { "" }
+                    )
+                })
+                .collect();
+            t.push_str(&format!("  {:<24} {}\n", first.gp, each.join(", ")));
+        }
+    }
     if !s.validation.is_empty() {
         t.push_str(
             "held-out choices (NLPD of the state summed over components; lower is better):\n",

@@ -104,6 +104,16 @@ def test_2d_arrays_train_a_vector_model_that_tracks_both_components(vector):
     memory = len(model.params["memory"])
     assert model.transition_gps[0].n_features_in_ == 2 * 2 + 2 * (2 + memory)
     assert model.summary["trajectories"] == 1 and model.summary["validation"]
+    assert model.summary["kernel_evidence"] == []
+
+
+def test_a_list_of_kernels_is_chosen_among_by_evidence_per_gp():
+    u, x, y = coupled(300, 1)
+    model = hbn.HysteresisModel.fit(u, x, y, kernel=["matern52", "se-ard"], **FAST)
+    rows = model.summary["kernel_evidence"]
+    # Two rows per GP: two transitions and both variants of each of three sensors.
+    assert len(rows) == 2 * (2 + 2 * 3)
+    assert sum(r["chosen"] for r in rows) == 2 + 2 * 3
 
 
 def test_estimate_shapes_for_1d_column_and_vector_data(vector):

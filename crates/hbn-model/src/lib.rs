@@ -81,8 +81,8 @@ pub use params::{
 pub use smooth::{Smoothing, StateFrame};
 pub use tuning::{CandidateRow, FilterTuning, NoiseScales, ValidationReport};
 pub use vector::{
-    SignalNames, VectorEstimate, VectorLagRow, VectorModel, VectorSequence, VectorSummary,
-    VectorValidationRow,
+    SignalNames, VectorEstimate, VectorKernelRow, VectorLagRow, VectorModel, VectorSequence,
+    VectorSummary, VectorValidationRow,
 };
 pub use vector_filter::VectorFilter;
 pub use vector_latent::VectorLatentRun;

@@ -29,7 +29,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{DataError, ModelError, ModelFileProblem, Signal};
 use crate::model::{GpRole, OUTLIER_GATE, SignalStats};
-use crate::params::{CheckedHbnParams, ConfigError, HbnParams, Param, Problem, SensorInputs};
+use crate::params::{
+    CheckedHbnParams, ConfigError, HbnParams, KernelChoice, Param, Problem, SensorInputs,
+};
 use crate::smooth::StateFrame;
 
 /// The model file's tag.
@@ -274,6 +276,25 @@ pub struct VectorSummary {
     /// one was: [`VectorModel::fit_with_sensors`]).
     #[serde(default)]
     pub lags: Vec<VectorLagRow>,
+    /// Each GP's kernel chosen by evidence among the kernels listed (the set kernel and
+    /// [`crate::params::Selection::kernels`]): one row per GP and kernel of the fit that
+    /// chose them (the first held-out fold's, or every trajectory's without folds), in order;
+    /// empty when one kernel was given.
+    #[serde(default)]
+    pub kernel_evidence: Vec<VectorKernelRow>,
+}
+
+/// One GP's evidence under one kernel, in a vector model's kernel choice.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VectorKernelRow {
+    /// Which GP: `transition i`, or `sensor j` with `own output` or `state only`.
+    pub gp: String,
+    /// The kernel.
+    pub kernel: KernelChoice,
+    /// Log marginal likelihood of the GP with this kernel (`None`: it could not be fitted).
+    pub lml: Option<f64>,
+    /// Whether this kernel was chosen for the GP.
+    pub chosen: bool,
 }
 
 /// One candidate of a vector model's lag selection: its lag set and held-out scores.
@@ -347,7 +368,12 @@ struct Fitted {
     transitions: Vec<GaussianProcess>,
     /// Per sensor: with its own previous output, state only.
     sensors: Vec<SensorPair>,
+    /// The kernel choice by evidence, where this fit made it.
+    kernels: Vec<VectorKernelRow>,
 }
+
+/// The sensor GPs of one fit, and their rows of the kernel choice.
+type SensorFits = (Vec<SensorPair>, Vec<VectorKernelRow>);
 
 /// Per sensor: its GP with its own previous output among its inputs, and its GP of the state
 /// only (`None`: not fitted, where the sensor's inputs were given).
@@ -361,7 +387,7 @@ type SensorPair = [Option<GaussianProcess>; 2];
 /// then the refit on every trajectory.
 pub(crate) struct SharedSensors {
     folds: usize,
-    cells: Vec<OnceLock<Option<Vec<SensorPair>>>>,
+    cells: Vec<OnceLock<Option<SensorFits>>>,
 }
 
 /// Which fit of [`VectorModel::fit_one`] a set of sensor GPs belongs to.
@@ -383,7 +409,7 @@ impl SharedSensors {
         }
     }
 
-    fn cell(&self, stage: Stage) -> Option<&OnceLock<Option<Vec<SensorPair>>>> {
+    fn cell(&self, stage: Stage) -> Option<&OnceLock<Option<SensorFits>>> {
         self.cells.get(match stage {
             Stage::Fold(f) if f < self.folds => f,
             Stage::Fold(_) => return None,
@@ -462,32 +488,35 @@ impl VectorModel {
         let threads = std::thread::available_parallelism()
             .map_or(1, |n| n.get())
             .min(sets.len());
+        // Candidates are handed out one at a time: the first to fit a stage's sensor GPs
+        // takes longer than those that find them fitted.
         let fitted: Vec<(Result<Self, ModelError>, f64)> = if threads < 2 {
             sets.iter().map(fit).collect()
         } else {
-            let chunk = sets.len().div_ceil(threads);
-            std::thread::scope(|scope| {
-                let handles: Vec<_> = sets
-                    .chunks(chunk)
-                    .map(|part| {
-                        let n = part.len();
-                        (
-                            scope.spawn(move || part.iter().map(fit).collect::<Vec<_>>()),
-                            n,
-                        )
-                    })
-                    .collect();
-                handles
-                    .into_iter()
-                    .flat_map(|(h, n)| {
-                        h.join().unwrap_or_else(|_| {
-                            std::iter::repeat_with(|| (Err(unfitted_candidate()), 0.0))
-                                .take(n)
-                                .collect()
+            let next = std::sync::atomic::AtomicUsize::new(0);
+            let mut done: Vec<(usize, (Result<Self, ModelError>, f64))> =
+                std::thread::scope(|scope| {
+                    let workers: Vec<_> = (0..threads)
+                        .map(|_| {
+                            scope.spawn(|| {
+                                let mut done = Vec::new();
+                                loop {
+                                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                                    let Some(lags) = sets.get(i) else { break };
+                                    done.push((i, fit(lags)));
+                                }
+                                done
+                            })
                         })
-                    })
-                    .collect()
-            })
+                        .collect();
+                    // A panic is a bug: it propagates, as it would without the threads.
+                    workers
+                        .into_iter()
+                        .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                        .collect()
+                });
+            done.sort_by_key(|(i, _)| *i);
+            done.into_iter().map(|(_, r)| r).collect()
         };
         let mut rows: Vec<VectorLagRow> = sets
             .iter()
@@ -603,6 +632,7 @@ impl VectorModel {
             primary.clone(),
             names,
         )?;
+        model.summary.kernel_evidence = primary.kernels.clone();
         for (j, reads) in fixed.iter().enumerate() {
             model.sensors[j] = primary.sensor(j, *reads)?.clone();
             model.sensor_reads_output[j] = *reads;
@@ -668,48 +698,129 @@ impl VectorModel {
         plays: &Plays,
         fixed: Option<&Fitted>,
         only: &[bool],
-        shared: Option<&OnceLock<Option<Vec<SensorPair>>>>,
+        shared: Option<&OnceLock<Option<SensorFits>>>,
     ) -> Result<Fitted, ModelError> {
         let dims = trajectories[0].dims;
         let (t_rows, t_targets) = transition_rows(trajectories, plays);
         let t_dim = dims.transition_dim(plays.len());
         let mut transitions = Vec::with_capacity(dims.states);
+        let mut kernels = Vec::new();
         for i in 0..dims.states {
-            let spec = params.transition_kernel.spec(t_dim, [0, 0]);
-            let mut spec = spec;
-            spec.direction = None;
-            spec.validate().map_err(|e| ModelError::Gp {
-                which: GpRole::Transition,
-                source: hbn_gp::GpError::from(e),
-            })?;
-            let mut g = params.gp_params(spec, GpRole::Transition);
-            g.seed = params.seed.wrapping_add(i as u64);
-            if let Some(f) = fixed {
-                g.init = Some(f.transitions[i].hyperparameters());
-                g.optimize = false;
-            }
             let targets: Vec<f64> = t_targets
                 .iter()
                 .skip(i)
                 .step_by(dims.states)
                 .copied()
                 .collect();
-            let gp = hbn_gp::fit(&g, &t_rows, &targets).map_err(|source| ModelError::Gp {
-                which: GpRole::Transition,
-                source,
-            })?;
+            let gp = Self::fit_gp(
+                params,
+                GpRole::Transition,
+                t_dim,
+                params.seed.wrapping_add(i as u64),
+                fixed.map(|f| &f.transitions[i]),
+                (&t_rows, &targets),
+                &format!("transition {i}"),
+                &mut kernels,
+            )?;
             transitions.push(gp);
         }
         let fit_sensors = || Self::fit_sensors(trajectories, params, fixed, only);
         // A failed shared fit is fitted again here, so that its error is this fit's.
-        let sensors = match shared.map(|cell| cell.get_or_init(|| fit_sensors().ok())) {
-            Some(Some(sensors)) => sensors.clone(),
-            _ => fit_sensors()?,
-        };
+        let (sensors, sensor_kernels) =
+            match shared.map(|cell| cell.get_or_init(|| fit_sensors().ok())) {
+                Some(Some(fits)) => fits.clone(),
+                _ => fit_sensors()?,
+            };
+        kernels.extend(sensor_kernels);
         Ok(Fitted {
             transitions,
             sensors,
+            kernels,
         })
+    }
+
+    /// Fits one GP on `(rows, targets)`. With `fixed`, that GP's kernel and hyperparameters
+    /// (a refit on other data); otherwise the role's kernel and those of the selection
+    /// ([`crate::params::Selection::kernels`]), keeping the highest log marginal likelihood
+    /// (the first of equals; rows for `evidence`, labelled `gp`, where there were several).
+    #[allow(clippy::too_many_arguments)]
+    fn fit_gp(
+        params: &CheckedHbnParams,
+        role: GpRole,
+        dim: usize,
+        seed: u64,
+        fixed: Option<&GaussianProcess>,
+        (rows, targets): (&[f64], &[f64]),
+        gp: &str,
+        evidence: &mut Vec<VectorKernelRow>,
+    ) -> Result<GaussianProcess, ModelError> {
+        let fit = |spec: hbn_core::KernelSpec, init: Option<&GaussianProcess>| {
+            spec.validate().map_err(|e| ModelError::Gp {
+                which: role,
+                source: hbn_gp::GpError::from(e),
+            })?;
+            let mut g = params.gp_params(spec, role);
+            g.seed = seed;
+            if let Some(f) = init {
+                g.init = Some(f.hyperparameters());
+                g.optimize = false;
+            }
+            hbn_gp::fit(&g, rows, targets).map_err(|source| ModelError::Gp {
+                which: role,
+                source,
+            })
+        };
+        if let Some(f) = fixed {
+            return fit(f.kernel().clone(), Some(f));
+        }
+        let set = match role {
+            GpRole::Transition => params.transition_kernel,
+            GpRole::Sensor => params.sensor_kernel,
+        };
+        // A list of kernels (`--kernel a,b`) is chosen among by evidence, per GP. The
+        // scalar default's choice by evidence ([`HbnParams::kernel_evidence`]) is not made:
+        // docs/vector.md, "The model".
+        let mut kernels = vec![set];
+        for k in &params.select.kernels {
+            if !kernels.contains(k) {
+                kernels.push(*k);
+            }
+        }
+        let mut fits: Vec<(KernelChoice, Result<GaussianProcess, ModelError>)> = kernels
+            .iter()
+            .map(|k| {
+                let mut spec = k.spec(dim, [0, 0]);
+                spec.direction = None;
+                (*k, fit(spec, None))
+            })
+            .collect();
+        let lml = |r: &Result<GaussianProcess, ModelError>| {
+            r.as_ref()
+                .ok()
+                .map(GaussianProcess::log_marginal_likelihood)
+                .filter(|l| l.is_finite())
+        };
+        let mut best: Option<usize> = None;
+        for (i, (_, r)) in fits.iter().enumerate() {
+            if let Some(l) = lml(r)
+                && best.is_none_or(|b| lml(&fits[b].1).is_none_or(|lb| l > lb))
+            {
+                best = Some(i);
+            }
+        }
+        if fits.len() > 1 {
+            evidence.extend(fits.iter().enumerate().map(|(i, (k, r))| VectorKernelRow {
+                gp: gp.to_owned(),
+                kernel: *k,
+                lml: lml(r),
+                chosen: Some(i) == best,
+            }));
+        }
+        // None fitted: the first kernel's error.
+        fits.swap(0, best.unwrap_or(0));
+        fits.into_iter()
+            .next()
+            .map_or_else(|| Err(unfitted()), |(_, r)| r)
     }
 
     /// The sensor GPs of [`VectorModel::fit_gps`].
@@ -718,9 +829,10 @@ impl VectorModel {
         params: &CheckedHbnParams,
         fixed: Option<&Fitted>,
         only: &[bool],
-    ) -> Result<Vec<SensorPair>, ModelError> {
+    ) -> Result<SensorFits, ModelError> {
         let dims = trajectories[0].dims;
         let mut sensors = Vec::with_capacity(dims.sensors);
+        let mut kernels = Vec::new();
         for j in 0..dims.sensors {
             let mut pair = [None, None];
             for (slot, reads) in pair.iter_mut().zip([true, false]) {
@@ -728,23 +840,23 @@ impl VectorModel {
                     continue;
                 }
                 let (rows, targets) = sensor_rows(trajectories, j, reads);
-                let mut spec = params.sensor_kernel.spec(dims.sensor_dim(reads), [0, 0]);
-                spec.direction = None;
-                let mut g = params.gp_params(spec, GpRole::Sensor);
-                g.seed = params.seed.wrapping_add(100 + j as u64);
-                if let Some(f) = fixed {
-                    g.init = Some(f.sensor(j, reads)?.hyperparameters());
-                    g.optimize = false;
-                }
-                let gp = hbn_gp::fit(&g, &rows, &targets).map_err(|source| ModelError::Gp {
-                    which: GpRole::Sensor,
-                    source,
-                })?;
+                let twin = fixed.map(|f| f.sensor(j, reads)).transpose()?;
+                let inputs = if reads { "own output" } else { "state only" };
+                let gp = Self::fit_gp(
+                    params,
+                    GpRole::Sensor,
+                    dims.sensor_dim(reads),
+                    params.seed.wrapping_add(100 + j as u64),
+                    twin,
+                    (&rows, &targets),
+                    &format!("sensor {j} ({inputs})"),
+                    &mut kernels,
+                )?;
                 *slot = Some(gp);
             }
             sensors.push(pair);
         }
-        Ok(sensors)
+        Ok((sensors, kernels))
     }
 
     fn assemble(
@@ -1768,6 +1880,69 @@ mod tests {
         let bits = |v: &[f64]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&a.x), bits(&b.x));
         assert_eq!(bits(&a.x_std), bits(&b.x_std));
+    }
+
+    /// Given several kernels, each GP's kernel is chosen among them by evidence (the highest
+    /// log marginal likelihood of the first fold's fit, one row per GP and kernel), and the
+    /// model's GPs, refitted on every sample, keep the kernel chosen. By default, Matern 5/2
+    /// and no choice.
+    #[test]
+    fn each_gp_takes_the_listed_kernel_with_the_highest_evidence() {
+        let (dims, u, x, y) = finger_rows(300);
+        let seq = VectorSequence::new(&u, &x, &y, dims);
+        let base = HbnParams {
+            lags: Vec::new(),
+            select: crate::params::Selection::default(),
+            ..(*quick_params(60, 20)).clone()
+        };
+        let spec = |k: KernelChoice, gp: &GaussianProcess| {
+            let mut s = k.spec(gp.kernel().dim, [0, 0]);
+            s.direction = None;
+            s
+        };
+        let model = VectorModel::fit_checked(
+            &[seq],
+            &base.clone().check().unwrap(),
+            SignalNames::default(),
+        )
+        .unwrap();
+        assert!(model.summary().kernel_evidence.is_empty());
+        let gp = model.transition(0).unwrap();
+        assert_eq!(*gp.kernel(), spec(KernelChoice::MATERN52, gp));
+        let mut listed = base;
+        listed.select.kernels = vec![KernelChoice::SE_ARD];
+        let params = listed.check().unwrap();
+        let model = VectorModel::fit_checked(&[seq], &params, SignalNames::default()).unwrap();
+        let rows = &model.summary().kernel_evidence;
+        // Two transitions and both variants of three sensors.
+        assert_eq!(rows.len(), (2 + 2 * 3) * 2);
+        let mut seen_both = [false, false];
+        for per_gp in rows.chunks(2) {
+            assert!(per_gp.iter().all(|r| r.gp == per_gp[0].gp));
+            assert_eq!(
+                (per_gp[0].kernel, per_gp[1].kernel),
+                (KernelChoice::MATERN52, KernelChoice::SE_ARD)
+            );
+            let chosen: Vec<_> = per_gp.iter().filter(|r| r.chosen).collect();
+            assert_eq!(chosen.len(), 1, "{per_gp:?}");
+            let best = per_gp.iter().filter_map(|r| r.lml).fold(f64::MIN, f64::max);
+            assert_eq!(chosen[0].lml, Some(best));
+            let gp = match per_gp[0].gp.strip_prefix("transition ") {
+                Some(i) => model.transition(i.parse().unwrap()),
+                None => {
+                    let j: usize = per_gp[0].gp["sensor ".len()..][..1].parse().unwrap();
+                    let reads = per_gp[0].gp.contains("own output");
+                    (model.sensor_reads_output(j) == Some(reads))
+                        .then(|| model.sensor(j))
+                        .flatten()
+                }
+            };
+            if let Some(gp) = gp {
+                assert_eq!(*gp.kernel(), spec(chosen[0].kernel, gp), "{}", per_gp[0].gp);
+            }
+            seen_both[usize::from(chosen[0].kernel == KernelChoice::SE_ARD)] = true;
+        }
+        assert_eq!(seen_both, [true, true], "{rows:?}");
     }
 
     /// The held-out score reads the state only where the mask says it was measured: nonsense
