@@ -469,7 +469,7 @@ impl VectorModel {
             return Self::fit_one(trajectories, params, names, sensors, None);
         }
         let t0 = Instant::now();
-        let shared = SharedSensors::new(folds(trajectories).len());
+        let shared = SharedSensors::new(fold_count(trajectories));
         let fit = |lags: &Vec<f64>| -> (Result<Self, ModelError>, f64) {
             let t = Instant::now();
             let one = HbnParams {
@@ -1566,6 +1566,16 @@ fn unfitted() -> ModelError {
     ))
 }
 
+/// How many folds [`folds`] makes of `trajectories`: 4, or 0 when no trajectory is long enough
+/// (80 samples). Reads only the lengths, so it is safe before the trajectories are validated.
+fn fold_count(trajectories: &[VectorSequence<'_>]) -> usize {
+    if trajectories.iter().any(|t| t.len() >= 80) {
+        4
+    } else {
+        0
+    }
+}
+
 /// The held-out folds of `trajectories`: for each quarter `q` (the last first), the training
 /// parts (every trajectory long enough without its quarter `q`, the pieces before and after
 /// it as trajectories of their own; shorter trajectories whole) and the held-out quarters.
@@ -1574,10 +1584,7 @@ fn unfitted() -> ModelError {
 fn folds<'a>(
     trajectories: &[VectorSequence<'a>],
 ) -> Vec<(Vec<VectorSequence<'a>>, Vec<VectorSequence<'a>>)> {
-    if !trajectories.iter().any(|t| t.len() >= 80) {
-        return Vec::new();
-    }
-    (0..4)
+    (0..fold_count(trajectories))
         .rev()
         .map(|q| {
             let (mut train, mut held) = (Vec::new(), Vec::new());
@@ -1943,6 +1950,23 @@ mod tests {
             seen_both[usize::from(chosen[0].kernel == KernelChoice::SE_ARD)] = true;
         }
         assert_eq!(seen_both, [true, true], "{rows:?}");
+    }
+
+    /// Trajectories of unequal lengths are a data error before anything is fitted or sliced,
+    /// with the lag candidates (the default) as with one.
+    #[test]
+    fn unequal_lengths_are_a_data_error() {
+        let (dims, u, x, y) = finger_rows(200);
+        let seq = VectorSequence::new(&u, &x[..x.len() - 4], &y, dims);
+        for lags in [vec![vec![1.0]], Vec::new()] {
+            let mut p = HbnParams::default();
+            p.select.lags = lags;
+            let e = VectorModel::fit(&[seq], &p).unwrap_err();
+            assert!(
+                matches!(e, ModelError::Data(DataError::LengthMismatch { .. })),
+                "{e}"
+            );
+        }
     }
 
     /// The held-out score reads the state only where the mask says it was measured: nonsense
