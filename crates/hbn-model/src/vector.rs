@@ -372,6 +372,9 @@ struct Fitted {
     kernels: Vec<VectorKernelRow>,
 }
 
+/// A lag candidate's model (or why it failed) and the seconds its training took.
+type Trained = (Result<VectorModel, ModelError>, f64);
+
 /// The sensor GPs of one fit, and their rows of the kernel choice.
 type SensorFits = (Vec<SensorPair>, Vec<VectorKernelRow>);
 
@@ -470,7 +473,7 @@ impl VectorModel {
         }
         let t0 = Instant::now();
         let shared = SharedSensors::new(fold_count(trajectories));
-        let fit = |lags: &Vec<f64>| -> (Result<Self, ModelError>, f64) {
+        let fit = |lags: &Vec<f64>| -> Trained {
             let t = Instant::now();
             let one = HbnParams {
                 lags: lags.clone(),
@@ -490,31 +493,30 @@ impl VectorModel {
             .min(sets.len());
         // Candidates are handed out one at a time: the first to fit a stage's sensor GPs
         // takes longer than those that find them fitted.
-        let fitted: Vec<(Result<Self, ModelError>, f64)> = if threads < 2 {
+        let fitted: Vec<Trained> = if threads < 2 {
             sets.iter().map(fit).collect()
         } else {
             let next = std::sync::atomic::AtomicUsize::new(0);
-            let mut done: Vec<(usize, (Result<Self, ModelError>, f64))> =
-                std::thread::scope(|scope| {
-                    let workers: Vec<_> = (0..threads)
-                        .map(|_| {
-                            scope.spawn(|| {
-                                let mut done = Vec::new();
-                                loop {
-                                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                                    let Some(lags) = sets.get(i) else { break };
-                                    done.push((i, fit(lags)));
-                                }
-                                done
-                            })
+            let mut done: Vec<(usize, Trained)> = std::thread::scope(|scope| {
+                let workers: Vec<_> = (0..threads)
+                    .map(|_| {
+                        scope.spawn(|| {
+                            let mut done = Vec::new();
+                            loop {
+                                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                                let Some(lags) = sets.get(i) else { break };
+                                done.push((i, fit(lags)));
+                            }
+                            done
                         })
-                        .collect();
-                    // A panic is a bug: it propagates, as it would without the threads.
-                    workers
-                        .into_iter()
-                        .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                        .collect()
-                });
+                    })
+                    .collect();
+                // A panic is a bug: it propagates, as it would without the threads.
+                workers
+                    .into_iter()
+                    .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                    .collect()
+            });
             done.sort_by_key(|(i, _)| *i);
             done.into_iter().map(|(_, r)| r).collect()
         };
@@ -771,7 +773,7 @@ impl VectorModel {
             })
         };
         if let Some(f) = fixed {
-            return fit(f.kernel().clone(), Some(f));
+            return fit(*f.kernel(), Some(f));
         }
         let set = match role {
             GpRole::Transition => params.transition_kernel,
