@@ -117,32 +117,7 @@ pub(crate) fn choose(
         let fitted = HysteresisModel::fit_gp(role, &gp_params, &table, &mut |_, _| {}).ok();
         (gp_params, fitted)
     };
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .min(jobs.len())
-        .max(1);
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let mut fitted: Vec<(usize, Attempt)> = std::thread::scope(|scope| {
-        let workers: Vec<_> = (0..threads)
-            .map(|_| {
-                scope.spawn(|| {
-                    let mut done = Vec::new();
-                    loop {
-                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        let Some(job) = jobs.get(i) else { break };
-                        done.push((i, fit(job)));
-                    }
-                    done
-                })
-            })
-            .collect();
-        // A panic is a bug: it propagates, as it would without the threads.
-        workers
-            .into_iter()
-            .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-            .collect()
-    });
-    fitted.sort_by_key(|(i, _)| *i);
+    let mut fitted: Vec<Attempt> = crate::parallel::side_by_side(&jobs, fit);
     let mut rows = Vec::with_capacity(jobs.len());
     let mut prefit = Vec::new();
     let mut chosen = params.clone();
@@ -150,7 +125,6 @@ pub(crate) fn choose(
         let of_role: Vec<usize> = (0..jobs.len()).filter(|&i| jobs[i].0 == role).collect();
         let lml = |i: usize| {
             fitted[i]
-                .1
                 .1
                 .as_ref()
                 .map(|(gp, _)| gp.log_marginal_likelihood())
@@ -175,7 +149,7 @@ pub(crate) fn choose(
         }
         if let Some(b) = best {
             chosen = chosen.with_kernel(role, jobs[b].1);
-            let (gp_params, fit) = &mut fitted[b].1;
+            let (gp_params, fit) = &mut fitted[b];
             if let Some((gp, starts)) = fit.take() {
                 prefit.push(Prefit {
                     role,

@@ -49,6 +49,7 @@ pub mod latent;
 mod local;
 pub mod metrics;
 mod model;
+mod parallel;
 mod params;
 pub mod smooth;
 pub mod tuning;

@@ -488,38 +488,9 @@ impl VectorModel {
             });
             (model, t.elapsed().as_secs_f64())
         };
-        let threads = std::thread::available_parallelism()
-            .map_or(1, |n| n.get())
-            .min(sets.len());
         // Candidates are handed out one at a time: the first to fit a stage's sensor GPs
         // takes longer than those that find them fitted.
-        let fitted: Vec<Trained> = if threads < 2 {
-            sets.iter().map(fit).collect()
-        } else {
-            let next = std::sync::atomic::AtomicUsize::new(0);
-            let mut done: Vec<(usize, Trained)> = std::thread::scope(|scope| {
-                let workers: Vec<_> = (0..threads)
-                    .map(|_| {
-                        scope.spawn(|| {
-                            let mut done = Vec::new();
-                            loop {
-                                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                                let Some(lags) = sets.get(i) else { break };
-                                done.push((i, fit(lags)));
-                            }
-                            done
-                        })
-                    })
-                    .collect();
-                // A panic is a bug: it propagates, as it would without the threads.
-                workers
-                    .into_iter()
-                    .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                    .collect()
-            });
-            done.sort_by_key(|(i, _)| *i);
-            done.into_iter().map(|(_, r)| r).collect()
-        };
+        let fitted: Vec<Trained> = crate::parallel::side_by_side(&sets, fit);
         let mut rows: Vec<VectorLagRow> = sets
             .iter()
             .zip(&fitted)
