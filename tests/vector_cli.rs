@@ -210,6 +210,20 @@ fn a_finger_trains_and_estimates_through_the_cli() {
     for lags in ["lags none ", "lags 0.1 s ", "lags 1 s ", "(chosen)"] {
         assert!(out.contains(lags), "{lags}: {out}");
     }
+    // Every GP's line names the kernel it uses.
+    let gp_lines: Vec<&str> = out
+        .lines()
+        .skip_while(|l| *l != "GPs:")
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        .collect();
+    assert_eq!(gp_lines.len(), 2 + 3, "{out}");
+    for line in &gp_lines {
+        assert!(
+            line.contains(": matern52, ") || line.contains(": se-ard, "),
+            "{line}"
+        );
+    }
     // Each GP's kernel chosen by evidence between the two given: a line per GP, one kept.
     let evidence: Vec<&str> = out
         .lines()

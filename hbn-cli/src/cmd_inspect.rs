@@ -412,7 +412,8 @@ pub fn vector_text(model: &hbn_model::VectorModel, file: &std::path::Path) -> St
     t.push_str("GPs:\n");
     for (label, gp) in vector_gps(model) {
         t.push_str(&format!(
-            "  {label}: {} inputs, {} support points{}, noise variance {:.3e}\n",
+            "  {label}: {}, {} inputs, {} support points{}, noise variance {:.3e}\n",
+            kernel_name(gp),
             gp.kernel().dim,
             gp.n_support(),
             if gp.is_sparse() { " (inducing)" } else { "" },
@@ -482,6 +483,11 @@ pub fn vector_text(model: &hbn_model::VectorModel, file: &std::path::Path) -> St
     t
 }
 
+/// The kernel a fitted GP uses, by name (`custom` for a structure no choice gives).
+fn kernel_name(gp: &GaussianProcess) -> String {
+    KernelChoice::of_spec(gp.kernel()).map_or_else(|| "custom".to_owned(), |k| k.to_string())
+}
+
 /// A lag set as the CLI prints it: `none`, `1 s`, `0.1 s, 1 s`.
 pub fn lag_set(lags: &[f64]) -> String {
     if lags.is_empty() {
@@ -499,6 +505,7 @@ pub fn vector_json(model: &hbn_model::VectorModel) -> Value {
         .map(|(label, gp)| {
             json!({
                 "gp": label,
+                "kernel": kernel_name(gp),
                 "inputs": gp.kernel().dim,
                 "support_points": gp.n_support(),
                 "sparse": gp.is_sparse(),

@@ -109,6 +109,17 @@ impl KernelChoice {
         }
         spec
     }
+
+    /// The kernel whose [`KernelChoice::spec`] is `spec`, its direction pair aside (a vector
+    /// model's GPs have none): the kernel a fitted GP uses. `None` for a structure no choice
+    /// gives.
+    pub fn of_spec(spec: &KernelSpec) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| {
+            let mut s = k.spec(spec.dim, [0, 0]);
+            s.direction = spec.direction;
+            s == *spec
+        })
+    }
 }
 
 /// The default, `matern52`: the most robust single kernel across the simulators and noise
@@ -1595,6 +1606,20 @@ fn core_reason(e: hbn_core::CoreError) -> &'static str {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every kernel is recognised from its structure, with or without a direction pair.
+    #[test]
+    fn a_kernel_is_recognised_from_its_structure() {
+        for k in KernelChoice::ALL {
+            let mut spec = k.spec(6, [0, 3]);
+            assert_eq!(KernelChoice::of_spec(&spec), Some(k), "{k}");
+            spec.direction = None;
+            assert_eq!(KernelChoice::of_spec(&spec), Some(k), "{k}");
+        }
+        let mut odd = KernelChoice::SE.spec(6, [0, 0]);
+        odd.warp_units = 2;
+        assert_eq!(KernelChoice::of_spec(&odd), None);
+    }
 
     /// Sizes in bytes, KB (1024) and MB (1024 KB), any case, with or without a space.
     #[test]
