@@ -78,6 +78,20 @@ impl Prefit {
 /// it could not be fitted).
 type Attempt = (GpParams, Option<(GaussianProcess, Vec<StartSummary>)>);
 
+/// The position of the highest log marginal likelihood among `lmls` (`None`: a fit that
+/// failed), the first of equals, so that ties keep the order listed; `None` when none fitted.
+pub(crate) fn highest(lmls: impl IntoIterator<Item = Option<f64>>) -> Option<usize> {
+    let mut best: Option<(usize, f64)> = None;
+    for (i, l) in lmls.into_iter().enumerate() {
+        if let Some(l) = l
+            && best.is_none_or(|(_, b)| l > b)
+        {
+            best = Some((i, l));
+        }
+    }
+    best.map(|(i, _)| i)
+}
+
 /// What [`choose`] returns: the parameters with the chosen kernels (and no evidence list), the
 /// table, and the chosen fits.
 pub(crate) struct Chosen {
@@ -130,15 +144,7 @@ pub(crate) fn choose(
                 .map(|(gp, _)| gp.log_marginal_likelihood())
                 .filter(|l| l.is_finite())
         };
-        // The first of the highest: ties keep the order listed.
-        let best = of_role
-            .iter()
-            .copied()
-            .fold(None, |best: Option<usize>, i| match (best, lml(i)) {
-                (Some(b), Some(l)) if lml(b).is_some_and(|lb| lb >= l) => Some(b),
-                (_, Some(_)) => Some(i),
-                (b, None) => b,
-            });
+        let best = highest(of_role.iter().map(|&i| lml(i))).map(|k| of_role[k]);
         for &i in &of_role {
             rows.push(KernelEvidence {
                 gp: role,
@@ -173,6 +179,16 @@ mod tests {
     use super::*;
     use crate::params::{DEFAULT_EVIDENCE_KERNELS, Param, ParamValue};
     use hbn_sim::{SimConfig, SystemKind, simulate_random};
+
+    /// The highest evidence wins, the first of equals, failed fits never.
+    #[test]
+    fn the_highest_evidence_is_the_first_of_equals() {
+        assert_eq!(highest([Some(1.0), Some(3.0), Some(2.0)]), Some(1));
+        assert_eq!(highest([Some(3.0), None, Some(3.0)]), Some(0));
+        assert_eq!(highest([None, Some(-5.0)]), Some(1));
+        assert_eq!(highest([None, None]), None);
+        assert_eq!(highest(std::iter::empty()), None);
+    }
 
     fn small() -> HbnParams {
         HbnParams {

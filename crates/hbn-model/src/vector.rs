@@ -759,7 +759,7 @@ impl VectorModel {
                 kernels.push(*k);
             }
         }
-        let mut fits: Vec<(KernelChoice, Result<GaussianProcess, ModelError>)> = kernels
+        let fits: Vec<(KernelChoice, Result<GaussianProcess, ModelError>)> = kernels
             .iter()
             .map(|k| {
                 let mut spec = k.spec(dim, [0, 0]);
@@ -773,14 +773,7 @@ impl VectorModel {
                 .map(GaussianProcess::log_marginal_likelihood)
                 .filter(|l| l.is_finite())
         };
-        let mut best: Option<usize> = None;
-        for (i, (_, r)) in fits.iter().enumerate() {
-            if let Some(l) = lml(r)
-                && best.is_none_or(|b| lml(&fits[b].1).is_none_or(|lb| l > lb))
-            {
-                best = Some(i);
-            }
-        }
+        let best = crate::evidence::highest(fits.iter().map(|(_, r)| lml(r)));
         if fits.len() > 1 {
             evidence.extend(fits.iter().enumerate().map(|(i, (k, r))| VectorKernelRow {
                 gp: gp.to_owned(),
@@ -790,9 +783,8 @@ impl VectorModel {
             }));
         }
         // None fitted: the first kernel's error.
-        fits.swap(0, best.unwrap_or(0));
         fits.into_iter()
-            .next()
+            .nth(best.unwrap_or(0))
             .map_or_else(|| Err(unfitted()), |(_, r)| r)
     }
 
