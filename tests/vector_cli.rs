@@ -70,18 +70,16 @@ fn a_finger_trains_and_estimates_through_the_cli() {
         out.contains("2 inputs, 2 state components, 3 sensors"),
         "{out}"
     );
-    // The lag candidates (none, 0.1 s, 1 s) trained side by side: the summary names the one
-    // kept.
+    // The candidates (exact and m = 64, each with the lags none, 0.1 s, 1 s) trained side by
+    // side: the summary names the one kept.
     let chosen = out
         .lines()
         .find(|l| l.contains("chosen on held-out data"))
         .unwrap_or_default();
-    assert!(
-        ["lags none", "lags 0.1 s", "lags 1 s"]
-            .iter()
-            .any(|l| chosen.ends_with(l)),
-        "{out}"
-    );
+    let kept = ["lags none", "lags 0.1 s", "lags 1 s"]
+        .iter()
+        .flat_map(|l| ["exact", "m=64"].map(|g| format!("{l}, GPs {g}")));
+    assert!(kept.clone().any(|l| chosen.ends_with(&l)), "{out}");
     let csv = d.path().join("est.csv");
     let (r, out) = hbn(&[
         "estimate",
@@ -207,9 +205,14 @@ fn a_finger_trains_and_estimates_through_the_cli() {
     ] {
         assert!(out.contains(gp), "{gp}: {out}");
     }
-    for lags in ["lags none ", "lags 0.1 s ", "lags 1 s ", "(chosen)"] {
-        assert!(out.contains(lags), "{lags}: {out}");
+    // The candidates' table: a row per inducing setting and lag set, one chosen.
+    for g in ["exact ", "m=64  "] {
+        for lags in ["lags none ", "lags 0.1 s ", "lags 1 s "] {
+            let row = format!("  {g} {lags}");
+            assert_eq!(out.matches(&row).count(), 1, "{row}: {out}");
+        }
     }
+    assert_eq!(out.matches("(chosen)").count(), 1, "{out}");
     // Every GP's line names the kernel it uses.
     let gp_lines: Vec<&str> = out
         .lines()

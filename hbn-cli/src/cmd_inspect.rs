@@ -457,12 +457,12 @@ pub fn vector_text(model: &hbn_model::VectorModel, file: &std::path::Path) -> St
             ));
         }
     }
-    if !s.lags.is_empty() {
+    if !s.candidates.is_empty() {
         t.push_str(
-            "lag candidates, trained side by side (the lowest held-out NLPD among those at least \
-             as accurate held out as the first):\n",
+            "candidates, trained side by side (the lowest held-out NLPD among those at least as \
+             accurate held out as the first):\n",
         );
-        for r in &s.lags {
+        for r in &s.candidates {
             let nrmse: Vec<String> = r.nrmse.iter().map(|v| format!("{v:.4}")).collect();
             let score = match (r.nlpd, &r.error) {
                 (Some(nlpd), _) => format!("NLPD {nlpd:>9.3}  nRMSE {}", nrmse.join(", ")),
@@ -470,7 +470,8 @@ pub fn vector_text(model: &hbn_model::VectorModel, file: &std::path::Path) -> St
                 (None, None) => "no held-out score".to_owned(),
             };
             t.push_str(&format!(
-                "  lags {:<12} {score}  {:.1} s{}\n",
+                "  {:<6} lags {:<12} {score}  {:.1} s{}\n",
+                inducing_setting(r.n_inducing),
                 lag_set(&r.lags),
                 r.seconds,
                 if r.chosen { "  (chosen)" } else { "" }
@@ -486,6 +487,11 @@ pub fn vector_text(model: &hbn_model::VectorModel, file: &std::path::Path) -> St
 /// The kernel a fitted GP uses, by name (`custom` for a structure no choice gives).
 fn kernel_name(gp: &GaussianProcess) -> String {
     KernelChoice::of_spec(gp.kernel()).map_or_else(|| "custom".to_owned(), |k| k.to_string())
+}
+
+/// An inducing setting as the CLI prints it: `exact`, `m=64`.
+pub fn inducing_setting(n_inducing: Option<usize>) -> String {
+    n_inducing.map_or_else(|| "exact".to_owned(), |m| format!("m={m}"))
 }
 
 /// A lag set as the CLI prints it: `none`, `1 s`, `0.1 s, 1 s`.

@@ -165,15 +165,16 @@ fn run_vector(ui: &mut Ui<'_>, args: &TrainArgs, signals: &VectorSignals) -> any
             )
         })
         .collect();
-    let lags = if s.lags.is_empty() && model.lags().is_empty() {
+    let lags = if s.candidates.is_empty() && model.lags().is_empty() {
         String::new()
     } else {
         format!(", lags {}", crate::cmd_inspect::lag_set(model.lags()))
     };
     text.push_str(&format!(
-        "  chosen on held-out data: mode {}, sensors {}{lags}\n",
+        "  chosen on held-out data: mode {}, sensors {}{lags}, GPs {}\n",
         model.default_mode(),
-        sensors.join(", ")
+        sensors.join(", "),
+        crate::cmd_inspect::inducing_setting(model.params().n_inducing)
     ));
     if let Some(best) = s.validation.iter().rev().find(|r| r.chosen) {
         let nrmse: Vec<String> = best.nrmse.iter().map(|v| format!("{v:.4}")).collect();

@@ -82,7 +82,7 @@ pub use params::{
 pub use smooth::{Smoothing, StateFrame};
 pub use tuning::{CandidateRow, FilterTuning, NoiseScales, ValidationReport};
 pub use vector::{
-    SignalNames, VectorEstimate, VectorKernelRow, VectorLagRow, VectorModel, VectorSequence,
+    SignalNames, VectorCandidateRow, VectorEstimate, VectorKernelRow, VectorModel, VectorSequence,
     VectorSummary, VectorValidationRow,
 };
 pub use vector_filter::VectorFilter;

@@ -272,10 +272,10 @@ pub struct VectorSummary {
     /// state was measured only sometimes ([`VectorModel::fit_latent`]).
     #[serde(default)]
     pub latent: Option<crate::latent::LatentReport>,
-    /// The lag sets trained side by side, one candidate each, in order (empty when only
-    /// one was: [`VectorModel::fit_with_sensors`]).
-    #[serde(default)]
-    pub lags: Vec<VectorLagRow>,
+    /// The candidates trained side by side (each inducing setting with each lag set), in
+    /// order (empty when only one was: [`VectorModel::fit_with_sensors`]).
+    #[serde(default, alias = "lags")]
+    pub candidates: Vec<VectorCandidateRow>,
     /// Each GP's kernel chosen by evidence among the kernels listed (the set kernel and
     /// [`crate::params::Selection::kernels`]): one row per GP and kernel of the fit that
     /// chose them (the first held-out fold's, or every trajectory's without folds), in order;
@@ -297,11 +297,16 @@ pub struct VectorKernelRow {
     pub chosen: bool,
 }
 
-/// One candidate of a vector model's lag selection: its lag set and held-out scores.
+/// One candidate of a vector model's selection: its lag set, its inducing setting and its
+/// held-out scores.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct VectorLagRow {
+pub struct VectorCandidateRow {
     /// The lags' time constants (s); empty: none.
     pub lags: Vec<f64>,
+    /// Inducing points per GP (sparse GPs on every sample), or `None`: exact GPs on at most
+    /// [`HbnParams::max_points`] samples.
+    #[serde(default)]
+    pub n_inducing: Option<usize>,
     /// Held-out NLPD of the state, summed over components, of the candidate's final choice
     /// (`None` when it failed to train or has no held-out score).
     pub nlpd: Option<f64>,
@@ -455,49 +460,65 @@ impl VectorModel {
     /// [`VectorModel::fit_checked`] with each sensor's inputs given: none (chosen on held-out
     /// data, one sensor at a time), one for every sensor, or one per sensor.
     ///
-    /// With held-out data (`params.validation > 0`) it trains one candidate per lag set
-    /// (the primary [`HbnParams::lags`], then the selection's, [`crate::VECTOR_DEFAULT_LAGS`]
-    /// by default), side by side, and keeps the one with the lowest held-out NLPD among those
-    /// at least as accurate held out (mean nRMSE over components) as the primary, the rule of
-    /// the scalar model's selection; [`VectorSummary::lags`] has the table. A candidate that
-    /// fails to train is reported there; training fails only when the primary fails.
+    /// With held-out data (`params.validation > 0`) it trains one candidate per inducing
+    /// setting (the primary [`HbnParams::n_inducing`], then the selection's,
+    /// [`crate::params::Selection::inducing`]) and lag set (the primary [`HbnParams::lags`],
+    /// then the selection's, [`crate::VECTOR_DEFAULT_LAGS`] by default), side by side, and
+    /// keeps the one with the lowest held-out NLPD among those at least as accurate held out
+    /// (mean nRMSE over components) as the primary, the rule of the scalar model's selection;
+    /// [`VectorSummary::candidates`] has the table. A candidate that fails to train is
+    /// reported there; training fails only when the primary fails.
     pub fn fit_with_sensors(
         trajectories: &[VectorSequence<'_>],
         params: &CheckedHbnParams,
         names: SignalNames,
         sensors: &[SensorInputs],
     ) -> Result<Self, ModelError> {
-        let sets = lag_sets(params);
-        if sets.len() < 2 || params.validation <= 0.0 {
+        let candidates = candidates(params);
+        if candidates.len() < 2 || params.validation <= 0.0 {
             return Self::fit_one(trajectories, params, names, sensors, None);
         }
         let t0 = Instant::now();
-        let shared = SharedSensors::new(fold_count(trajectories));
-        let fit = |lags: &Vec<f64>| -> Trained {
+        // The sensor GPs depend on the inducing setting, not on the lags: one set of shared
+        // cells per inducing setting.
+        let inducing = inducing_settings(params);
+        let shared: Vec<SharedSensors> = inducing
+            .iter()
+            .map(|_| SharedSensors::new(fold_count(trajectories)))
+            .collect();
+        let fit = |(lags, n_inducing): &(Vec<f64>, Option<usize>)| -> Trained {
             let t = Instant::now();
             let one = HbnParams {
                 lags: lags.clone(),
+                n_inducing: *n_inducing,
                 select: crate::params::Selection {
                     lags: Vec::new(),
+                    inducing: Vec::new(),
                     ..params.select.clone()
                 },
                 ..(**params).clone()
             };
-            let model = one.check().map_err(ModelError::from).and_then(|p| {
-                Self::fit_one(trajectories, &p, names.clone(), sensors, Some(&shared))
-            });
+            let cells = inducing
+                .iter()
+                .position(|m| m == n_inducing)
+                .and_then(|i| shared.get(i));
+            let model = one
+                .check()
+                .map_err(ModelError::from)
+                .and_then(|p| Self::fit_one(trajectories, &p, names.clone(), sensors, cells));
             (model, t.elapsed().as_secs_f64())
         };
-        // Candidates are handed out one at a time: the first to fit a stage's sensor GPs
-        // takes longer than those that find them fitted.
-        let fitted: Vec<Trained> = crate::parallel::side_by_side(&sets, fit);
-        let mut rows: Vec<VectorLagRow> = sets
+        // Candidates are handed out one at a time, in order: the first to fit a stage's sensor
+        // GPs takes longer than those that find them fitted.
+        let fitted: Vec<Trained> = crate::parallel::side_by_side(&candidates, fit);
+        let mut rows: Vec<VectorCandidateRow> = candidates
             .iter()
             .zip(&fitted)
-            .map(|(lags, (model, seconds))| {
+            .map(|((lags, n_inducing), (model, seconds))| {
                 let scores = model.as_ref().ok().and_then(|m| m.held_out_best());
-                VectorLagRow {
+                VectorCandidateRow {
                     lags: lags.clone(),
+                    n_inducing: *n_inducing,
                     nlpd: scores.as_ref().map(|s| s.0),
                     nrmse: scores.map(|s| s.1).unwrap_or_default(),
                     seconds: *seconds,
@@ -506,7 +527,7 @@ impl VectorModel {
                 }
             })
             .collect();
-        let choice = choose_lags(&rows);
+        let choice = choose_candidate(&rows);
         // `choice` is the primary (0) unless a candidate that trained beat it; a failed
         // primary's error is the training's.
         let mut model = fitted
@@ -516,7 +537,7 @@ impl VectorModel {
         if let Some(row) = rows.get_mut(choice) {
             row.chosen = true;
         }
-        model.summary.lags = rows;
+        model.summary.candidates = rows;
         model.summary.seconds = t0.elapsed().as_secs_f64();
         Ok(model)
     }
@@ -529,8 +550,8 @@ impl VectorModel {
             .then(|| (row.nlpd, row.nrmse.clone()))
     }
 
-    /// [`VectorModel::fit_with_sensors`] for one lag set (`params.lags`; the selection's lag
-    /// sets are not read). With `shared`, the sensor GPs come from there (fitted by whichever
+    /// [`VectorModel::fit_with_sensors`] for one candidate (`params.lags` and
+    /// `params.n_inducing`; the selection's lag sets and inducing settings are not read). With `shared`, the sensor GPs come from there (fitted by whichever
     /// candidate needs them first).
     pub(crate) fn fit_one(
         trajectories: &[VectorSequence<'_>],
@@ -1498,11 +1519,33 @@ fn lag_sets(params: &HbnParams) -> Vec<Vec<f64>> {
     sets
 }
 
+/// The inducing settings a vector model trains: the primary ([`HbnParams::n_inducing`]), then
+/// the selection's; each once.
+fn inducing_settings(params: &HbnParams) -> Vec<Option<usize>> {
+    let mut out = vec![params.n_inducing];
+    for m in &params.select.inducing {
+        if !out.contains(m) {
+            out.push(*m);
+        }
+    }
+    out
+}
+
+/// The candidates a vector model trains, `(lags, inducing setting)`: each inducing setting
+/// ([`inducing_settings`]) with each lag set ([`lag_sets`]), the primary (both primary) first.
+fn candidates(params: &HbnParams) -> Vec<(Vec<f64>, Option<usize>)> {
+    let sets = lag_sets(params);
+    inducing_settings(params)
+        .into_iter()
+        .flat_map(|m| sets.iter().map(move |lags| (lags.clone(), m)))
+        .collect()
+}
+
 /// The candidate `fit_with_sensors` keeps: the lowest held-out NLPD among those scored whose
 /// mean held-out nRMSE is no higher than the primary's (row 0); the primary when it alone
 /// scored or nothing beats it.
-fn choose_lags(rows: &[VectorLagRow]) -> usize {
-    let mean = |r: &VectorLagRow| r.nrmse.iter().sum::<f64>() / r.nrmse.len().max(1) as f64;
+fn choose_candidate(rows: &[VectorCandidateRow]) -> usize {
+    let mean = |r: &VectorCandidateRow| r.nrmse.iter().sum::<f64>() / r.nrmse.len().max(1) as f64;
     let Some(primary) = rows.first().filter(|r| r.nlpd.is_some()) else {
         return 0;
     };
@@ -1728,12 +1771,33 @@ mod tests {
         assert_eq!(lag_sets(&p), [vec![0.1]]);
     }
 
+    /// The candidates: each inducing setting (the primary, then the selection's) with each lag
+    /// set; the library's default trains exact and 64-point sparse GPs with three lag sets.
+    #[test]
+    fn candidates_are_each_inducing_setting_with_each_lag_set() {
+        let d = HbnParams::default();
+        let sets = [vec![], vec![0.1], vec![1.0]];
+        let expected: Vec<(Vec<f64>, Option<usize>)> = [None, Some(64)]
+            .into_iter()
+            .flat_map(|m| sets.iter().map(move |l| (l.clone(), m)))
+            .collect();
+        assert_eq!(candidates(&d), expected);
+        let mut p = d.clone();
+        p.n_inducing = Some(32);
+        p.select.inducing = vec![Some(32), None];
+        p.select.lags = Vec::new();
+        assert_eq!(candidates(&p), [(vec![], Some(32)), (vec![], None)]);
+        p.select.inducing.clear();
+        assert_eq!(candidates(&p), [(vec![], Some(32))]);
+    }
+
     /// The choice: the lowest held-out NLPD among the candidates no less accurate held out
     /// (mean nRMSE) than the primary; the primary when nothing beats it or it has no score.
     #[test]
-    fn the_lag_choice_follows_the_rule_of_model_selection() {
-        let row = |nlpd: Option<f64>, nrmse: [f64; 2]| VectorLagRow {
+    fn the_choice_follows_the_rule_of_model_selection() {
+        let row = |nlpd: Option<f64>, nrmse: [f64; 2]| VectorCandidateRow {
             lags: Vec::new(),
+            n_inducing: None,
             nlpd,
             nrmse: nrmse.to_vec(),
             seconds: 1.0,
@@ -1743,12 +1807,12 @@ mod tests {
         let primary = row(Some(-4.0), [0.02, 0.04]);
         // Lower NLPD and as accurate: chosen.
         assert_eq!(
-            choose_lags(&[primary.clone(), row(Some(-4.5), [0.02, 0.04])]),
+            choose_candidate(&[primary.clone(), row(Some(-4.5), [0.02, 0.04])]),
             1
         );
         // Lower NLPD but less accurate on average: not chosen.
         assert_eq!(
-            choose_lags(&[primary.clone(), row(Some(-4.5), [0.01, 0.06])]),
+            choose_candidate(&[primary.clone(), row(Some(-4.5), [0.01, 0.06])]),
             0
         );
         // The lowest NLPD among the accurate ones, not the first.
@@ -1759,9 +1823,9 @@ mod tests {
             row(Some(-5.0), [0.05, 0.05]),
             row(None, [0.0, 0.0]),
         ];
-        assert_eq!(choose_lags(&rows), 2);
+        assert_eq!(choose_candidate(&rows), 2);
         assert_eq!(
-            choose_lags(&[row(None, [0.0; 2]), row(Some(-9.0), [0.0; 2])]),
+            choose_candidate(&[row(None, [0.0; 2]), row(Some(-9.0), [0.0; 2])]),
             0
         );
     }
@@ -1826,16 +1890,24 @@ mod tests {
         assert_eq!(reads, [Some(true), Some(false), Some(true)]);
     }
 
-    /// The lag candidates share their sensor GPs ([`SharedSensors`]): the model chosen is the
-    /// one its lag set trains alone, held-out table, GPs and estimates bit for bit.
+    /// The candidates of one inducing setting share their sensor GPs ([`SharedSensors`]): the
+    /// model chosen is the one its lag set and inducing setting train alone, held-out table,
+    /// GPs and estimates bit for bit.
     #[test]
-    fn lag_candidates_share_their_sensor_gps() {
+    fn candidates_share_their_sensor_gps() {
         let (dims, u, x, y) = finger_rows(400);
         let seq = VectorSequence::new(&u, &x, &y, dims);
         let params = quick_params(80, 30);
         let model =
             VectorModel::fit_with_sensors(&[seq], &params, SignalNames::default(), &[]).unwrap();
-        assert_eq!(model.summary().lags.len(), 3);
+        let shapes: Vec<(Vec<f64>, Option<usize>)> = model
+            .summary()
+            .candidates
+            .iter()
+            .map(|r| (r.lags.clone(), r.n_inducing))
+            .collect();
+        assert_eq!(shapes, candidates(&params));
+        assert_eq!(shapes.len(), 6);
         let chosen = model.params().clone().check().unwrap();
         let alone =
             VectorModel::fit_one(&[seq], &chosen, SignalNames::default(), &[], None).unwrap();

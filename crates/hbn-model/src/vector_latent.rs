@@ -171,10 +171,10 @@ impl VectorModel {
                 _ => SensorInputs::Thesis,
             })
             .collect();
-        // The lag set the first fit chose (its parameters hold it alone), kept by every refit,
-        // and the table of the lag candidates, kept in the summary.
+        // The lag set and inducing setting the first fit chose (its parameters hold them
+        // alone), kept by every refit, and the table of the candidates, kept in the summary.
         let refit = best.params().clone().check()?;
-        let lag_rows = best.summary().lags.clone();
+        let candidate_rows = best.summary().candidates.clone();
         let frame_var: Vec<f64> = best
             .stats()
             .1
@@ -236,8 +236,8 @@ impl VectorModel {
         let warning = latent_warning(&report);
         let summary = best.summary_mut();
         summary.warnings.push(warning);
-        if summary.lags.is_empty() {
-            summary.lags = lag_rows;
+        if summary.candidates.is_empty() {
+            summary.candidates = candidate_rows;
         }
         summary.latent = Some(report);
         summary.seconds = t0.elapsed().as_secs_f64();

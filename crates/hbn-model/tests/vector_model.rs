@@ -73,16 +73,30 @@ fn a_finger_model_estimates_each_component_of_a_fresh_run() {
         assert!(rmse / span < 0.08, "component {i}: nRMSE {}", rmse / span);
         assert!(cover > 0.8, "component {i}: coverage {cover}");
     }
-    // One candidate per lag set (none, 0.1 s, 1 s), trained side by side; the model is the
-    // chosen one's, its plays carry its lags, and the file keeps them.
-    let lags = &model.summary().lags;
-    let sets: Vec<&[f64]> = lags.iter().map(|r| r.lags.as_slice()).collect();
-    assert_eq!(sets, [&[][..], &[0.1][..], &[1.0][..]]);
-    let chosen: Vec<&hbn_model::VectorLagRow> = lags.iter().filter(|r| r.chosen).collect();
-    assert_eq!(chosen.len(), 1, "{lags:#?}");
+    // One candidate per inducing setting (exact, m = 64) and lag set (none, 0.1 s, 1 s),
+    // trained side by side; the model is the chosen one's, its plays carry its lags, its GPs
+    // are sparse when the sparse candidate was chosen, and the file keeps both.
+    let rows = &model.summary().candidates;
+    let shapes: Vec<(&[f64], Option<usize>)> = rows
+        .iter()
+        .map(|r| (r.lags.as_slice(), r.n_inducing))
+        .collect();
+    let sets = [&[][..], &[0.1][..], &[1.0][..]];
+    let expected: Vec<(&[f64], Option<usize>)> = [None, Some(64)]
+        .into_iter()
+        .flat_map(|m| sets.iter().map(move |l| (*l, m)))
+        .collect();
+    assert_eq!(shapes, expected);
+    let chosen: Vec<&hbn_model::VectorCandidateRow> = rows.iter().filter(|r| r.chosen).collect();
+    assert_eq!(chosen.len(), 1, "{rows:#?}");
     assert_eq!(model.lags(), chosen[0].lags.as_slice());
+    assert_eq!(model.params().n_inducing, chosen[0].n_inducing);
+    for i in 0..dims.states {
+        let gp = model.transition(i).unwrap();
+        assert_eq!(gp.is_sparse(), chosen[0].n_inducing.is_some());
+    }
     assert_eq!(model.plays().unwrap().lags().len(), model.lags().len());
-    assert!(lags.iter().all(|r| r.nlpd.is_some() && r.error.is_none()));
+    assert!(rows.iter().all(|r| r.nlpd.is_some() && r.error.is_none()));
     // The model file round-trips to the same estimates, bit for bit.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("finger.json");
@@ -91,6 +105,7 @@ fn a_finger_model_estimates_each_component_of_a_fresh_run() {
     let again = back.estimate(&ut, &yt, model.default_mode()).unwrap();
     assert_eq!(est, again);
     assert_eq!(back.lags(), model.lags());
+    assert_eq!(back.params().n_inducing, model.params().n_inducing);
     assert!(VectorModel::load(&dir.path().join("missing.json")).is_err());
     for mode in [Mode::Ekf, Mode::Ukf] {
         let e = model.estimate(&ut, &yt, mode).unwrap();
