@@ -474,6 +474,16 @@ impl VectorModel {
         names: SignalNames,
         sensors: &[SensorInputs],
     ) -> Result<Self, ModelError> {
+        if params.firmware_budget.is_some() {
+            return Err(ModelError::Config(ConfigError {
+                param: Param::FirmwareBudget,
+                problem: Problem::Invalid {
+                    reason: "a flash budget trains scalar models only; for a vector model, \
+                             train sparse GPs (--inducing 32, Python n_inducing=32) and read \
+                             the sizes `hbn export` prints",
+                },
+            }));
+        }
         let candidates = candidates(params);
         if candidates.len() < 2 || params.validation <= 0.0 {
             return Self::fit_one(trajectories, params, names, sensors, None);
@@ -1789,6 +1799,39 @@ mod tests {
         assert_eq!(candidates(&p), [(vec![], Some(32)), (vec![], None)]);
         p.select.inducing.clear();
         assert_eq!(candidates(&p), [(vec![], Some(32))]);
+    }
+
+    /// A flash budget is refused with a message that says what to do instead, not ignored.
+    #[test]
+    fn a_flash_budget_is_refused() {
+        let (dims, u, x, y) = finger_rows(120);
+        let seq = VectorSequence::new(&u, &x, &y, dims);
+        let params = HbnParams {
+            firmware_budget: Some(64 * 1024),
+            ..HbnParams::default()
+        };
+        match VectorModel::fit(&[seq], &params) {
+            Err(ModelError::Config(e)) => {
+                assert_eq!(e.param, Param::FirmwareBudget);
+                assert!(e.to_string().contains("--inducing"), "{e}");
+            }
+            other => panic!("{:?}", other.map(|_| ())),
+        }
+    }
+
+    /// A model file written before the candidates had inducing settings lists them under
+    /// `lags`: they read as exact candidates.
+    #[test]
+    fn older_files_list_the_candidates_under_lags() {
+        let text = r#"{"trajectories": 1, "samples": 400, "seconds": 2.0, "validation": [],
+            "warnings": [], "unobservable": [0.0, 0.0],
+            "lags": [{"lags": [0.1], "nlpd": -3.5, "nrmse": [0.02, 0.03], "seconds": 1.0,
+                      "error": null, "chosen": true}]}"#;
+        let s: VectorSummary = serde_json::from_str(text).unwrap();
+        assert_eq!(s.candidates.len(), 1);
+        let row = &s.candidates[0];
+        assert_eq!((row.lags.as_slice(), row.n_inducing), (&[0.1][..], None));
+        assert!(row.chosen);
     }
 
     /// The choice: the lowest held-out NLPD among the candidates no less accurate held out
