@@ -116,6 +116,22 @@ def test_a_list_of_kernels_is_chosen_among_by_evidence_per_gp():
     assert sum(r["chosen"] for r in rows) == 2 + 2 * 3
 
 
+def test_exact_and_sparse_gps_with_each_lag_set_are_the_candidates(vector):
+    model, _ = vector
+    rows = model.summary["candidates"]
+    shapes = [(r["n_inducing"], tuple(r["lags"])) for r in rows]
+    assert shapes == [(m, lags) for m in (None, 64) for lags in ((), (0.1,), (1.0,))]
+    assert sum(r["chosen"] for r in rows) == 1
+    chosen = next(r for r in rows if r["chosen"])
+    assert model.params["n_inducing"] == chosen["n_inducing"]
+
+
+def test_a_vector_model_refuses_a_flash_budget():
+    u, x, y = coupled(120, 1)
+    with pytest.raises(hbn.ConfigError, match="--inducing"):
+        hbn.HysteresisModel.fit(u, x, y, firmware_budget="64KB", **FAST)
+
+
 def test_estimate_shapes_for_1d_column_and_vector_data(vector):
     model, (u, _, y) = vector
     est = model.estimate(u, y)
