@@ -485,7 +485,9 @@ impl VectorModel {
             }));
         }
         let candidates = candidates(params);
-        if candidates.len() < 2 || params.validation <= 0.0 {
+        // Without held-out folds (no data held out, or no trajectory long enough) nothing
+        // could choose among the candidates: the primary alone.
+        if candidates.len() < 2 || params.validation <= 0.0 || fold_count(trajectories) == 0 {
             return Self::fit_one(trajectories, params, names, sensors, None);
         }
         let t0 = Instant::now();
@@ -1799,6 +1801,19 @@ mod tests {
         assert_eq!(candidates(&p), [(vec![], Some(32)), (vec![], None)]);
         p.select.inducing.clear();
         assert_eq!(candidates(&p), [(vec![], Some(32))]);
+    }
+
+    /// Without held-out folds (every trajectory shorter than 80 samples) nothing could choose,
+    /// so only the primary candidate trains.
+    #[test]
+    fn without_folds_only_the_primary_trains() {
+        let (dims, u, x, y) = finger_rows(60);
+        let seq = VectorSequence::new(&u, &x, &y, dims);
+        let params = quick_params(40, 10);
+        let model = VectorModel::fit_checked(&[seq], &params, SignalNames::default()).unwrap();
+        assert!(model.summary().candidates.is_empty());
+        assert_eq!(model.params().n_inducing, None);
+        assert!(model.lags().is_empty());
     }
 
     /// A flash budget is refused with a message that says what to do instead, not ignored.
