@@ -8,11 +8,18 @@ use std::path::Path;
 
 /// Runs `hbn ARGS` in-process; returns the result and stdout.
 fn hbn(args: &[&str]) -> (hbn_cli::anyhow::Result<()>, String) {
+    let (r, out, _) = hbn_with_stderr(args);
+    (r, out)
+}
+
+/// [`hbn`], with stderr (notes and warnings) as well.
+fn hbn_with_stderr(args: &[&str]) -> (hbn_cli::anyhow::Result<()>, String, String) {
     let mut out = Vec::new();
     let mut err = Vec::new();
     let full: Vec<&str> = std::iter::once("hbn").chain(args.iter().copied()).collect();
     let r = hbn_cli::run_with(full, &mut out, &mut err);
-    (r, String::from_utf8_lossy(&out).into_owned())
+    let text = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
+    (r, text(&out), text(&err))
 }
 
 fn s(p: &Path) -> &str {
@@ -40,7 +47,7 @@ fn a_finger_trains_and_estimates_through_the_cli() {
         r.expect("simulate");
     }
     let model = d.path().join("finger.json");
-    let (r, out) = hbn(&[
+    let (r, out, err) = hbn_with_stderr(&[
         "train",
         "--log",
         s(&train),
@@ -69,6 +76,11 @@ fn a_finger_trains_and_estimates_through_the_cli() {
     assert!(
         out.contains("2 inputs, 2 state components, 3 sensors"),
         "{out}"
+    );
+    // The note names the candidates before they train.
+    assert!(
+        err.contains("model selection: training 6 vector candidates side by side (exact lags none"),
+        "{err}"
     );
     // The candidates (exact and m = 64, each with the lags none, 0.1 s, 1 s) trained side by
     // side: the summary names the one kept.

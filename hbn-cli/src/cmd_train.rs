@@ -116,12 +116,34 @@ fn run_vector(ui: &mut Ui<'_>, args: &TrainArgs, signals: &VectorSignals) -> any
         ..args.read.options(args.rate)
     };
     let mut render = Renderer::default();
+    let params = args.params();
+    let candidates = hbn_model::VectorModel::candidates(&params);
+    if candidates.len() > 1 {
+        let names: Vec<String> = candidates
+            .iter()
+            .map(|(lags, m)| {
+                format!(
+                    "{} lags {}",
+                    crate::cmd_inspect::inducing_setting(*m),
+                    crate::cmd_inspect::lag_set(lags)
+                )
+            })
+            .collect();
+        // Shown once the logs are read and checked, not before an error about them.
+        render.when_logs_read = Some(format!(
+            "model selection: training {} vector candidates side by side ({}); the one with \
+             the lowest held-out NLPD, if at least as accurate held out as the first, becomes \
+             the model",
+            candidates.len(),
+            names.join(", ")
+        ));
+    }
     let mut native = None;
     let trained = train_vector_from_logs(
         &args.logs,
         signals,
         opts,
-        args.params(),
+        params,
         &args.sensor_inputs,
         &mut |e| {
             note_native_rate(&mut native, &e);

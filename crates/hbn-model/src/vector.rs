@@ -554,6 +554,17 @@ impl VectorModel {
         Ok(model)
     }
 
+    /// The candidates [`VectorModel::fit_with_sensors`] trains with `params` when it has
+    /// held-out data, `(lags, inducing setting)`, the primary first: each inducing setting
+    /// (the primary [`HbnParams::n_inducing`], then [`crate::params::Selection::inducing`])
+    /// with each lag set; one alone when there is nothing to choose.
+    pub fn candidates(params: &HbnParams) -> Vec<(Vec<f64>, Option<usize>)> {
+        if params.validation <= 0.0 {
+            return vec![(params.lags.clone(), params.n_inducing)];
+        }
+        candidates(params)
+    }
+
     /// The held-out NLPD (summed over components) and nRMSE (per component) of this model's
     /// final choice on its held-out folds (`None` without held-out data).
     pub(crate) fn held_out_best(&self) -> Option<(f64, Vec<f64>)> {
@@ -1794,6 +1805,12 @@ mod tests {
             .flat_map(|m| sets.iter().map(move |l| (l.clone(), m)))
             .collect();
         assert_eq!(candidates(&d), expected);
+        assert_eq!(VectorModel::candidates(&d), expected);
+        let nothing_held_out = HbnParams {
+            validation: 0.0,
+            ..d.clone()
+        };
+        assert_eq!(VectorModel::candidates(&nothing_held_out), [(vec![], None)]);
         let mut p = d.clone();
         p.n_inducing = Some(32);
         p.select.inducing = vec![Some(32), None];
