@@ -675,7 +675,8 @@ pub struct TrainArgs {
     pub max_signal_variance: Cap,
     /// Train what fits this much firmware flash (the f32 export's tables), e.g. `16KB`, `64KB`,
     /// `1MB` or bytes: sparse GPs with the most inducing points (64 down to 8) that fit, a
-    /// thinned initial-state table, and a default mode that fits. docs/firmware.md.
+    /// thinned initial-state table, and a default mode that fits. Scalar models only.
+    /// docs/firmware.md.
     #[arg(help_heading = "Model", long, value_parser = hbn_model::parse_bytes, value_name = "SIZE")]
     pub firmware_budget: Option<u64>,
     /// Log reading options.
