@@ -919,7 +919,8 @@ _TRAINING_PARAMETERS_DOC = """
         Train what fits this much firmware flash (the ``f32`` export's tables): bytes, or a
         size such as ``"16KB"``, ``"64KB"`` or ``"1MB"``. Sparse GPs with the most inducing
         points (64 down to 8) that fit, a thinned initial-state table and a default mode that
-        fits (``docs/firmware.md``); ``None``: no budget.
+        fits (``docs/firmware.md``); ``None``: no budget. Scalar models only: a vector model
+        given a budget raises :class:`ConfigError`.
 
     ``None`` keeps a parameter's default, except ``n_inducing=None`` (exact GPs). A bad value
     raises :class:`ConfigError` whose ``keyword`` names it.
@@ -931,7 +932,8 @@ _TRAINING_PARAMETERS_DOC = """
     as the first becomes the model, leaving out candidates whose filter loses the state on
     their own training runs while another does not. Each candidate costs one training. The
     table is ``summary["validation"]["candidates"]``, and :attr:`HysteresisModel.params` holds
-    the configuration chosen.
+    the configuration chosen. A vector model's candidates are each inducing setting with each
+    lag set, by the same rule (``summary["candidates"]``, ``docs/vector.md``).
 
 """
 
