@@ -13,7 +13,8 @@
 //!   noise draw (seed `1000 + seed`). Nothing is scored on the training run.
 //! - the vector model: `VectorModel::fit` with `HbnParams::default()`, estimating the test run
 //!   in its default mode; per component the nRMSE (RMSE over the span of the true test
-//!   component), the 2-sigma coverage and the mean NEES.
+//!   component), the 2-sigma coverage and the mean NEES; the JSON names the candidate it
+//!   kept (`vector_lags`, `vector_inducing`).
 //! - the scalar models: `HysteresisModel::fit` with `HbnParams::default()` on every triple
 //!   (input `a`, component `i`, sensor `j`) of the training run. The pair `(a, j)` of component
 //!   `i` is chosen by the model's own held-out score on the training run (the tuned row of its
@@ -192,6 +193,9 @@ struct CaseResult {
     seed: u64,
     vector_seconds: f64,
     vector_mode: Mode,
+    /// The candidate the vector model kept: its lag set and inducing setting.
+    vector_lags: Vec<f64>,
+    vector_inducing: Option<usize>,
     vector_warnings: Vec<String>,
     /// The vector model's held-out table (`VectorSummary::validation`) as JSON rows.
     vector_validation: Vec<Value>,
@@ -321,7 +325,9 @@ fn run_case(
     let mode = model.default_mode();
     let est = model.estimate(&rows(&test.u), &rows(&test.y), mode)?;
     eprintln!(
-        "  vector: {vector_seconds:.1} s, mode {mode}, warnings {:?}",
+        "  vector: {vector_seconds:.1} s, mode {mode}, lags {:?}, inducing {:?}, warnings {:?}",
+        model.lags(),
+        model.params().n_inducing,
         model.summary().warnings
     );
     let validation: Vec<Value> = model
@@ -420,6 +426,8 @@ fn run_case(
         seed,
         vector_seconds,
         vector_mode: mode,
+        vector_lags: model.lags().to_vec(),
+        vector_inducing: model.params().n_inducing,
         vector_warnings: model.summary().warnings.clone(),
         vector_validation: validation,
         scalar_seconds: pairs.iter().map(|p| p.seconds).sum(),
@@ -657,6 +665,8 @@ fn to_json(header: &[(String, String)], cases: &[CaseResult], pick: Pick) -> Val
                 "seed": case.seed,
                 "vector_seconds": case.vector_seconds,
                 "vector_mode": case.vector_mode.to_string(),
+                "vector_lags": case.vector_lags,
+                "vector_inducing": case.vector_inducing,
                 "vector_warnings": case.vector_warnings,
                 "vector_validation": case.vector_validation,
                 "scalar_seconds_total": case.scalar_seconds,
