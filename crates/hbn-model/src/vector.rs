@@ -484,10 +484,10 @@ impl VectorModel {
                 },
             }));
         }
-        let candidates = candidates(params);
+        let candidates = Self::candidates(params);
         // Without held-out folds (no data held out, or no trajectory long enough) nothing
         // could choose among the candidates: the primary alone.
-        if candidates.len() < 2 || params.validation <= 0.0 || fold_count(trajectories) == 0 {
+        if candidates.len() < 2 || fold_count(trajectories) == 0 {
             return Self::fit_one(trajectories, params, names, sensors, None);
         }
         let t0 = Instant::now();
