@@ -142,6 +142,12 @@
 //! Both need a disturbance that does not propagate, and refuse `soft-actuator-load`
 //! ([`SimError::NoExactOracle`]).
 //!
+//! On the multi-signal systems, [`multi_posterior_estimate`] gives the posterior of the state
+//! given the inputs and outputs so far and the simulator's own model (not the true past
+//! states), found by a particle filter: the least expected squared error of any causal
+//! estimator, up to the particles' sampling error, which only raises it. `docs/vector.md`
+//! reports it beside the vector and scalar models.
+//!
 //! ## Building blocks
 //!
 //! The operators ([`PlayOperator`], [`PrandtlIshlinskii`], [`MaxwellSlip`], [`BoucWen`],
@@ -161,8 +167,8 @@ use hbn_core::rng::Rng;
 pub use input::{DEFAULT_MAX_INCREMENT, InputKind, generate_input};
 pub use multi::{
     ARM_ELONGATION_SQ, ARM_SENSOR_MIX, ARM_STATE_MIX, FINGER_SENSOR_MIX, FINGER_STATE_MIX,
-    MultiConfig, MultiKind, MultiSimulator, MultiTrajectory, generate_multi_input, simulate_multi,
-    simulate_multi_random,
+    MultiConfig, MultiKind, MultiPosterior, MultiSimulator, MultiTrajectory, generate_multi_input,
+    multi_posterior_estimate, simulate_multi, simulate_multi_random,
 };
 pub use operators::{
     BoucWen, BoucWenParams, Duhem, Envelope, Hysteresis, MaxwellSlip, PlayOperator,
@@ -236,6 +242,25 @@ pub enum SimError {
         len: usize,
         /// Samples of input signal 0.
         expected: usize,
+    },
+    /// Sensor outputs of a multi-signal system given in a number other than its sensors', or
+    /// of a length other than the inputs'.
+    #[error(
+        "`{system}` has {expected} sensors of {samples} samples each; got {got} output signals, output signal {signal} with {len} samples"
+    )]
+    OutputShape {
+        /// The system's name.
+        system: &'static str,
+        /// Sensors the system has.
+        expected: usize,
+        /// Samples of the inputs.
+        samples: usize,
+        /// Output signals given.
+        got: usize,
+        /// The first output signal whose length differs (or `got` when the count differs).
+        signal: usize,
+        /// Its samples (0 when the count differs).
+        len: usize,
     },
     /// A sample of one input signal of a multi-signal simulation is NaN or infinite.
     #[error("input signal {input}: sample {index} is not finite ({value})")]

@@ -254,6 +254,11 @@ impl Tip {
     fn step(&mut self, target: f64) -> f64 {
         (self.lag.step(target) - self.offset) * self.gain
     }
+
+    /// Moves the tip by `d` (calibrated units): the lag state takes the displacement.
+    fn disturb(&mut self, d: f64) {
+        self.lag.s += d / self.gain;
+    }
 }
 
 fn dot(w: &[f64], v: &[f64]) -> f64 {
@@ -544,11 +549,17 @@ impl MultiSystem {
 
     /// Actuators: the next clean state `x` for the inputs `u` (one per chamber).
     pub(crate) fn actuate(&mut self, u: &[f64], x: &mut [f64]) {
-        for ((b, ch), &uc) in self.bends.iter_mut().zip(&mut self.chambers).zip(u) {
-            *b = ch.step(uc);
-        }
+        self.bend(u);
         for ((xi, tip), row) in x.iter_mut().zip(&mut self.tips).zip(&self.state_mix) {
             *xi = tip.step(dot(row, &self.bends));
+        }
+    }
+
+    /// Chambers only: the calibrated bends for the inputs `u` (one per chamber), the tips'
+    /// targets before mixing.
+    fn bend(&mut self, u: &[f64]) {
+        for ((b, ch), &uc) in self.bends.iter_mut().zip(&mut self.chambers).zip(u) {
+            *b = ch.step(uc);
         }
     }
 
@@ -556,7 +567,7 @@ impl MultiSystem {
     /// takes the displacement, which then relaxes with the lag's time constant.
     pub(crate) fn disturb(&mut self, i: usize, d: f64) {
         if let Some(tip) = self.tips.get_mut(i) {
-            tip.lag.s += d / tip.gain;
+            tip.disturb(d);
         }
     }
 
@@ -643,6 +654,32 @@ impl MultiSimulator {
     }
 }
 
+/// Checks that `u` holds one signal per input of `kind`, all of one length, every sample
+/// finite and within [`INPUT_RANGE`]; returns the length.
+fn check_inputs(kind: MultiKind, u: &[Vec<f64>]) -> Result<usize, SimError> {
+    if u.len() != kind.inputs() {
+        return Err(SimError::InputCount {
+            system: kind.name(),
+            expected: kind.inputs(),
+            got: u.len(),
+        });
+    }
+    let n = u.first().map_or(0, Vec::len);
+    for (input, ui) in u.iter().enumerate() {
+        if ui.len() != n {
+            return Err(SimError::InputLengthMismatch {
+                input,
+                len: ui.len(),
+                expected: n,
+            });
+        }
+        for (index, &value) in ui.iter().enumerate() {
+            check_sample(input, index, value)?;
+        }
+    }
+    Ok(n)
+}
+
 fn check_sample(input: usize, index: usize, value: f64) -> Result<(), SimError> {
     if !value.is_finite() {
         return Err(SimError::NonFiniteMultiInput {
@@ -673,26 +710,7 @@ fn check_sample(input: usize, index: usize, value: f64) -> Result<(), SimError> 
 pub fn simulate_multi(config: &MultiConfig, u: &[Vec<f64>]) -> Result<MultiTrajectory, SimError> {
     config.validate()?;
     let kind = config.system;
-    if u.len() != kind.inputs() {
-        return Err(SimError::InputCount {
-            system: kind.name(),
-            expected: kind.inputs(),
-            got: u.len(),
-        });
-    }
-    let n = u.first().map_or(0, Vec::len);
-    for (input, ui) in u.iter().enumerate() {
-        if ui.len() != n {
-            return Err(SimError::InputLengthMismatch {
-                input,
-                len: ui.len(),
-                expected: n,
-            });
-        }
-        for (index, &value) in ui.iter().enumerate() {
-            check_sample(input, index, value)?;
-        }
-    }
+    let n = check_inputs(kind, u)?;
     let mut sim = MultiSimulator::new(config)?;
     let mut x = vec![Vec::with_capacity(n); kind.states()];
     let mut y = vec![Vec::with_capacity(n); kind.sensors()];
@@ -759,6 +777,9 @@ pub fn simulate_multi_random(
     )?;
     simulate_multi(config, &u)
 }
+
+mod posterior;
+pub use posterior::{MultiPosterior, multi_posterior_estimate};
 
 #[cfg(test)]
 mod tests;

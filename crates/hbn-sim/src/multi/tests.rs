@@ -593,3 +593,82 @@ fn a_rejected_step_leaves_the_simulator_where_it_was() {
     }
     assert_eq!(sim.steps(), 300);
 }
+
+/// Root-mean-square difference of two signals.
+fn rms_diff(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len()).max(1) as f64;
+    (a.iter().zip(b).map(|(p, q)| (p - q) * (p - q)).sum::<f64>() / n).sqrt()
+}
+
+#[test]
+fn without_noise_the_posterior_is_the_state() {
+    let config = MultiConfig::new(MultiKind::Finger);
+    let traj = simulate_multi(&config, &random_inputs(MultiKind::Finger, 300, 3)).unwrap();
+    let post = multi_posterior_estimate(&config, &traj.u, &traj.y, 3, 1).unwrap();
+    for i in 0..2 {
+        assert!(max_abs_diff(&post.mean[i], &traj.x[i]) < 1e-12);
+        assert!(post.std[i].iter().all(|s| *s < 1e-12));
+    }
+}
+
+#[test]
+fn the_posterior_uses_the_sensors_and_its_band_covers_the_state() {
+    let config = MultiConfig {
+        noise_gain: 10.0,
+        seed: 11,
+        ..MultiConfig::new(MultiKind::Arm)
+    };
+    let traj = simulate_multi_random(&config, 600).unwrap();
+    let post = multi_posterior_estimate(&config, &traj.u, &traj.y, 400, 2).unwrap();
+    // The same filter without the sensors (every output missing) is the prior: the
+    // disturbances accumulate in the tips' lags.
+    let missing = vec![vec![f64::NAN; traj.len()]; 4];
+    let prior = multi_posterior_estimate(&config, &traj.u, &missing, 400, 2).unwrap();
+    for i in 0..3 {
+        let (with, without) = (
+            rms_diff(&post.mean[i], &traj.x[i]),
+            rms_diff(&prior.mean[i], &traj.x[i]),
+        );
+        assert!(
+            with < 0.7 * without,
+            "x{i}: {with} with the sensors, {without} without"
+        );
+        let inside = (0..traj.len())
+            .filter(|&k| (post.mean[i][k] - traj.x[i][k]).abs() <= 2.0 * post.std[i][k])
+            .count() as f64
+            / traj.len() as f64;
+        assert!(
+            (0.9..=1.0).contains(&inside),
+            "x{i}: 2-sigma coverage {inside}"
+        );
+    }
+    assert!(post.resamples > 0 && post.min_effective_particles >= 1.0);
+}
+
+#[test]
+fn the_posterior_refuses_wrong_outputs_and_no_particles() {
+    let config = MultiConfig::new(MultiKind::Finger);
+    let traj = simulate_multi(&config, &random_inputs(MultiKind::Finger, 20, 1)).unwrap();
+    let two = &traj.y[..2];
+    assert!(matches!(
+        multi_posterior_estimate(&config, &traj.u, two, 10, 0),
+        Err(SimError::OutputShape { got: 2, .. })
+    ));
+    let mut short = traj.y.clone();
+    short[1].pop();
+    assert!(matches!(
+        multi_posterior_estimate(&config, &traj.u, &short, 10, 0),
+        Err(SimError::OutputShape {
+            signal: 1,
+            len: 19,
+            ..
+        })
+    ));
+    assert!(matches!(
+        multi_posterior_estimate(&config, &traj.u, &traj.y, 0, 0),
+        Err(SimError::InvalidParameter {
+            name: "particles",
+            ..
+        })
+    ));
+}
