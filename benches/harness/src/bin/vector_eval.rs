@@ -6,7 +6,7 @@
 //! ```text
 //! vector_eval [--systems finger,arm] [--gains 0,1,10] [--seeds 1,2,3] \
 //!     [--train-steps 3000] [--test-steps 2000] [--pick nrmse|nlpd] [--quick] [--out FILE] \
-//!     [--floor-particles 2000] [--scalar-cache DIR]
+//!     [--floor-particles 2000] [--coverage-runs 0] [--scalar-cache DIR]
 //! ```
 //!
 //! For each system, noise gain and seed:
@@ -26,6 +26,9 @@
 //!   particles), the posterior mean given the inputs, the outputs and the simulator's own model.
 //!   No causal estimator has a lower expected error, so where the floor's nRMSE is more than
 //!   0.8x the scalar model's the bar lies below what any estimator can reach.
+//! - with `--coverage-runs N`, the vector model's 2-sigma coverage on `N` more fresh test runs
+//!   (seeds `COVERAGE_SEED_OFFSET + 100 s + r`): how much one test run's coverage varies for
+//!   one trained model.
 //!
 //! Prints a Markdown report (machine, date, command line, one row per component, then the
 //! geometric mean of the ratios per system and gain) on stdout, progress on stderr, and the
@@ -50,6 +53,8 @@ const RATIO_BAR: f64 = 0.8;
 const COVERAGE_BAND: (f64, f64) = (0.90, 0.98);
 /// Offset of the test run's seed from the training run's.
 const TEST_SEED_OFFSET: u64 = 1000;
+/// Offset of the seeds of the extra coverage runs (`--coverage-runs`).
+const COVERAGE_SEED_OFFSET: u64 = 20_000;
 
 /// The held-out score that chooses each component's scalar pair.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -97,6 +102,9 @@ struct Args {
     /// floor's nRMSE to about 1e-4 of 32000's on the arm at noise gain 10.
     #[arg(long, default_value_t = 2000)]
     floor_particles: usize,
+    /// Also score the vector model's 2-sigma coverage on this many more fresh test runs.
+    #[arg(long, default_value_t = 0)]
+    coverage_runs: usize,
 }
 
 /// Geometric mean of the finite positive values (`NaN` when there are none).
@@ -194,6 +202,8 @@ struct ComponentResult {
     vector_unobservable: f64,
     /// nRMSE of the posterior mean under the simulator's own model (`NaN` without a floor).
     floor_nrmse: f64,
+    /// The vector model's 2-sigma coverage on each extra fresh test run (`--coverage-runs`).
+    extra_coverage: Vec<f64>,
     /// Index into the case's pairs: the held-out choice and the oracle.
     chosen: Option<usize>,
     oracle: Option<usize>,
@@ -404,11 +414,29 @@ fn run_case(
                     .as_ref()
                     .and_then(|f| f.get(i))
                     .map_or(f64::NAN, |m| nrmse(m, &test.x[i])),
+                extra_coverage: Vec::new(),
                 chosen: None,
                 oracle: None,
             }
         })
         .collect();
+
+    for r in 0..args.coverage_runs as u64 {
+        let run = simulate_multi_random(
+            &MultiConfig {
+                noise_gain: gain,
+                seed: COVERAGE_SEED_OFFSET + 100 * seed + r,
+                ..MultiConfig::new(system)
+            },
+            args.test_steps,
+        )?;
+        let e = model.estimate(&rows(&run.u), &rows(&run.y), mode)?;
+        for c in &mut components {
+            let i = c.component;
+            let cal = calibration(&e.component(i), &e.component_std(i), &run.x[i]);
+            c.extra_coverage.push(cal.coverage_2sigma);
+        }
+    }
 
     let mut pairs = Vec::new();
     let mut cached = 0;
@@ -615,6 +643,48 @@ fn markdown(header: &[(String, String)], cases: &[CaseResult], pick: Pick) -> St
     for case in cases {
         s.push_str(&case_rows(case));
     }
+    if cases
+        .iter()
+        .any(|c| c.components.iter().any(|k| !k.extra_coverage.is_empty()))
+    {
+        let _ = writeln!(
+            s,
+            "\nThe vector model's 2-sigma coverage on more fresh test runs (one trained model per \
+             row; runs outside [{}, {}] counted):\n\n| system | gain | seed | comp. | runs | mean | sd | min | max | outside |\n|---|---|---|---|---|---|---|---|---|---|",
+            COVERAGE_BAND.0, COVERAGE_BAND.1
+        );
+        for case in cases {
+            for c in &case.components {
+                let v = &c.extra_coverage;
+                if v.is_empty() {
+                    continue;
+                }
+                let n = v.len() as f64;
+                let mean = v.iter().sum::<f64>() / n;
+                let sd = (v.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n).sqrt();
+                let (lo, hi) = v
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
+                        (l.min(x), h.max(x))
+                    });
+                let outside = v.iter().filter(|x| !passes(0.0, **x).1).count();
+                let _ = writeln!(
+                    s,
+                    "| {} | {} | {} | x{} | {} | {} | {} | {} | {} | {} |",
+                    case.system,
+                    case.gain,
+                    case.seed,
+                    c.component,
+                    v.len(),
+                    f3(mean),
+                    f3(sd),
+                    f3(lo),
+                    f3(hi),
+                    outside
+                );
+            }
+        }
+    }
     let _ = writeln!(
         s,
         "\n| system | gain | components x seeds | geo. mean ratio (held-out) | geo. mean ratio (oracle) | cells over the ratio bar | cells whose floor is over the bar | cells outside the coverage band |"
@@ -717,6 +787,7 @@ fn to_json(header: &[(String, String)], cases: &[CaseResult], pick: Pick) -> Val
                         "oracle_ratio": finite(case.ratio(c, c.oracle)),
                         "floor_nrmse": finite(c.floor_nrmse),
                         "floor_ratio": finite(case.floor_ratio(c)),
+                        "extra_coverage_2sigma": c.extra_coverage.iter().map(|v| finite(*v)).collect::<Vec<_>>(),
                     })
                 })
                 .collect();
