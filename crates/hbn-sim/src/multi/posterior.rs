@@ -62,7 +62,7 @@ struct Particle {
 ///
 /// The trajectory must start from the system's relaxed state, as [`super::simulate_multi`]'s
 /// do. With noise gain 0 the state is a deterministic function of the inputs and the posterior
-/// is exact.
+/// is exact (one particle runs, whatever `particles` says).
 ///
 /// # Errors
 /// An invalid `config`; inputs of the wrong count, of different lengths or out of range; outputs
@@ -106,6 +106,8 @@ pub fn multi_posterior_estimate(
     let (width_x, width_y) = (config.noise_width_x(), config.noise_width_y());
     let (half_y, edge) = (0.5 * width_y, (SOFT_EDGE * width_y).max(f64::MIN_POSITIVE));
     let (dx, du) = (kind.states(), kind.inputs());
+    // Without a disturbance every particle follows the same path: one is the exact posterior.
+    let particles = if width_x == 0.0 { 1 } else { particles };
 
     let start = Particle {
         tips: system.tips.clone(),
