@@ -2139,29 +2139,38 @@ fn simulate_multi<'py>(
         ..d
     };
     let t = detached(py, move || Ok(hbn_sim::simulate_multi_random(&cfg, steps)?))?;
-    let rows = |signals: &[Vec<f64>]| -> Vec<f64> {
-        let n = signals.first().map_or(0, Vec::len);
-        (0..n)
-            .flat_map(|k| {
-                signals
-                    .iter()
-                    .map(move |s| s.get(k).copied().unwrap_or(f64::NAN))
-            })
-            .collect()
-    };
     let dims = (kind.inputs(), kind.states(), kind.sensors());
     Ok((
-        PyArray1::from_vec(py, rows(&t.u)),
-        PyArray1::from_vec(py, rows(&t.x)),
-        PyArray1::from_vec(py, rows(&t.y)),
+        PyArray1::from_vec(py, row_major(&t.u)),
+        PyArray1::from_vec(py, row_major(&t.x)),
+        PyArray1::from_vec(py, row_major(&t.y)),
         dims,
     ))
+}
+
+/// Row-major `(T, d)` flattened from component-major signals (a shorter one reads as NaN).
+fn row_major(signals: &[Vec<f64>]) -> Vec<f64> {
+    let n = signals.first().map_or(0, Vec::len);
+    (0..n)
+        .flat_map(|k| {
+            signals
+                .iter()
+                .map(move |s| s.get(k).copied().unwrap_or(f64::NAN))
+        })
+        .collect()
 }
 
 /// Names of the multi-signal simulators.
 #[pyfunction]
 fn multi_systems() -> Vec<&'static str> {
     MultiKind::ALL.iter().map(|k| k.name()).collect()
+}
+
+/// `(inputs, state components, sensors)` of a multi-signal simulator.
+#[pyfunction]
+fn multi_dims(py: Python<'_>, system: &str) -> PyResult<(usize, usize, usize)> {
+    let kind = MultiKind::from_str(system).map_err(|e| raise(py, e))?;
+    Ok((kind.inputs(), kind.states(), kind.sensors()))
 }
 
 /// The floor under estimation on a simulated trajectory: the posterior `(mean, std)` of each
@@ -2201,6 +2210,52 @@ fn oracle_estimate<'py>(
     Ok((
         PyArray1::from_vec(py, est.mean),
         PyArray1::from_vec(py, est.std),
+    ))
+}
+
+/// The floor under causal estimation on a multi-signal simulator: the posterior `(mean, std)`
+/// of the state given `u` and `y` (row-major `(T, du)` and `(T, dy)`, flattened) and the
+/// simulator's own model, by a particle filter of `particles` particles
+/// ([`hbn_sim::multi_posterior_estimate`]); both row-major `(T, dx)` flattened, and `dx`.
+#[pyfunction]
+#[pyo3(signature = (system, u, y, noise_gain, rate_hz, particles, seed))]
+#[allow(clippy::too_many_arguments)]
+fn multi_oracle_estimate<'py>(
+    py: Python<'py>,
+    system: &str,
+    u: PyReadonlyArray1<'_, f64>,
+    y: PyReadonlyArray1<'_, f64>,
+    noise_gain: Option<f64>,
+    rate_hz: Option<f64>,
+    particles: usize,
+    seed: u64,
+) -> PyResult<(Arr<'py>, Arr<'py>, usize)> {
+    let kind = MultiKind::from_str(system).map_err(|e| raise(py, e))?;
+    let d = MultiConfig::new(kind);
+    let cfg = MultiConfig {
+        noise_gain: noise_gain.unwrap_or(d.noise_gain),
+        rate_hz: rate_hz.unwrap_or(d.rate_hz),
+        ..d
+    };
+    // Component-major signals from the row-major arrays (the wrapper checked their shapes).
+    let columns = |flat: &[f64], width: usize| -> Vec<Vec<f64>> {
+        (0..width)
+            .map(|c| flat.iter().skip(c).step_by(width).copied().collect())
+            .collect()
+    };
+    let (u, y) = (
+        columns(slice(&u, "u")?, kind.inputs()),
+        columns(slice(&y, "y")?, kind.sensors()),
+    );
+    let post = detached(py, move || {
+        Ok(hbn_sim::multi_posterior_estimate(
+            &cfg, &u, &y, particles, seed,
+        )?)
+    })?;
+    Ok((
+        PyArray1::from_vec(py, row_major(&post.mean)),
+        PyArray1::from_vec(py, row_major(&post.std)),
+        kind.states(),
     ))
 }
 
@@ -2412,6 +2467,8 @@ fn _hbn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate_multi, m)?)?;
     m.add_function(wrap_pyfunction!(multi_systems, m)?)?;
     m.add_function(wrap_pyfunction!(oracle_estimate, m)?)?;
+    m.add_function(wrap_pyfunction!(multi_oracle_estimate, m)?)?;
+    m.add_function(wrap_pyfunction!(multi_dims, m)?)?;
     m.add_function(wrap_pyfunction!(systems, m)?)?;
     m.add_function(wrap_pyfunction!(score, m)?)?;
     m.add_function(wrap_pyfunction!(read_mcap, m)?)?;

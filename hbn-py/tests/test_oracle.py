@@ -88,3 +88,37 @@ def test_the_two_sided_floor_is_never_above_the_causal_one():
         with pytest.raises(hbn.ConfigError, match="lookahead") as e:
             hbn.oracle_estimate("duhem", d["u"], d["x"], d["y"], noise_gain=3.0, lookahead=bad)
         assert e.value.keyword == "lookahead"
+
+
+def test_a_multi_signal_floor_uses_the_sensors():
+    # The finger's disturbance propagates through the tip's lag: its floor is the posterior
+    # given u and y and the simulator (a particle filter), not given the true past states.
+    gain = 10.0
+    d = hbn.simulate("finger", 400, seed=8, noise_gain=gain)
+    o = hbn.oracle_estimate("finger", d["u"], d["x"], d["y"], noise_gain=gain, particles=300)
+    assert o["mean"].shape == o["std"].shape == (400, 2)
+    # Without the sensors (every output missing) the same filter is the prior.
+    blind = hbn.oracle_estimate(
+        "finger", d["u"], d["x"], np.full_like(d["y"], np.nan), noise_gain=gain, particles=300
+    )
+    for i in range(2):
+        with_y = float(np.sqrt(np.mean((o["mean"][:, i] - d["x"][:, i]) ** 2)))
+        without = float(np.sqrt(np.mean((blind["mean"][:, i] - d["x"][:, i]) ** 2)))
+        assert with_y < 0.8 * without, (i, with_y, without)
+        inside = float(np.mean(np.abs(o["mean"][:, i] - d["x"][:, i]) <= 2 * o["std"][:, i]))
+        assert 0.9 <= inside <= 1.0, (i, inside)
+    clean = hbn.simulate("finger", 200, seed=8)
+    exact = hbn.oracle_estimate("finger", clean["u"], clean["x"], clean["y"])
+    np.testing.assert_allclose(exact["mean"], clean["x"], atol=1e-12)
+
+
+def test_a_multi_signal_floor_names_what_to_fix():
+    d = hbn.simulate("arm", 50, seed=1, noise_gain=1.0)
+    with pytest.raises(hbn.DataError, match=r"\(T, 4\)"):
+        hbn.oracle_estimate("arm", d["u"], d["x"], d["y"][:, :3], noise_gain=1.0)
+    with pytest.raises(hbn.DataError, match="length"):
+        hbn.oracle_estimate("arm", d["u"], d["x"], d["y"][:-1], noise_gain=1.0)
+    with pytest.raises(hbn.ConfigError, match="lookahead"):
+        hbn.oracle_estimate("arm", d["u"], d["x"], d["y"], noise_gain=1.0, lookahead=5)
+    with pytest.raises(hbn.ConfigError, match="particles"):
+        hbn.oracle_estimate("arm", d["u"], d["x"], d["y"], noise_gain=1.0, particles=0)

@@ -379,6 +379,7 @@ def oracle_estimate(
     noise_gain: float = ...,
     rate_hz: float = ...,
     lookahead: Optional[int] = ...,
+    particles: int = ...,
 ) -> Dict[str, FloatArray]: ...
 def list_topics(path: PathLike) -> List[Dict[str, Any]]: ...
 def read_mcap(

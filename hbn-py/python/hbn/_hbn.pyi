@@ -329,6 +329,16 @@ def simulate_multi(
     Tuple[int, int, int],
 ]: ...
 def multi_systems() -> List[str]: ...
+def multi_dims(system: str) -> Tuple[int, int, int]: ...
+def multi_oracle_estimate(
+    system: str,
+    u: npt.NDArray[np.float64],
+    y: npt.NDArray[np.float64],
+    noise_gain: Optional[float],
+    rate_hz: Optional[float],
+    particles: int,
+    seed: int,
+) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], int]: ...
 def oracle_estimate(
     system: str,
     u: npt.NDArray[np.float64],
