@@ -2131,13 +2131,7 @@ fn simulate_multi<'py>(
     rate_hz: Option<f64>,
 ) -> PyResult<(Arr<'py>, Arr<'py>, Arr<'py>, (usize, usize, usize))> {
     let kind = MultiKind::from_str(system).map_err(|e| raise(py, e))?;
-    let d = MultiConfig::new(kind);
-    let cfg = MultiConfig {
-        noise_gain: noise_gain.unwrap_or(d.noise_gain),
-        rate_hz: rate_hz.unwrap_or(d.rate_hz),
-        seed: seed.unwrap_or(d.seed),
-        ..d
-    };
+    let cfg = multi_config(kind, seed, noise_gain, rate_hz);
     let t = detached(py, move || Ok(hbn_sim::simulate_multi_random(&cfg, steps)?))?;
     let dims = (kind.inputs(), kind.states(), kind.sensors());
     Ok((
@@ -2146,6 +2140,22 @@ fn simulate_multi<'py>(
         PyArray1::from_vec(py, row_major(&t.y)),
         dims,
     ))
+}
+
+/// The configuration of `kind` with the given settings (`None`: the simulator's defaults).
+fn multi_config(
+    kind: MultiKind,
+    seed: Option<u64>,
+    noise_gain: Option<f64>,
+    rate_hz: Option<f64>,
+) -> MultiConfig {
+    let d = MultiConfig::new(kind);
+    MultiConfig {
+        noise_gain: noise_gain.unwrap_or(d.noise_gain),
+        rate_hz: rate_hz.unwrap_or(d.rate_hz),
+        seed: seed.unwrap_or(d.seed),
+        ..d
+    }
 }
 
 /// Row-major `(T, d)` flattened from component-major signals (a shorter one reads as NaN).
@@ -2231,12 +2241,7 @@ fn multi_oracle_estimate<'py>(
     seed: u64,
 ) -> PyResult<(Arr<'py>, Arr<'py>, usize)> {
     let kind = MultiKind::from_str(system).map_err(|e| raise(py, e))?;
-    let d = MultiConfig::new(kind);
-    let cfg = MultiConfig {
-        noise_gain: noise_gain.unwrap_or(d.noise_gain),
-        rate_hz: rate_hz.unwrap_or(d.rate_hz),
-        ..d
-    };
+    let cfg = multi_config(kind, None, noise_gain, rate_hz);
     // Component-major signals from the row-major arrays (the wrapper checked their shapes).
     let columns = |flat: &[f64], width: usize| -> Vec<Vec<f64>> {
         (0..width)
