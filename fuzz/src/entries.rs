@@ -439,24 +439,37 @@ pub fn step(data: &[u8]) {
         // The byte layout has no play operators (so that the committed corpora keep their
         // meaning); the step advances the plays with or without them.
         plays: Plays::NONE,
+        sensor_memory: Plays::NONE,
     };
+    // The same model read as a sensor with memory of the state (when its sensor GP has the
+    // three inputs that takes), stepped beside it on the same samples: no bytes of its own.
+    let memory = Plays::new(&[0.05, 0.3]).ok();
+    let with_memory = memory.map(|sensor_memory| HbnView {
+        sensor_memory,
+        ..model
+    });
     let mut scratch = vec![0.0; Estimator::scratch_len(&model)];
+    let mut memory_scratch = vec![0.0; Estimator::scratch_len(&model)];
     let Ok(mut est) = Estimator::new(model, config, &mut scratch) else {
         return;
     };
+    let mut est_memory =
+        with_memory.and_then(|m| Estimator::new(m, config, &mut memory_scratch).ok());
     for _ in 0..64 {
         let (u, y) = (b.f64(), b.f64());
-        let out = est.step(u, y);
-        assert!(
-            out.x.is_finite()
-                && out.x_std.is_finite()
-                && out.y_pred.is_finite()
-                && out.innovation_var.is_finite()
-                && out.q_x.is_finite()
-                && out.r.is_finite()
-                && out.jacobian.iter().all(|v| v.is_finite()),
-            "non-finite step output {out:?} (u {u}, y {y})"
-        );
+        let outs = [Some(est.step(u, y)), est_memory.as_mut().map(|e| e.step(u, y))];
+        for out in outs.into_iter().flatten() {
+            assert!(
+                out.x.is_finite()
+                    && out.x_std.is_finite()
+                    && out.y_pred.is_finite()
+                    && out.innovation_var.is_finite()
+                    && out.q_x.is_finite()
+                    && out.r.is_finite()
+                    && out.jacobian.iter().all(|v| v.is_finite()),
+                "non-finite step output {out:?} (u {u}, y {y})"
+            );
+        }
         if b.0.is_empty() {
             break;
         }

@@ -321,6 +321,10 @@ pub const SENSOR_DIM: usize = 3;
 /// "A sensor of the state only").
 pub const SENSOR_STATE_DIM: usize = 2;
 
+/// Most play operators of the state a sensor GP reads ([`HbnView::sensor_memory`]): its
+/// inputs `[x_k, q^1_k, .., q^m_k]` fill [`SENSOR_DIM`].
+pub const MAX_SENSOR_MEMORY: usize = SENSOR_DIM - 1;
+
 /// Prior of `x_0` from the first measurement: training `(y, x)` pairs sorted by `y`. Hysteresis
 /// makes `x` given `y` ambiguous; the spread of `x` over the training samples whose `y` is
 /// nearest says how much. Checked once by [`InitPrior::new`]; [`InitPrior::prior`] is
@@ -454,6 +458,7 @@ pub struct HbnView<'a> {
     pub transition: GpView<'a>,
     /// Sensor GP, inputs `[x_{k-1}, y_{k-1}, x_k]` (the thesis), or `[x_{k-1}, x_k]` (a
     /// sensor that reads the state only, [`SENSOR_STATE_DIM`]): its dimension says which.
+    /// With [`HbnView::sensor_memory`] it reads `[x_k, q^1_k, .., q^m_k]` instead.
     pub sensor: GpView<'a>,
     /// Training samples and index for the transition's local regression (EKF+BLR only).
     pub transition_local: Option<Neighbourhood<'a>>,
@@ -467,6 +472,14 @@ pub struct HbnView<'a> {
     /// Play operators whose values extend the transition's inputs ([`Plays::NONE`]: the
     /// thesis' four inputs).
     pub plays: Plays,
+    /// Play operators of the state (radii in the state's units, no lags, at most
+    /// [`MAX_SENSOR_MEMORY`]) that the sensor GP reads with `x_k`: `[x_k, q^1_k, .., q^m_k]`
+    /// with `q^i_k = clamp(q^i_{k-1}, x_k - r_i, x_k + r_i)`. The filter carries `q_{k-1}`,
+    /// the plays of its estimates `x_0..x_{k-1}` ([`EkfState::memory`]), so a sensor whose
+    /// output depends on the state's history (a relay or play-type sensor) reads that history
+    /// without `y_{k-1}`. [`Plays::NONE`]: the sensor reads the thesis' or the state-only
+    /// inputs.
+    pub sensor_memory: Plays,
 }
 
 impl HbnView<'_> {
@@ -483,7 +496,20 @@ impl HbnView<'_> {
             });
         }
         let sensor_dim = self.sensor.dim();
-        if sensor_dim != SENSOR_DIM && sensor_dim != SENSOR_STATE_DIM {
+        if !self.sensor_memory.is_empty() {
+            let memory = self.sensor_memory;
+            if !memory.lags().is_empty() || memory.len() > MAX_SENSOR_MEMORY {
+                return Err(CoreError::InvalidSpec(
+                    "a sensor reads at most 2 play operators of the state, and no lags",
+                ));
+            }
+            if sensor_dim != 1 + memory.len() {
+                return Err(CoreError::DimensionMismatch {
+                    expected: 1 + memory.len(),
+                    got: sensor_dim,
+                });
+            }
+        } else if sensor_dim != SENSOR_DIM && sensor_dim != SENSOR_STATE_DIM {
             return Err(CoreError::DimensionMismatch {
                 expected: SENSOR_DIM,
                 got: sensor_dim,
@@ -565,6 +591,9 @@ pub struct EkfState {
     pub u_prev: f64,
     /// The plays after `u_k` of the last step ([`HbnView::plays`]; unused slots hold `u_k`).
     pub plays: PlayState,
+    /// The plays of the estimates `x_0..x_k` ([`HbnView::sensor_memory`]; unused slots hold
+    /// the last estimate).
+    pub memory: PlayState,
     /// Steps taken.
     pub steps: u64,
     /// Measurements down-weighted in a row by the outlier gate ([`EkfConfig::nis_gate`]).
@@ -581,6 +610,29 @@ struct Local {
     grad: [f64; 4],
     noise: f64,
     epistemic: f64,
+}
+
+/// The sensor GP's input at one point and how each of its entries moves with the filter's
+/// `(x_{k-1}, s_{k-1}, x_k)`: `chain[i][j] = d input_i / d z_j` (a play of the state moves
+/// with `x_k` while `x_k` drags it, and holds inside its band).
+#[derive(Clone, Copy, Debug)]
+struct SensorPoint {
+    input: [f64; SENSOR_DIM],
+    chain: [[f64; 3]; SENSOR_DIM],
+}
+
+impl SensorPoint {
+    /// The gradient of the GP mean w.r.t. `(x_{k-1}, s_{k-1}, x_k)` from the one w.r.t. the
+    /// GP's inputs (the chain rule through [`SensorPoint::chain`]).
+    fn gradient(&self, local: &mut Local) {
+        let mut out = [0.0; 4];
+        for (g, row) in local.grad.iter().zip(&self.chain) {
+            for (o, c) in out.iter_mut().zip(row) {
+                *o += g * c;
+            }
+        }
+        local.grad = out;
+    }
 }
 
 /// Which relation of the HBN a linearisation is of.
@@ -717,6 +769,7 @@ impl<'m> Ekf<'m> {
         } else {
             st.lost_run = 0;
         }
+        self.model.sensor_memory.advance(&mut st.memory, st.z.x);
         *state = Some(st);
         StepOutput {
             x: st.z.x,
@@ -791,6 +844,7 @@ impl<'m> Ekf<'m> {
             u_last: u0,
             u_prev: u0,
             plays: self.model.plays.start(u0),
+            memory: self.model.sensor_memory.start(x0_mean),
             steps: 1,
             rejected_run: 0,
             lost_run: 0,
@@ -812,8 +866,9 @@ impl<'m> Ekf<'m> {
 
     /// A lost filter's re-start: `x_k` and `x_{k-1}` from the model's [`InitPrior`] at `y_k`,
     /// uncorrelated with `s_k`, which is `y_k` with the variance of the first step. The
-    /// inputs, plays and counters of steps are kept. Nothing happens without a prior or with a
-    /// non-finite `y_k` (the run counter then keeps counting).
+    /// inputs, their plays and the counters of steps are kept; the plays of the state restart
+    /// at the new estimate. Nothing happens without a prior or with a non-finite `y_k` (the run
+    /// counter then keeps counting).
     fn relocalise(&self, st: &mut EkfState, y_k: f64, flags: &mut u32) {
         let cfg = self.config;
         let Some((x_mean, x_var)) = self.model.init.and_then(|prior| prior.prior(y_k)) else {
@@ -825,6 +880,7 @@ impl<'m> Ekf<'m> {
         let p = Matrix3::new(x_var, x_var, 0.0, x_var, x_var, 0.0, 0.0, 0.0, r);
         st.z = Vector3::new(x, x, s);
         st.p = bound_covariance(p, cfg.p_min, cfg.p_max, flags);
+        st.memory = self.model.sensor_memory.start(x);
         st.lost_run = 0;
         st.rejected_run = 0;
         *flags |= Flags::RELOCALISED;
@@ -900,40 +956,40 @@ impl<'m> Ekf<'m> {
         let xk = clamp_flag(t.mean, cfg.x_bounds, flags);
         let a1 = clamp_jac(t.grad[0], cfg.jac_max, flags);
         let a2 = clamp_jac(t.grad[1], cfg.jac_max, flags);
-        let b_in = self.sensor_input(x1, s1, xk);
-        let (f_mat, g_vec, q_x, q_s, r, s_pred) =
-            match self.linearise(Relation::Sensor, &b_in, scratch, flags) {
-                Some(s) => {
-                    let c = clamp_jac(s.grad[0], cfg.jac_max, flags);
-                    let e = clamp_jac(s.grad[1], cfg.jac_max, flags);
-                    let f = clamp_jac(s.grad[2], cfg.jac_max, flags);
-                    let (q_x, q_s, r) = self.noises(&t, &s, flags);
-                    let s_pred = clamp_flag(s.mean, cfg.y_bounds, flags);
-                    (
-                        Self::jacobian(a1, a2, c, e, f),
-                        Vector3::new(1.0, 0.0, f),
-                        q_x,
-                        q_s,
-                        r,
-                        s_pred,
-                    )
-                }
-                None => {
-                    let q_x = floor_flag(
-                        cfg.q_scale * (t.noise + t.epistemic).max(cfg.qx_model_floor),
-                        cfg.q_floor,
-                        flags,
-                    );
-                    (
-                        Matrix3::new(a1, a2, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0),
-                        Vector3::new(1.0, 0.0, 0.0),
-                        q_x,
-                        cfg.p_max * 0.01,
-                        self.fallback_r(),
-                        s1,
-                    )
-                }
-            };
+        let b_in = self.sensor_input(st, x1, s1, xk);
+        let (f_mat, g_vec, q_x, q_s, r, s_pred) = match self.linearise_sensor(&b_in, scratch, flags)
+        {
+            Some(s) => {
+                let c = clamp_jac(s.grad[0], cfg.jac_max, flags);
+                let e = clamp_jac(s.grad[1], cfg.jac_max, flags);
+                let f = clamp_jac(s.grad[2], cfg.jac_max, flags);
+                let (q_x, q_s, r) = self.noises(&t, &s, flags);
+                let s_pred = clamp_flag(s.mean, cfg.y_bounds, flags);
+                (
+                    Self::jacobian(a1, a2, c, e, f),
+                    Vector3::new(1.0, 0.0, f),
+                    q_x,
+                    q_s,
+                    r,
+                    s_pred,
+                )
+            }
+            None => {
+                let q_x = floor_flag(
+                    cfg.q_scale * (t.noise + t.epistemic).max(cfg.qx_model_floor),
+                    cfg.q_floor,
+                    flags,
+                );
+                (
+                    Matrix3::new(a1, a2, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0),
+                    Vector3::new(1.0, 0.0, 0.0),
+                    q_x,
+                    cfg.p_max * 0.01,
+                    self.fallback_r(),
+                    s1,
+                )
+            }
+        };
         st.z = Vector3::new(xk, x1, s_pred);
         let q = g_vec * q_x * g_vec.transpose()
             + Matrix3::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, q_s);
@@ -976,12 +1032,9 @@ impl<'m> Ekf<'m> {
             return (self.random_walk(st), None);
         };
         let xk_mean = clamp_to(t.mean, cfg.x_bounds.0, cfg.x_bounds.1);
-        let Some(s) = self.linearise(
-            Relation::Sensor,
-            &self.sensor_input(x1, s1, xk_mean),
-            scratch,
-            flags,
-        ) else {
+        let Some(s) =
+            self.linearise_sensor(&self.sensor_input(st, x1, s1, xk_mean), scratch, flags)
+        else {
             *flags |= Flags::MODEL_INVALID;
             return (self.random_walk(st), None);
         };
@@ -1033,8 +1086,11 @@ impl<'m> Ekf<'m> {
             let xk = xk + w;
             // A point pushed into the box flags it, as a clamped EKF prediction does.
             let x_in = clamp_flag(xk, cfg.x_bounds, flags);
-            let Some(sk) = self.mean_of(Relation::Sensor, &self.sensor_input(a, c, x_in), scratch)
-            else {
+            let Some(sk) = self.mean_of(
+                Relation::Sensor,
+                &self.sensor_input(st, a, c, x_in).input,
+                scratch,
+            ) else {
                 ok = false;
                 break;
             };
@@ -1105,13 +1161,56 @@ impl<'m> Ekf<'m> {
     }
 
     /// The sensor GP's input at `x_{k-1} = x1`, `s_{k-1} = s1`, `x_k = xk`: `[x1, s1, xk]`,
-    /// or `[x1, xk, 0]` for a sensor of the state only (the GP reads its first two).
-    fn sensor_input(&self, x1: f64, s1: f64, xk: f64) -> [f64; SENSOR_DIM] {
-        if self.model.sensor.dim() == SENSOR_STATE_DIM {
-            [x1, xk, 0.0]
+    /// `[x1, xk, 0]` for a sensor of the state only (the GP reads its first two), or
+    /// `[xk, q^1, .., q^m]` for a sensor with memory, each play `q^i` moved from the state's
+    /// [`EkfState::memory`] by `xk` (the GP reads its first `1 + m`).
+    fn sensor_input(&self, st: &EkfState, x1: f64, s1: f64, xk: f64) -> SensorPoint {
+        const X1: [f64; 3] = [1.0, 0.0, 0.0];
+        const S1: [f64; 3] = [0.0, 1.0, 0.0];
+        const XK: [f64; 3] = [0.0, 0.0, 1.0];
+        const NONE: [f64; 3] = [0.0; 3];
+        let memory = self.model.sensor_memory;
+        if !memory.is_empty() {
+            let mut point = SensorPoint {
+                input: [xk; SENSOR_DIM],
+                chain: [XK, NONE, NONE],
+            };
+            for ((r, q), (slot, row)) in memory
+                .radii()
+                .iter()
+                .zip(&st.memory)
+                .zip(point.input.iter_mut().zip(&mut point.chain).skip(1))
+            {
+                let held = crate::play::clamp_play(*q, xk - r, xk + r);
+                *slot = held;
+                // The play moves with `x_k` where `x_k` drags it (at either edge of its band).
+                *row = if held == *q { NONE } else { XK };
+            }
+            point
+        } else if self.model.sensor.dim() == SENSOR_STATE_DIM {
+            SensorPoint {
+                input: [x1, xk, 0.0],
+                chain: [X1, XK, NONE],
+            }
         } else {
-            [x1, s1, xk]
+            SensorPoint {
+                input: [x1, s1, xk],
+                chain: [X1, S1, XK],
+            }
         }
+    }
+
+    /// [`Ekf::linearise`] of the sensor at `point`, its gradient w.r.t. `(x_{k-1}, s_{k-1},
+    /// x_k)`.
+    fn linearise_sensor(
+        &self,
+        point: &SensorPoint,
+        scratch: &mut [f64],
+        flags: &mut u32,
+    ) -> Option<Local> {
+        let mut local = self.linearise(Relation::Sensor, &point.input, scratch, flags)?;
+        point.gradient(&mut local);
+        Some(local)
     }
 
     /// The GP mean of one relation at `input` (no variance, no gradient), `None` on failure.
@@ -1209,11 +1308,6 @@ impl<'m> Ekf<'m> {
         {
             *flags |= Flags::MODEL_INVALID;
             return None;
-        }
-        // A sensor of the state only reads `[x_{k-1}, x_k]`: its gradients go where the
-        // thesis' sensor has them (w.r.t. `x_{k-1}, s_{k-1}, x_k`), none for `s_{k-1}`.
-        if which == Relation::Sensor && d == SENSOR_STATE_DIM {
-            out.grad = [out.grad[0], 0.0, out.grad[1], 0.0];
         }
         Some(out)
     }
@@ -1571,6 +1665,7 @@ mod tests {
             u_last: 0.0,
             u_prev: 0.0,
             plays: [0.0; crate::play::MAX_PLAYS],
+            memory: [0.0; crate::play::MAX_PLAYS],
             steps: 5,
             rejected_run: 0,
             lost_run: 0,
@@ -1629,6 +1724,7 @@ mod tests {
             blr: LocalRegression::default(),
             init: None,
             plays: Plays::NONE,
+            sensor_memory: Plays::NONE,
         };
         let state_only = HbnView {
             sensor: linear_gp(&theta_s2, &zeros, &ones, &slopes_s2),
@@ -1700,6 +1796,7 @@ mod tests {
             blr: LocalRegression::default(),
             init: None,
             plays: Plays::NONE,
+            sensor_memory: Plays::NONE,
         };
         for mode in [Mode::Ekf, Mode::Ukf] {
             let cfg = EkfConfig {
@@ -1770,6 +1867,7 @@ mod tests {
             blr: LocalRegression::default(),
             init: None,
             plays: Plays::NONE,
+            sensor_memory: Plays::NONE,
         };
         assert_eq!(
             view.validate(),
@@ -1827,6 +1925,7 @@ mod tests {
                 blr: LocalRegression::default(),
                 init: with_prior.then(|| InitPrior::new(&pairs, 1, 1e-4).unwrap()),
                 plays: Plays::NONE,
+                sensor_memory: Plays::NONE,
             };
             let cfg = EkfConfig {
                 x_bounds: (-1.0, 1.0),

@@ -57,8 +57,8 @@ pub mod eigen;
 pub use blr::{LocalRegression, Neighbourhood, NeighbourhoodParts, Posterior};
 pub use ekf::{
     EXTRAPOLATION_RATIO, Ekf, EkfConfig, EkfState, Estimator, Flags, HbnView, InitPrior,
-    LOST_AFTER, Mode, SENSOR_DIM, SENSOR_STATE_DIM, StepOutput, observability_eigenvalues,
-    state_information,
+    LOST_AFTER, MAX_SENSOR_MEMORY, Mode, SENSOR_DIM, SENSOR_STATE_DIM, StepOutput,
+    observability_eigenvalues, state_information,
 };
 pub use error::CoreError;
 pub use gp::{GpParts, GpView, Prediction, Variance, Want};

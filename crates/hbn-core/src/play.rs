@@ -177,7 +177,7 @@ pub fn transition_input(
 }
 
 /// `p` clamped to `[lo, hi]` (`max(lo, min(hi, p))`, without `f64::clamp`'s panic).
-fn clamp_play(p: f64, lo: f64, hi: f64) -> f64 {
+pub(crate) fn clamp_play(p: f64, lo: f64, hi: f64) -> f64 {
     let p = if p > hi { hi } else { p };
     if p < lo { lo } else { p }
 }

@@ -48,9 +48,10 @@ pub const MAGIC: u32 = u32::from_le_bytes(*b"HBN1");
 /// others read as empty: the play operators after the prior of `x_0` (version 3 and above),
 /// each GP's linear mean, its slope count after the whitening length and its slopes after the
 /// output scalars (4 and above, else a constant mean), the lags' count and coefficients after
-/// the plays (5 and above), and the split ranges after the version (6, see
-/// [`split_ranges`]).
-pub const VERSION: u32 = 6;
+/// the plays (5 and above), the split ranges after the version (6, see
+/// [`split_ranges`]), and the count and radii of the sensor's plays of the state after the
+/// lags (7, [`HbnView::sensor_memory`]).
+pub const VERSION: u32 = 7;
 /// Oldest format version [`Tables::model`] reads.
 pub const OLDEST_VERSION: u32 = 2;
 /// Last value of every layout (catches a truncated or misaligned table).
@@ -401,6 +402,10 @@ fn write_tables<S: TableSink>(
     w.int(count(view.plays.lags().len())?);
     for &a in view.plays.lags() {
         w.real(a);
+    }
+    w.int(count(view.sensor_memory.radii().len())?);
+    for &r in view.sensor_memory.radii() {
+        w.real(r);
     }
     w.end_split()?;
     w.int(END);
@@ -775,6 +780,15 @@ impl<'a> Tables<'a> {
         } else {
             Plays::NONE
         };
+        let sensor_memory = if version >= 7 {
+            let n = r.size()?;
+            if n > crate::ekf::MAX_SENSOR_MEMORY {
+                return Err(TRUNCATED);
+            }
+            Plays::new(r.reals(n)?)?
+        } else {
+            Plays::NONE
+        };
         if r.int()? != END || !r.ints.is_empty() || !r.keys.is_empty() || !r.reals.is_empty() {
             return Err(TRUNCATED);
         }
@@ -790,6 +804,7 @@ impl<'a> Tables<'a> {
             },
             init,
             plays,
+            sensor_memory,
         };
         view.validate()?;
         config.validate()?;

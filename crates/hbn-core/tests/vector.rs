@@ -95,6 +95,7 @@ fn a_one_by_one_model_follows_the_scalar_filter() {
                 blr: LocalRegression::default(),
                 init: None,
                 plays: Plays::NONE,
+                sensor_memory: Plays::NONE,
             };
             let sekf = Ekf::new(scalar_view, scalar_config(mode)).unwrap();
             let mut scratch = vec![0.0; vekf.scratch_len().max(sekf.scratch_len())];

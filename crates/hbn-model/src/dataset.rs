@@ -3,7 +3,10 @@
 //! From each trajectory of samples `(u_k, x_k, y_k)`, `k = 0..N`:
 //! - transition set `D_D`: inputs `[x_{k-1}, x_{k-2}, u_{k-1}, u_{k-2}]`, target `x_k`, `k >= 2`;
 //! - sensor set `D_S`: inputs `[x_{k-1}, y_{k-1}, x_k]`, target `y_k`, `k >= 1`... taken from
-//!   `k >= 2` too, so both sets describe the same samples.
+//!   `k >= 2` too, so both sets describe the same samples. Each row goes on with the plays of
+//!   the state after `x_k` ([`Memory::state`], `q^1_k, q^2_k`, started at the trajectory's
+//!   `x_0`; `x_k` itself where there are none), which a sensor with memory reads with `x_k`
+//!   ([`crate::SensorInputs::Memory`]).
 //!
 //! With play operators ([`hbn_core::play`]) the transition's inputs go on with the plays after
 //! `u_{k-1}`, each play started at the trajectory's `u_0`.
@@ -14,13 +17,16 @@
 //! [`SENSOR_DIRECTION`].
 
 use crate::error::{DataError, Signal};
-use hbn_core::{MAX_PLAYS, Plays, transition_input};
+use hbn_core::{MAX_PLAYS, MAX_SENSOR_MEMORY, Plays, transition_input};
 
 /// Inputs of the transition GP without play operators (with them: one more per play).
 pub const TRANSITION_DIM: usize = 4;
-/// Inputs of the thesis' sensor GP (the rows [`build_dataset`] writes; a sensor of the state
-/// only reads two of them, [`crate::SensorInputs::columns`]).
+/// Inputs of the thesis' sensor GP (the first three columns of the rows [`build_dataset`]
+/// writes; each sensor reads its [`crate::SensorInputs::columns`]).
 pub const SENSOR_DIM: usize = hbn_core::SENSOR_DIM;
+/// Columns of the sensor rows [`build_dataset`] writes: `[x_{k-1}, y_{k-1}, x_k]` and the
+/// plays of the state after `x_k`.
+pub const SENSOR_ROW: usize = SENSOR_DIM + MAX_SENSOR_MEMORY;
 /// Direction pair of the transition: `sgn(u_{k-1} - u_{k-2})`.
 pub const TRANSITION_DIRECTION: [usize; 2] = [2, 3];
 /// Direction pair of the sensor: `sgn(x_k - x_{k-1})`.
@@ -195,18 +201,39 @@ pub struct Dataset {
     pub sensor: Table,
 }
 
-/// Builds `D_D` (with the values of `plays` after `u_{k-1}` as extra inputs) and `D_S` from
-/// trajectories, never crossing a boundary.
-pub fn build_dataset(trajectories: &[Sequence<'_>], plays: &Plays) -> Result<Dataset, DataError> {
+/// The memory operators whose values extend the rows: the input's plays and lags (the
+/// transition's) and the state's plays (the sensor's, [`crate::SensorInputs::Memory`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Memory {
+    /// Plays and lags of `u` ([`hbn_core::HbnView::plays`]).
+    pub input: Plays,
+    /// Plays of `x` ([`hbn_core::HbnView::sensor_memory`]).
+    pub state: Plays,
+}
+
+impl Memory {
+    /// The input's operators alone (no plays of the state).
+    pub fn of_input(input: Plays) -> Self {
+        Self {
+            input,
+            state: Plays::NONE,
+        }
+    }
+}
+
+/// Builds `D_D` (with the values of `memory.input` after `u_{k-1}` as extra inputs) and `D_S`
+/// (with those of `memory.state` after `x_k`) from trajectories, never crossing a boundary.
+pub fn build_dataset(trajectories: &[Sequence<'_>], memory: &Memory) -> Result<Dataset, DataError> {
     if trajectories.is_empty() {
         return Err(DataError::NoTrajectories);
     }
+    let plays = &memory.input;
     let mut tr = Table {
         dim: TRANSITION_DIM + plays.len(),
         ..Table::default()
     };
     let mut se = Table {
-        dim: SENSOR_DIM,
+        dim: SENSOR_ROW,
         ..Table::default()
     };
     for (i, t) in trajectories.iter().enumerate() {
@@ -214,6 +241,9 @@ pub fn build_dataset(trajectories: &[Sequence<'_>], plays: &Plays) -> Result<Dat
         // `after[k]`: the plays after `u_0..=u_k`, as the filter carries them.
         let mut after = vec![[0.0; MAX_PLAYS]; t.u.len()];
         plays.run(t.u, &mut after);
+        // `held[k]`: the plays of the state after `x_0..=x_k`.
+        let mut held = vec![[0.0; MAX_PLAYS]; t.x.len()];
+        memory.state.run(t.x, &mut held);
         for k in 2..t.u.len() {
             let input = transition_input(
                 t.x[k - 1],
@@ -225,6 +255,8 @@ pub fn build_dataset(trajectories: &[Sequence<'_>], plays: &Plays) -> Result<Dat
             tr.inputs.extend(input.iter().take(tr.dim));
             tr.targets.push(t.x[k]);
             se.inputs.extend([t.x[k - 1], t.y[k - 1], t.x[k]]);
+            se.inputs
+                .extend(held[k].iter().take(MAX_SENSOR_MEMORY).copied());
             se.targets.push(t.y[k]);
         }
     }
@@ -248,7 +280,7 @@ mod tests {
         let y2 = [25.0, 26.0, 27.0];
         let d = build_dataset(
             &[Sequence::new(&u1, &x1, &y1), Sequence::new(&u2, &x2, &y2)],
-            &Plays::NONE,
+            &Memory::default(),
         )
         .unwrap();
         assert_eq!(d.transition.len(), 3);
@@ -266,7 +298,7 @@ mod tests {
         let u = [0.0, 1.0, 3.0, 2.5, 0.0];
         let x = [0.0; 5];
         let plays = Plays::new(&[1.0]).unwrap();
-        let d = build_dataset(&[Sequence::new(&u, &x, &x)], &plays).unwrap();
+        let d = build_dataset(&[Sequence::new(&u, &x, &x)], &Memory::of_input(plays)).unwrap();
         assert_eq!(d.transition.dim, 5);
         // Row for x_k holds the play after u_{k-1}: k = 2, 3, 4 -> after 1.0, 3.0, 2.5.
         let plays_col: Vec<f64> = d.transition.inputs.chunks(5).map(|r| r[4]).collect();
@@ -276,7 +308,7 @@ mod tests {
         assert_eq!(state_sensor.dim, 2);
         assert_eq!(state_sensor.targets, d.sensor.targets);
         let pairs: Vec<&[f64]> = state_sensor.inputs.chunks(2).collect();
-        let thesis: Vec<&[f64]> = d.sensor.inputs.chunks(3).collect();
+        let thesis: Vec<&[f64]> = d.sensor.inputs.chunks(SENSOR_ROW).collect();
         for (p, t) in pairs.iter().zip(&thesis) {
             assert_eq!(*p, &[t[0], t[2]][..]);
         }
@@ -287,15 +319,45 @@ mod tests {
     }
 
     #[test]
+    fn plays_of_the_state_extend_the_sensor_rows() {
+        // Radius 1: the play starts at x_0 = 0, holds to x = 1, then trails x by 1.
+        let x = [0.0, 1.0, 3.0, 2.5, 0.0];
+        let memory = Memory {
+            input: Plays::NONE,
+            state: Plays::new(&[1.0]).unwrap(),
+        };
+        let d = build_dataset(&[Sequence::new(&x, &x, &x)], &memory).unwrap();
+        assert_eq!(d.sensor.dim, SENSOR_ROW);
+        // The sensor with memory reads `[x_k, q^1_k, q^2_k]`, the plays after `x_k`; the
+        // second slot, unused, follows `x_k`.
+        let rows = d.sensor.columns(crate::SensorInputs::Memory.columns());
+        assert_eq!(rows.dim, crate::SensorInputs::Memory.dim());
+        assert_eq!(
+            rows.inputs,
+            vec![3.0, 2.0, 3.0, 2.5, 2.0, 2.5, 0.0, 1.0, 0.0]
+        );
+        // The thesis' columns are as without the plays.
+        let plain = build_dataset(&[Sequence::new(&x, &x, &x)], &Memory::default()).unwrap();
+        assert_eq!(
+            d.sensor.columns(&[0, 1, 2]),
+            plain.sensor.columns(&[0, 1, 2])
+        );
+    }
+
+    #[test]
     fn bad_trajectories_are_rejected() {
-        assert!(build_dataset(&[], &Plays::NONE).is_err());
+        assert!(build_dataset(&[], &Memory::default()).is_err());
         let ok = [0.0, 1.0, 2.0];
-        assert!(build_dataset(&[Sequence::new(&ok, &ok[..2], &ok)], &Plays::NONE).is_err());
+        assert!(build_dataset(&[Sequence::new(&ok, &ok[..2], &ok)], &Memory::default()).is_err());
         assert!(
-            build_dataset(&[Sequence::new(&ok[..2], &ok[..2], &ok[..2])], &Plays::NONE).is_err()
+            build_dataset(
+                &[Sequence::new(&ok[..2], &ok[..2], &ok[..2])],
+                &Memory::default()
+            )
+            .is_err()
         );
         let nan = [0.0, f64::NAN, 2.0];
-        let e = build_dataset(&[Sequence::new(&ok, &nan, &ok)], &Plays::NONE)
+        let e = build_dataset(&[Sequence::new(&ok, &nan, &ok)], &Memory::default())
             .unwrap_err()
             .to_string();
         assert!(e.contains("x[1]"), "{e}");

@@ -46,6 +46,7 @@ struct DataKey {
     memory: Vec<f64>,
     lags: Vec<f64>,
     rate_hz: f64,
+    sensor_inputs: crate::SensorInputs,
 }
 
 impl DataKey {
@@ -54,6 +55,7 @@ impl DataKey {
             memory: p.memory.clone(),
             lags: p.lags.clone(),
             rate_hz: p.rate_hz,
+            sensor_inputs: p.sensor_inputs,
         }
     }
 }
@@ -116,8 +118,8 @@ pub(crate) fn choose(
             prefit: Vec::new(),
         });
     }
-    let plays = HysteresisModel::plays_for(trajectories, params)?;
-    let data = crate::build_dataset(trajectories, &plays)?;
+    let memory = HysteresisModel::memory_for(trajectories, params)?;
+    let data = crate::build_dataset(trajectories, &memory)?;
     let kernels = params.kernel_evidence.clone();
     let jobs: Vec<(GpRole, KernelChoice)> = [GpRole::Transition, GpRole::Sensor]
         .into_iter()
@@ -125,7 +127,7 @@ pub(crate) fn choose(
         .collect();
     let fit = |&(role, kernel): &(GpRole, KernelChoice)| {
         let p = params.with_kernel(role, kernel);
-        let (spec, table) = HysteresisModel::gp_problem(&p, &plays, &data, role);
+        let (spec, table) = HysteresisModel::gp_problem(&p, &memory.input, &data, role);
         let mut gp_params = p.gp_params(spec, role);
         gp_params.sparse = None;
         let fitted = HysteresisModel::fit_gp(role, &gp_params, &table, &mut |_, _| {}).ok();
@@ -249,8 +251,8 @@ mod tests {
         let params = small().check().unwrap();
         let chosen = choose(&runs, &params).unwrap();
         assert_eq!(chosen.prefit.len(), 2);
-        let plays = HysteresisModel::plays_for(&runs, &chosen.params).unwrap();
-        let data = crate::build_dataset(&runs, &plays).unwrap();
+        let memory = HysteresisModel::memory_for(&runs, &chosen.params).unwrap();
+        let data = crate::build_dataset(&runs, &memory).unwrap();
         for (candidate, reused) in [(chosen.params.candidate(), true), {
             let mut sparse = chosen.params.candidate();
             sparse.n_inducing = Some(16);
@@ -258,7 +260,7 @@ mod tests {
         }] {
             let p = chosen.params.for_candidate(&candidate);
             for role in [GpRole::Transition, GpRole::Sensor] {
-                let (spec, _) = HysteresisModel::gp_problem(&p, &plays, &data, role);
+                let (spec, _) = HysteresisModel::gp_problem(&p, &memory.input, &data, role);
                 let found = Prefit::matching(&chosen.prefit, role, &p.gp_params(spec, role), &p);
                 assert_eq!(found.is_some(), reused, "{candidate} {role}");
                 if let Some(f) = found {

@@ -81,7 +81,9 @@ use hbn_core::rng::Rng;
 use hbn_core::{GpView, MAX_DIM, PlayState, Plays, Want, transition_input};
 use hbn_gp::{GaussianProcess, Hyperparameters};
 
-use crate::dataset::{Sequence, TRANSITION_DIM, TRANSITION_DIRECTION, Table, build_dataset};
+use crate::dataset::{
+    Memory, Sequence, TRANSITION_DIM, TRANSITION_DIRECTION, Table, build_dataset,
+};
 use crate::params::{CheckedHbnParams, HbnParams};
 use crate::{HysteresisModel, ModelError};
 
@@ -625,7 +627,7 @@ impl Explorer {
         params.model = model.params().clone();
         let mut explorer = Self::new(params)?;
         explorer.plays = model.plays()?;
-        build_dataset(history, &explorer.plays).map_err(ModelError::from)?;
+        build_dataset(history, &Memory::of_input(explorer.plays)).map_err(ModelError::from)?;
         explorer.runs = history
             .iter()
             .map(|s| {
@@ -1220,7 +1222,7 @@ impl Explorer {
             .filter(|r| r.u.len() >= crate::MIN_SAMPLES)
             .map(|r| Sequence::new(&r.u, &r.x, &r.y))
             .collect();
-        let data = build_dataset(&seqs, &self.plays)?;
+        let data = build_dataset(&seqs, &Memory::of_input(self.plays))?;
         Ok(data.transition)
     }
 

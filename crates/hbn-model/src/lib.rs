@@ -58,7 +58,7 @@ mod vector_filter;
 pub mod vector_latent;
 mod vector_smooth;
 
-pub use dataset::{Dataset, MIN_SAMPLES, Sequence, Table, build_dataset};
+pub use dataset::{Dataset, MIN_SAMPLES, Memory, Sequence, Table, build_dataset};
 pub use error::{DataError, ModelError, ModelFileProblem, Signal};
 pub use estimate::{Estimate, NEAR_UNOBSERVABLE, OBSERVABILITY_WINDOW, ObservabilitySummary};
 pub use evidence::KernelEvidence;
@@ -76,8 +76,8 @@ pub use model::{
 pub use params::{
     Candidate, CheckedHbnParams, ConfigError, DEFAULT_EVIDENCE_KERNELS, DEFAULT_INDUCING,
     DEFAULT_LAGS, DEFAULT_MEMORY, FIRMWARE_INDUCING_LADDER, HbnParams, KernelChoice, LinearMean,
-    MIN_FIRMWARE_BUDGET, Param, ParamValue, Problem, Selection, SensorInputs, SignalInfo, Signals,
-    UnknownKernel, VECTOR_DEFAULT_LAGS, parse_bytes,
+    MIN_FIRMWARE_BUDGET, Param, ParamValue, Problem, SENSOR_MEMORY, Selection, SensorInputs,
+    SignalInfo, Signals, UnknownKernel, VECTOR_DEFAULT_LAGS, parse_bytes,
 };
 pub use smooth::{Smoothing, StateFrame};
 pub use tuning::{CandidateRow, FilterTuning, NoiseScales, ValidationReport};

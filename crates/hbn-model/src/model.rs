@@ -1,7 +1,7 @@
 //! The HBN model: both GPs, their local training data, the signals and the rate.
 
 use crate::ModelError;
-use crate::dataset::{Sequence, TRANSITION_DIM, TRANSITION_DIRECTION, build_dataset};
+use crate::dataset::{Memory, Sequence, TRANSITION_DIM, TRANSITION_DIRECTION, build_dataset};
 use crate::error::ModelFileProblem;
 use crate::evidence::{KernelEvidence, Prefit};
 use crate::local::LocalData;
@@ -173,6 +173,11 @@ pub struct HysteresisModel {
     /// before play operators existed).
     #[serde(default)]
     play_radii: Vec<f64>,
+    /// Radii of the sensor's play operators of the state in the state's units
+    /// ([`crate::SENSOR_MEMORY`] times the training state's range) for a sensor with memory
+    /// ([`crate::SensorInputs::Memory`]); empty (and not written) for the others.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    sensor_memory_radii: Vec<f64>,
     summary: TrainingSummary,
 }
 
@@ -336,11 +341,7 @@ impl HysteresisModel {
         budget: u64,
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
-        let sensor_dim = match params.sensor_inputs {
-            crate::SensorInputs::Thesis => 3,
-            crate::SensorInputs::State => 2,
-        };
-        let dims = [params.transition_dim(), sensor_dim];
+        let dims = [params.transition_dim(), params.sensor_inputs.dim()];
         let ladder = crate::FIRMWARE_INDUCING_LADDER;
         let smallest = ladder[ladder.len() - 1];
         // The smallest flash of a trained rung that did not fit, for the error.
@@ -675,8 +676,8 @@ impl HysteresisModel {
             if phase_one {
                 let t = Instant::now();
                 let p = params.for_candidate(first);
-                let fitted = Self::plays_for(trajectories, &p).and_then(|plays| {
-                    Self::fit_gps(trajectories, &p, &plays, None, None, prefit, observe)
+                let fitted = Self::memory_for(trajectories, &p).and_then(|memory| {
+                    Self::fit_gps(trajectories, &p, &memory, None, None, prefit, observe)
                 });
                 let seconds = t.elapsed().as_secs_f64();
                 match fitted {
@@ -819,16 +820,16 @@ impl HysteresisModel {
         prefit: &[Prefit],
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
-        let plays = Self::plays_for(trajectories, params)?;
+        let memory = Self::memory_for(trajectories, params)?;
         let mut model = match start {
             Start::Fitted(model) => *model,
             Start::Fresh => {
-                Self::fit_gps(trajectories, params, &plays, None, None, prefit, observe)?
+                Self::fit_gps(trajectories, params, &memory, None, None, prefit, observe)?
             }
             Start::FromExact(exact) => Self::fit_gps(
                 trajectories,
                 params,
-                &plays,
+                &memory,
                 None,
                 Some(exact),
                 prefit,
@@ -847,7 +848,7 @@ impl HysteresisModel {
                         let model = Self::fit_gps(
                             &fold.train,
                             params,
-                            &plays,
+                            &memory,
                             Some((&model.transition, &model.sensor)),
                             None,
                             &[],
@@ -882,23 +883,39 @@ impl HysteresisModel {
         Ok(model)
     }
 
-    /// The play operators of `params.memory` on the input range of `trajectories` (all of
-    /// them, so that the folds of filter-aware training share the radii), and the lags of
-    /// `params.lags`.
-    pub(crate) fn plays_for(
+    /// The memory operators of the rows (all of `trajectories`, so that the folds of
+    /// filter-aware training share the radii): the play operators of `params.memory` on the
+    /// input's range and the lags of `params.lags`; for a sensor with memory
+    /// ([`crate::SensorInputs::Memory`]) the plays of [`crate::SENSOR_MEMORY`] on the state's
+    /// range.
+    pub(crate) fn memory_for(
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
-    ) -> Result<Plays, ModelError> {
+    ) -> Result<Memory, ModelError> {
         let lags = params.lag_coefficients()?;
-        if params.memory.is_empty() {
-            return Ok(Plays::with_lags(&[], &lags)?);
+        if params.memory.is_empty() && !params.sensor_inputs.has_memory() {
+            return Ok(Memory::of_input(Plays::with_lags(&[], &lags)?));
         }
         for (i, t) in trajectories.iter().enumerate() {
             t.validate(i)?;
         }
-        let span = SignalStats::of(trajectories.iter().flat_map(|t| t.u.iter())).span();
-        let radii: Vec<f64> = params.memory.iter().map(|f| f * span).collect();
-        Ok(Plays::with_lags(&radii, &lags)?)
+        let radii = |fractions: &[f64], signal: &dyn Fn(&Sequence<'_>) -> Vec<f64>| {
+            if fractions.is_empty() {
+                return Vec::new();
+            }
+            let values: Vec<f64> = trajectories.iter().flat_map(signal).collect();
+            let span = SignalStats::of(values.iter()).span();
+            fractions.iter().map(|f| f * span).collect::<Vec<f64>>()
+        };
+        let state = if params.sensor_inputs.has_memory() {
+            Plays::new(&radii(&crate::SENSOR_MEMORY, &|t| t.x.to_vec()))?
+        } else {
+            Plays::NONE
+        };
+        Ok(Memory {
+            input: Plays::with_lags(&radii(&params.memory, &|t| t.u.to_vec()), &lags)?,
+            state,
+        })
     }
 
     /// The exact transition GP's optimum with `params` ([`exact_optimum`]): what
@@ -907,9 +924,9 @@ impl HysteresisModel {
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
     ) -> Option<Hyperparameters> {
-        let plays = Self::plays_for(trajectories, params).ok()?;
-        let data = build_dataset(trajectories, &plays).ok()?;
-        let (spec, table) = Self::gp_problem(params, &plays, &data, GpRole::Transition);
+        let memory = Self::memory_for(trajectories, params).ok()?;
+        let data = build_dataset(trajectories, &memory).ok()?;
+        let (spec, table) = Self::gp_problem(params, &memory.input, &data, GpRole::Transition);
         exact_optimum(&params.gp_params(spec, GpRole::Transition), &table)
     }
 
@@ -973,17 +990,17 @@ impl HysteresisModel {
     fn fit_gps(
         trajectories: &[Sequence<'_>],
         params: &CheckedHbnParams,
-        plays: &Plays,
+        memory: &Memory,
         fixed: Option<(&GaussianProcess, &GaussianProcess)>,
         exact: Option<&ExactStart<'_>>,
         prefit: &[Prefit],
         observe: &mut dyn FnMut(GpRole, &FitProgress),
     ) -> Result<Self, ModelError> {
         let t0 = Instant::now();
-        let data = build_dataset(trajectories, plays)?;
+        let data = build_dataset(trajectories, memory)?;
         let mut starts = Vec::new();
         let mut fit_gp = |which: GpRole| {
-            let (spec, table) = Self::gp_problem(params, plays, &data, which);
+            let (spec, table) = Self::gp_problem(params, &memory.input, &data, which);
             let table = &table;
             let mut gp_params = params.gp_params(spec, which);
             if let Some(pair) = fixed {
@@ -1077,7 +1094,8 @@ impl HysteresisModel {
             init_pairs,
             init_neighbours,
             tuning: FilterTuning::default(),
-            play_radii: plays.radii().to_vec(),
+            play_radii: memory.input.radii().to_vec(),
+            sensor_memory_radii: memory.state.radii().to_vec(),
             summary: TrainingSummary {
                 trajectories: trajectories.len(),
                 rows: data.transition.len(),
@@ -1124,7 +1142,14 @@ impl HysteresisModel {
             blr: self.params.blr,
             init: self.init_prior()?,
             plays: self.plays()?,
+            sensor_memory: self.sensor_memory()?,
         })
+    }
+
+    /// The sensor's play operators of the state ([`hbn_core::HbnView::sensor_memory`]):
+    /// [`Plays::NONE`] unless the sensor has memory ([`crate::SensorInputs::Memory`]).
+    pub fn sensor_memory(&self) -> Result<Plays, ModelError> {
+        Ok(Plays::new(&self.sensor_memory_radii)?)
     }
 
     /// The transition's play operators ([`HbnParams::memory`] in the input's units) and lags

@@ -243,17 +243,33 @@ pub enum SensorInputs {
     /// measurement says where the state is. It cannot model a sensor's own memory beyond what
     /// `x_{k-1}` carries.
     State,
+    /// `[x_k, q^1_k, q^2_k]`: the state and two play operators of it
+    /// ([`SENSOR_MEMORY`] of its range), the history a hysteretic sensor's output depends on,
+    /// so every measurement says where the state is without the sensor GP learning increments
+    /// from `y_{k-1}`. The filter carries the plays of its own estimates
+    /// ([`hbn_core::HbnView::sensor_memory`]).
+    Memory,
 }
+
+/// Radii of the play operators of the state that a sensor with memory reads
+/// ([`SensorInputs::Memory`]), as fractions of the training state's range: the input's
+/// default memory ([`DEFAULT_MEMORY`]) on the state.
+pub const SENSOR_MEMORY: [f64; hbn_core::MAX_SENSOR_MEMORY] = DEFAULT_MEMORY;
 
 impl SensorInputs {
     /// Every choice, in the order of their names.
-    pub const ALL: [SensorInputs; 2] = [SensorInputs::Thesis, SensorInputs::State];
+    pub const ALL: [SensorInputs; 3] = [
+        SensorInputs::Thesis,
+        SensorInputs::State,
+        SensorInputs::Memory,
+    ];
 
-    /// `thesis` or `state`.
+    /// `thesis`, `state` or `memory`.
     pub const fn name(self) -> &'static str {
         match self {
             SensorInputs::Thesis => "thesis",
             SensorInputs::State => "state",
+            SensorInputs::Memory => "memory",
         }
     }
 
@@ -262,28 +278,40 @@ impl SensorInputs {
         *self == SensorInputs::Thesis
     }
 
-    /// The input dimension ([`hbn_core::SENSOR_DIM`] or [`hbn_core::SENSOR_STATE_DIM`]).
+    /// The input dimension ([`hbn_core::SENSOR_DIM`], [`hbn_core::SENSOR_STATE_DIM`], or one
+    /// more than [`SENSOR_MEMORY`]'s length).
     pub const fn dim(self) -> usize {
         match self {
             SensorInputs::Thesis => SENSOR_DIM,
             SensorInputs::State => hbn_core::SENSOR_STATE_DIM,
+            SensorInputs::Memory => 1 + SENSOR_MEMORY.len(),
         }
     }
 
-    /// The columns of the thesis' sensor row `[x_{k-1}, y_{k-1}, x_k]` this sensor reads.
+    /// The columns of the sensor row `[x_{k-1}, y_{k-1}, x_k, q^1_k, q^2_k]`
+    /// ([`crate::build_dataset`]) this sensor reads.
     pub const fn columns(self) -> &'static [usize] {
         match self {
             SensorInputs::Thesis => &[0, 1, 2],
             SensorInputs::State => &[0, 2],
+            SensorInputs::Memory => &[2, 3, 4],
         }
     }
 
-    /// The direction pair of the advantage kernel, `sgn(x_k - x_{k-1})`, in these inputs.
+    /// The direction pair of the advantage kernel in these inputs: `sgn(x_k - x_{k-1})`, or
+    /// for a sensor with memory `sgn(x_k - q^1_k)`, which is the direction the state last
+    /// moved in by more than the narrow play's band.
     pub const fn direction(self) -> [usize; 2] {
         match self {
             SensorInputs::Thesis => SENSOR_DIRECTION,
             SensorInputs::State => [1, 0],
+            SensorInputs::Memory => [0, 1],
         }
+    }
+
+    /// Whether the sensor reads plays of the state ([`SensorInputs::Memory`]).
+    pub const fn has_memory(self) -> bool {
+        matches!(self, SensorInputs::Memory)
     }
 }
 
@@ -299,7 +327,7 @@ impl std::str::FromStr for SensorInputs {
         SensorInputs::ALL
             .into_iter()
             .find(|i| i.name().eq_ignore_ascii_case(s.trim()))
-            .ok_or_else(|| format!("unknown sensor inputs `{s}`; choose thesis or state"))
+            .ok_or_else(|| format!("unknown sensor inputs `{s}`; choose thesis, state or memory"))
     }
 }
 

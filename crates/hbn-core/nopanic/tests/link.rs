@@ -132,6 +132,8 @@ fn step_links_without_panic_paths_and_stays_finite() {
         blr: LocalRegression::default(),
         init: Some(init),
         plays: if sparse { plays } else { Plays::NONE },
+        // The sparse view's sensor reads the state and two plays of it.
+        sensor_memory: if sparse { plays } else { Plays::NONE },
     });
     for (view, mode) in views.iter().flat_map(|v| Mode::ALL.map(|m| (*v, m))) {
         let mut scratch = vec![0.0; Estimator::scratch_len(&view)];
