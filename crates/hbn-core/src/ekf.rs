@@ -1778,6 +1778,96 @@ mod tests {
         assert!(j.m33.abs() < 1e-12, "{j}");
     }
 
+    /// A sensor with memory reads `[x_k, q^1_k, q^2_k]`: the plays of the filter's estimates
+    /// moved by the predicted `x_k`. On a linear sensor the predicted measurement is
+    /// `b . [x_k, q^1, q^2]`, the Jacobian's sensor row is `(f a1, f a2, 0)` with
+    /// `f = b_0 + sum_i b_i [play i moves with x_k]`, and after each step the memory holds the
+    /// plays of the estimates so far. Fails if a held play passed `x_k`'s slope on (or a moving
+    /// one did not), if the memory followed the prediction instead of the estimate, or if the
+    /// sensor read the thesis' inputs.
+    #[test]
+    fn a_sensor_with_memory_reads_the_plays_of_its_estimates() {
+        let (zeros, ones) = ([0.0; 4], [1.0; 4]);
+        let theta = [0.0, 3.0, 3.0, 3.0, 3.0];
+        let slopes_t = [0.8, 0.1, 0.3, -0.2];
+        let slopes_s = [0.5, 0.7, -0.4];
+        let radii = [0.05, 0.3];
+        let memory = Plays::new(&radii).unwrap();
+        let view = HbnView {
+            transition: linear_gp(&theta, &zeros, &ones, &slopes_t),
+            sensor: linear_gp(&theta[..4], &zeros, &ones, &slopes_s),
+            transition_local: None,
+            sensor_local: None,
+            blr: LocalRegression::default(),
+            init: None,
+            plays: Plays::NONE,
+            sensor_memory: memory,
+        };
+        view.validate().unwrap();
+        // Two plays need three sensor inputs; lags are refused.
+        let two_inputs = HbnView {
+            sensor_memory: Plays::new(&[0.1]).unwrap(),
+            ..view
+        };
+        assert!(two_inputs.validate().is_err());
+        let lagged = HbnView {
+            sensor_memory: Plays::with_lags(&[0.1], &[0.5]).unwrap(),
+            ..view
+        };
+        assert!(lagged.validate().is_err());
+        for mode in [Mode::Ekf, Mode::Ukf] {
+            let ekf = Ekf::new(
+                view,
+                EkfConfig {
+                    mode,
+                    ..gate_config(1e9)
+                },
+            )
+            .unwrap();
+            let mut scratch = [0.0; 64];
+            let mut st = None;
+            let first = ekf.step(&mut st, &mut scratch, 0.0, 0.0);
+            let mut estimates = [first.x; crate::play::MAX_PLAYS];
+            let (mut held, mut moving) = ([0usize; 2], [0usize; 2]);
+            for k in 1..120 {
+                let u = (k as f64 * 0.13).sin() + 0.3 * (k as f64 * 0.71).sin();
+                let y = 0.4 * (k as f64 * 0.09).cos();
+                let Some(before) = st else {
+                    panic!("no state after a step")
+                };
+                assert_eq!(&before.memory[..2], &estimates[..2], "{mode:?} step {k}");
+                let xk = ekf.predict(&before, &mut scratch).z.x;
+                let mut f = slopes_s[0];
+                let mut s_pred = slopes_s[0] * xk;
+                for i in 0..2 {
+                    let q = before.memory[i].clamp(xk - radii[i], xk + radii[i]);
+                    s_pred += slopes_s[i + 1] * q;
+                    if q == before.memory[i] {
+                        held[i] += 1;
+                    } else {
+                        moving[i] += 1;
+                        f += slopes_s[i + 1];
+                    }
+                }
+                let out = ekf.step(&mut st, &mut scratch, u, y);
+                if mode == Mode::Ekf {
+                    assert!((out.y_pred - s_pred).abs() < 1e-9, "step {k}: {out:?}");
+                    let j = out.jacobian;
+                    assert!((j.m31 - f * slopes_t[0]).abs() < 1e-9, "step {k}: {j}");
+                    assert!((j.m32 - f * slopes_t[1]).abs() < 1e-9, "step {k}: {j}");
+                    assert!(j.m33.abs() < 1e-12, "step {k}: {j}");
+                }
+                assert!(out.x.is_finite() && out.x_std.is_finite());
+                memory.advance(&mut estimates, out.x);
+            }
+            // Both plays both held and moved.
+            assert!(
+                held.iter().chain(&moving).all(|&n| n > 5),
+                "{mode:?}: {held:?} {moving:?}"
+            );
+        }
+    }
+
     /// [`Ekf::predict`] is the step's prediction phase: the step's update applied to it gives
     /// the step's state bit for bit, in both modes that run without local data, and its
     /// predicted measurement is the step's. On a linear model the unscented cross-covariance
