@@ -837,7 +837,8 @@ mod tests {
     }
 
     /// The step on the f64 tables equals the model's own estimate bit for bit, every mode,
-    /// exact and sparse, with the thesis' sensor and with a sensor of the state only; the f32 tables read back (how close they stay depends on the model's
+    /// exact and sparse, with the thesis' sensor, a sensor of the state only and a sensor with
+    /// memory of the state; the f32 tables read back (how close they stay depends on the model's
     /// conditioning: `f32_tables_stay_close` and tests/firmware.rs measure it on trained
     /// models; this small one is poorly conditioned).
     #[test]
@@ -853,12 +854,15 @@ mod tests {
         .unwrap();
         let state = model_with(None, hbn_model::SensorInputs::State);
         assert_eq!(state.sensor().kernel().dim, 2);
-        for m in [model(None), model(Some(16)), state] {
+        let memory = model_with(Some(16), hbn_model::SensorInputs::Memory);
+        assert_eq!(memory.sensor_memory().unwrap().len(), 2);
+        for m in [model(None), model(Some(16)), state, memory] {
             for mode in Mode::ALL {
                 let est = m.estimate(&test.u, &test.y, mode).unwrap();
                 let t = model_tables(&m, mode).unwrap();
                 let tm = t.tables().model().unwrap();
                 assert_eq!(tm.config, m.ekf_config(mode));
+                assert_eq!(tm.view.sensor_memory, m.sensor_memory().unwrap());
                 let mut scratch = vec![0.0; tables::scratch_len(&t.layout).unwrap()];
                 let mut e = Estimator::new(tm.view, tm.config, &mut scratch).unwrap();
                 for (k, (&u, &y)) in test.u.iter().zip(&test.y).enumerate() {

@@ -440,10 +440,10 @@ pub struct HbnParams {
     /// inputs that the kernel models the rest of.
     #[serde(default)]
     pub linear_mean: LinearMean,
-    /// What the sensor GP reads ([`SensorInputs`]): the thesis' `[x_{k-1}, y_{k-1}, x_k]` (the
-    /// default), or the state's `[x_{k-1}, x_k]` alone. [`HbnParams::select`] may choose the
-    /// other on held-out data. The thesis' sensor is not written to model files (it is the
-    /// default when the field is absent).
+    /// What the sensor GP reads ([`SensorInputs`]): by default the state and two plays of it
+    /// ([`SensorInputs::Memory`]), with the thesis' `[x_{k-1}, y_{k-1}, x_k]` tried on
+    /// held-out data ([`HbnParams::select`]); or the state's `[x_{k-1}, x_k]` alone. The
+    /// thesis' sensor is not written to model files (a file without the field has it).
     #[serde(default, skip_serializing_if = "SensorInputs::is_thesis")]
     pub sensor_inputs: SensorInputs,
     /// Largest signal variance of both GPs, relative to the variance of what each kernel
@@ -648,7 +648,7 @@ impl Default for HbnParams {
             blr: LocalRegression::default(),
             validation: 0.25,
             linear_mean: LinearMean::None,
-            sensor_inputs: SensorInputs::Thesis,
+            sensor_inputs: SensorInputs::Memory,
             max_signal_variance: None,
             memory: DEFAULT_MEMORY.to_vec(),
             lags: Vec::new(),
@@ -656,7 +656,7 @@ impl Default for HbnParams {
                 kernels: Vec::new(),
                 inducing: vec![Some(DEFAULT_INDUCING)],
                 lags: vec![DEFAULT_LAGS.to_vec()],
-                sensor_inputs: vec![SensorInputs::State],
+                sensor_inputs: vec![SensorInputs::Thesis],
             },
             kernel_evidence: DEFAULT_EVIDENCE_KERNELS.to_vec(),
             firmware_budget: None,
@@ -1274,6 +1274,12 @@ impl HbnParams {
                             SensorInputs::State.dim(),
                             SensorInputs::State.direction(),
                         ),
+                        (
+                            Param::Kernel,
+                            k,
+                            SensorInputs::Memory.dim(),
+                            SensorInputs::Memory.direction(),
+                        ),
                     ]
                 }),
         ) {
@@ -1346,7 +1352,7 @@ impl HbnParams {
                     param,
                     Problem::Unknown {
                         given: t,
-                        choices: "thesis, state",
+                        choices: "thesis, state, memory",
                     },
                 )
             }),
@@ -1799,7 +1805,8 @@ mod tests {
 
     /// The default model is chosen on held-out data between exact GPs (the primary, trained
     /// alone when nothing is held out) and sparse GPs of `DEFAULT_INDUCING` points, without
-    /// and with the `DEFAULT_LAGS`, and the exact GPs with a sensor of the state only.
+    /// and with the `DEFAULT_LAGS`, all with a sensor with memory of the state, and the exact
+    /// GPs with the thesis' sensor.
     #[test]
     fn the_default_chooses_between_exact_and_sparse_gps() {
         let p = HbnParams::default();
@@ -1807,17 +1814,17 @@ mod tests {
         assert_eq!(
             names,
             [
-                "matern52 exact",
-                "matern52 m=64",
-                "matern52 m=64 lags=1",
-                "matern52 exact sensor=state"
+                "matern52 exact sensor=memory",
+                "matern52 m=64 sensor=memory",
+                "matern52 m=64 lags=1 sensor=memory",
+                "matern52 exact"
             ]
         );
         assert_eq!(
             p.get(Param::SensorInputs),
             Some(ParamValue::List(vec![
-                ParamValue::Text("thesis".into()),
-                ParamValue::Text("state".into())
+                ParamValue::Text("memory".into()),
+                ParamValue::Text("thesis".into())
             ]))
         );
         assert_eq!(p.candidate().n_inducing, None);
@@ -1854,13 +1861,13 @@ mod tests {
         assert_eq!(
             names,
             [
-                "se-ard m=32",
-                "se-ard exact",
-                "matern52 m=32",
-                "matern52 exact",
-                "se-ard m=32 lags=1",
-                "matern52 m=32 lags=1",
-                "se-ard m=32 sensor=state"
+                "se-ard m=32 sensor=memory",
+                "se-ard exact sensor=memory",
+                "matern52 m=32 sensor=memory",
+                "matern52 exact sensor=memory",
+                "se-ard m=32 lags=1 sensor=memory",
+                "matern52 m=32 lags=1 sensor=memory",
+                "se-ard m=32"
             ]
         );
         assert!(p.check_ref().is_ok());
@@ -1903,10 +1910,10 @@ mod tests {
         assert_eq!(
             names,
             [
-                "matern52 exact",
-                "matern52 m=64",
-                "matern52 m=64 lags=1",
-                "matern52 exact sensor=state"
+                "matern52 exact sensor=memory",
+                "matern52 m=64 sensor=memory",
+                "matern52 m=64 lags=1 sensor=memory",
+                "matern52 exact"
             ]
         );
         // Every configuration exact: no lag set is tried (`n_inducing=None` in Python trains
@@ -1918,11 +1925,11 @@ mod tests {
             },
             ..d.clone()
         };
-        let state = Candidate {
-            sensor_inputs: SensorInputs::State,
+        let thesis = Candidate {
+            sensor_inputs: SensorInputs::Thesis,
             ..exact.candidate()
         };
-        assert_eq!(exact.candidates(), vec![exact.candidate(), state]);
+        assert_eq!(exact.candidates(), vec![exact.candidate(), thesis]);
         // A list of lists: the primary set, then the alternatives; read back the same way.
         let mut p = HbnParams::default();
         let set =
@@ -1988,12 +1995,13 @@ mod tests {
         assert!(p.check_ref().is_ok());
         let e = p.set(Param::SensorInputs, text("level")).unwrap_err();
         assert_eq!(e.param, Param::SensorInputs);
-        assert!(e.to_string().contains("thesis, state"), "{e}");
+        assert!(e.to_string().contains("thesis, state, memory"), "{e}");
         let e = p.set(Param::SensorInputs, ParamValue::Int(2)).unwrap_err();
         assert_eq!(e.param, Param::SensorInputs);
         // Not written when it is the thesis' sensor, so older readers and files agree.
         let json = serde_json::to_string(&HbnParams {
             select: Selection::default(),
+            sensor_inputs: SensorInputs::Thesis,
             ..HbnParams::default()
         })
         .unwrap();

@@ -606,6 +606,15 @@ impl VectorModel {
         // hyperparameters are optimised once, on the first fold's training part (all but the
         // last quarter); the other folds refit them with those hyperparameters.
         let folds = folds(trajectories);
+        if sensors.contains(&SensorInputs::Memory) {
+            return Err(ModelError::Config(ConfigError {
+                param: Param::SensorInputs,
+                problem: Problem::Invalid {
+                    reason: "a vector model's sensors read `thesis` or `state` inputs; \
+                             `memory` is for models of one state and one sensor",
+                },
+            }));
+        }
         let fixed: Vec<bool> = match sensors {
             [] => Vec::new(),
             [one] => vec![*one == SensorInputs::Thesis; dims.sensors],
@@ -1982,6 +1991,18 @@ mod tests {
                 .unwrap();
         let reads: Vec<_> = (0..3).map(|j| model.sensor_reads_output(j)).collect();
         assert_eq!(reads, [Some(true), Some(false), Some(true)]);
+        // A sensor with memory of the state is a scalar model's: refused, naming the setting.
+        let e = VectorModel::fit_with_sensors(
+            &[seq],
+            &params,
+            SignalNames::default(),
+            &[SensorInputs::Memory],
+        )
+        .unwrap_err();
+        assert!(
+            matches!(&e, ModelError::Config(c) if c.param == Param::SensorInputs),
+            "{e}"
+        );
     }
 
     /// The candidates of one inducing setting share their sensor GPs ([`SharedSensors`]): the
