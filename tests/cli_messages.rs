@@ -535,18 +535,17 @@ fn model_selection_lists_print_their_table() {
     assert!(
         err.contains(
             "model selection: training 4 candidates side by side (exact, m=4, m=4 lags=1, \
-             exact sensor=state, each GP's kernel chosen by evidence first)"
+             exact sensor=thesis, each GP's kernel chosen by evidence first)"
         ),
         "announced on stderr: {err}"
     );
-    // The sparse GPs also with the default lag set, the exact ones with a sensor of the
-    // state only.
+    // The sparse GPs also with the default lag set, the exact ones with the thesis' sensor.
     assert!(
         out.contains("model selection, 4 candidates")
             && out.contains(" exact")
             && out.contains(" m=4 ")
             && out.contains(" m=4 lags=1")
-            && out.contains(" exact sensor=state"),
+            && out.contains(" exact sensor=thesis"),
         "{out}"
     );
     assert_eq!(out.matches("* chosen").count(), 1, "{out}");
@@ -677,12 +676,21 @@ fn sensor_inputs_flag_sets_what_the_sensor_reads_and_names_itself_when_wrong() {
             })
             .unwrap_or_default()
     };
-    // The default model's sensor is one of the two.
-    let default = sensor_inputs(&inspect(&m)).len();
-    assert!(default == 3 || default == 2, "{default}");
+    // The default model's sensor is one of the two: with memory of the state, or the thesis'.
+    let default = sensor_inputs(&inspect(&m));
+    assert!(
+        default[0] == "x[k]" && default[1].starts_with("play(x, ") || default[1] == "y[k-1]",
+        "{default:?}"
+    );
+    let (e, _) = train_small(&log, &m2, &["--sensor-inputs", "memory"]);
+    assert!(e.is_none(), "{e:?}");
+    assert_eq!(
+        sensor_inputs(&inspect(&m2)),
+        ["x[k]", "play(x, 0.05)[k]", "play(x, 0.2)[k]"]
+    );
     let (e, _) = train_small(&log, &m2, &["--sensor-inputs", "thesis"]);
     assert!(e.is_none(), "{e:?}");
-    assert_eq!(sensor_inputs(&inspect(&m2)).len(), 3);
+    assert_eq!(sensor_inputs(&inspect(&m2)), ["x[k-1]", "y[k-1]", "x[k]"]);
     let (e, _) = train_small(&log, &m2, &["--sensor-inputs", "state"]);
     assert!(e.is_none(), "{e:?}");
     let v = inspect(&m2);
@@ -717,7 +725,9 @@ fn sensor_inputs_flag_sets_what_the_sensor_reads_and_names_itself_when_wrong() {
         let (e, _) = train_small(&log, &m2, &["--sensor-inputs", bad]);
         let text = e.unwrap_or_else(|| panic!("--sensor-inputs {bad} accepted"));
         assert!(
-            text.contains("--sensor-inputs") && text.contains("thesis or state"),
+            text.contains("--sensor-inputs")
+                && text.contains("thesis, state")
+                && text.contains("memory"),
             "{bad}: {text}"
         );
     }

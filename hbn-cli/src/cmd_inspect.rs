@@ -11,7 +11,8 @@ use crate::glossary::{self, Term};
 
 /// The inputs of one GP by the model's signal names: `x[k-1], x[k-2], u[k-1], u[k-2]` for the
 /// transition (which predicts `x[k]`), `x[k-1], y[k-1], x[k]` for the sensor (which predicts
-/// `y[k]`; `x[k-1], x[k]` for a sensor of the state only).
+/// `y[k]`; `x[k-1], x[k]` for a sensor of the state only; `x[k], play(x, 0.05)[k],
+/// play(x, 0.2)[k]` for a sensor with memory).
 pub fn input_names(model: &HysteresisModel, role: GpRole) -> Vec<String> {
     let s = model.signals();
     let (u, x, y) = (&s.input.name, &s.state.name, &s.output.name);
@@ -42,11 +43,17 @@ pub fn input_names(model: &HysteresisModel, role: GpRole) -> Vec<String> {
             names
         }
         GpRole::Sensor => {
-            let thesis = [format!("{x}[k-1]"), format!("{y}[k-1]"), format!("{x}[k]")];
+            // The sensor rows' columns: the thesis' three, then the plays of the state.
+            let mut row = vec![format!("{x}[k-1]"), format!("{y}[k-1]"), format!("{x}[k]")];
+            row.extend(
+                hbn_model::SENSOR_MEMORY
+                    .iter()
+                    .map(|f| format!("play({x}, {f})[k]")),
+            );
             let columns = model.params().sensor_inputs.columns();
             columns
                 .iter()
-                .filter_map(|&j| thesis.get(j).cloned())
+                .filter_map(|&j| row.get(j).cloned())
                 .collect()
         }
     }

@@ -887,15 +887,21 @@ mod tests {
     /// the lags' count too (version 4), and each GP's linear-slope count too (version 3), give
     /// the same view, scratch size and steps as the current tables.
     #[test]
-    fn version_3_4_and_5_tables_read_as_the_current_ones() {
+    fn version_3_to_6_tables_read_as_the_current_ones() {
         let m = model(Some(16));
         let t = model_tables(&m, Mode::Ekf).unwrap();
         assert_eq!(t.layout[1], tables::VERSION);
+        // Version 7 ends with the count of the sensor's plays of the state, here 0, and END.
+        let n = t.layout.len();
+        assert_eq!(t.layout[n - 2], 0);
+        let mut v6 = t.layout.clone();
+        v6.remove(n - 2);
+        v6[1] = 6;
         // Version 6 lists the split ranges after the version: their count, then two values
         // each.
-        let ranges = t.layout[2] as usize;
+        let ranges = v6[2] as usize;
         assert!(ranges >= 3, "settings and two GPs: {ranges}");
-        let mut v5 = t.layout.clone();
+        let mut v5 = v6.clone();
         v5.drain(2..3 + 2 * ranges);
         v5[1] = 5;
         // The layout ends with the plays' count, (version 5) the lags' count, here 0, and END.
@@ -913,7 +919,7 @@ mod tests {
         v3.remove(second);
         v3.remove(first);
         v3[1] = 3;
-        for old in [v5, v4, v3] {
+        for old in [v6, v5, v4, v3] {
             check_lower_version_tables(&t, &old);
         }
     }

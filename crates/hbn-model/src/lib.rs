@@ -75,9 +75,9 @@ pub use model::{
 };
 pub use params::{
     Candidate, CheckedHbnParams, ConfigError, DEFAULT_EVIDENCE_KERNELS, DEFAULT_INDUCING,
-    DEFAULT_LAGS, DEFAULT_MEMORY, FIRMWARE_INDUCING_LADDER, HbnParams, KernelChoice, LinearMean,
-    MIN_FIRMWARE_BUDGET, Param, ParamValue, Problem, SENSOR_MEMORY, Selection, SensorInputs,
-    SignalInfo, Signals, UnknownKernel, VECTOR_DEFAULT_LAGS, parse_bytes,
+    DEFAULT_LAGS, DEFAULT_MEMORY, DEFAULT_SENSOR_INPUTS, FIRMWARE_INDUCING_LADDER, HbnParams,
+    KernelChoice, LinearMean, MIN_FIRMWARE_BUDGET, Param, ParamValue, Problem, SENSOR_MEMORY,
+    Selection, SensorInputs, SignalInfo, Signals, UnknownKernel, VECTOR_DEFAULT_LAGS, parse_bytes,
 };
 pub use smooth::{Smoothing, StateFrame};
 pub use tuning::{CandidateRow, FilterTuning, NoiseScales, ValidationReport};

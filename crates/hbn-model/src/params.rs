@@ -251,6 +251,12 @@ pub enum SensorInputs {
     Memory,
 }
 
+/// What the default model's sensor GP reads ([`HbnParams::sensor_inputs`]); model selection
+/// tries the thesis' sensor beside it ([`Selection::sensor_inputs`]). Candidates with this
+/// sensor are named without it (`matern52 exact`), the others with it
+/// (`matern52 exact sensor=thesis`).
+pub const DEFAULT_SENSOR_INPUTS: SensorInputs = SensorInputs::Memory;
+
 /// Radii of the play operators of the state that a sensor with memory reads
 /// ([`SensorInputs::Memory`]), as fractions of the training state's range: the input's
 /// default memory ([`DEFAULT_MEMORY`]) on the state.
@@ -599,7 +605,8 @@ pub struct Candidate {
 }
 
 /// `matern52 exact`, `se-ard m=64`; both kernels when they differ (`se,matern52 exact`); lags
-/// and then a sensor of the state only last (`matern52 m=64 lags=1`, `se exact sensor=state`).
+/// and then a sensor other than [`DEFAULT_SENSOR_INPUTS`] last (`matern52 m=64 lags=1`,
+/// `se exact sensor=thesis`).
 impl std::fmt::Display for Candidate {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         if self.transition_kernel == self.sensor_kernel {
@@ -623,7 +630,7 @@ impl Candidate {
             let taus: Vec<String> = self.lags.iter().map(|t| t.to_string()).collect();
             out.push_str(&format!(" lags={}", taus.join(",")));
         }
-        if !self.sensor_inputs.is_thesis() {
+        if self.sensor_inputs != DEFAULT_SENSOR_INPUTS {
             out.push_str(&format!(" sensor={}", self.sensor_inputs));
         }
         out
@@ -648,7 +655,7 @@ impl Default for HbnParams {
             blr: LocalRegression::default(),
             validation: 0.25,
             linear_mean: LinearMean::None,
-            sensor_inputs: SensorInputs::Memory,
+            sensor_inputs: DEFAULT_SENSOR_INPUTS,
             max_signal_variance: None,
             memory: DEFAULT_MEMORY.to_vec(),
             lags: Vec::new(),
@@ -1814,10 +1821,10 @@ mod tests {
         assert_eq!(
             names,
             [
-                "matern52 exact sensor=memory",
-                "matern52 m=64 sensor=memory",
-                "matern52 m=64 lags=1 sensor=memory",
-                "matern52 exact"
+                "matern52 exact",
+                "matern52 m=64",
+                "matern52 m=64 lags=1",
+                "matern52 exact sensor=thesis"
             ]
         );
         assert_eq!(
@@ -1861,13 +1868,13 @@ mod tests {
         assert_eq!(
             names,
             [
-                "se-ard m=32 sensor=memory",
-                "se-ard exact sensor=memory",
-                "matern52 m=32 sensor=memory",
-                "matern52 exact sensor=memory",
-                "se-ard m=32 lags=1 sensor=memory",
-                "matern52 m=32 lags=1 sensor=memory",
-                "se-ard m=32"
+                "se-ard m=32",
+                "se-ard exact",
+                "matern52 m=32",
+                "matern52 exact",
+                "se-ard m=32 lags=1",
+                "matern52 m=32 lags=1",
+                "se-ard m=32 sensor=thesis"
             ]
         );
         assert!(p.check_ref().is_ok());
@@ -1910,10 +1917,10 @@ mod tests {
         assert_eq!(
             names,
             [
-                "matern52 exact sensor=memory",
-                "matern52 m=64 sensor=memory",
-                "matern52 m=64 lags=1 sensor=memory",
-                "matern52 exact"
+                "matern52 exact",
+                "matern52 m=64",
+                "matern52 m=64 lags=1",
+                "matern52 exact sensor=thesis"
             ]
         );
         // Every configuration exact: no lag set is tried (`n_inducing=None` in Python trains
