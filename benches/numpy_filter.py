@@ -269,8 +269,12 @@ class NumpyEkf:
         params = model.get("params", {})
         rate = float(params.get("rate_hz", 100.0))
         self.lag_a = np.array([-math.expm1(-1.0 / (rate * float(tau))) for tau in params.get("lags") or []])
-        # The sensor reads [x_{k-1}, y_{k-1}, x_k] (the thesis) or [x_{k-1}, x_k] (a sensor of
-        # the state only, `sensor_inputs = state`).
+        # The sensor reads [x_{k-1}, y_{k-1}, x_k] (the thesis), [x_{k-1}, x_k] (a sensor of
+        # the state only, `sensor_inputs = state`), or [x_k, q^1_k, q^2_k] with plays of the
+        # state of these radii (`sensor_inputs = memory`, docs/memory.md).
+        self.state_radii = np.asarray(model.get("sensor_memory_radii", []), dtype=float)
+        if len(self.state_radii) and self.se.d != 1 + len(self.state_radii):
+            raise ValueError("a sensor with memory reads the state and one input per play of it")
         if self.tr.d != 4 + len(self.radii) + len(self.lag_a) or self.se.d not in (2, 3):
             raise ValueError(
                 "not an HBN model (transition needs 4 inputs plus one per play and lag, sensor 3 or 2)"
@@ -296,6 +300,7 @@ class NumpyEkf:
             "u_last": u0,
             "u_prev": u0,
             "plays": np.full(len(self.radii) + len(self.lag_a), u0),
+            "memory": np.full(len(self.state_radii), c["x0_mean"]),
             "rejected_run": 0,
             "lost_run": 0,
         }
@@ -320,11 +325,21 @@ class NumpyEkf:
             left_box = not (c["x_bounds"][0] <= t[0] <= c["x_bounds"][1])
             xk = _clamp(t[0], c["x_bounds"])
             state_only = self.se.d == 2
-            s = self._linearise(self.se, np.array([x1, xk] if state_only else [x1, s1, xk]))
+            sr = self.state_radii
+            if len(sr):
+                # The plays of the estimates, moved by x_k; those x_k drags pass on its slope.
+                held = np.maximum(xk - sr, np.minimum(xk + sr, st["memory"]))
+                moving = held != st["memory"]
+                s = self._linearise(self.se, np.concatenate([[xk], held]))
+            else:
+                s = self._linearise(self.se, np.array([x1, xk] if state_only else [x1, s1, xk]))
             if s is not None:
                 a1, a2 = _clamp_jac(t[2][0], jm), _clamp_jac(t[2][1], jm)
                 # The gradient w.r.t. x_{k-1}, s_{k-1}, x_k (none for s_{k-1} without it).
-                grad = [s[2][0], 0.0, s[2][1]] if state_only else list(s[2])
+                if len(sr):
+                    grad = [0.0, 0.0, s[2][0] + float(np.sum(s[2][1:] * moving))]
+                else:
+                    grad = [s[2][0], 0.0, s[2][1]] if state_only else list(s[2])
                 cc, e, f = (_clamp_jac(grad[0], jm), _clamp_jac(grad[1], jm), _clamp_jac(grad[2], jm))
                 fm = np.array([[a1, a2, 0.0], [1.0, 0.0, 0.0], [cc + f * a1, f * a2, e]])
                 g = np.array([1.0, 0.0, f])
@@ -401,6 +416,10 @@ class NumpyEkf:
                 )
                 st["lost_run"] = 0
                 st["rejected_run"] = 0
+                st["memory"] = np.full(len(self.state_radii), xm)
+        # The sensor's plays of the state advance with the estimate.
+        sr = self.state_radii
+        st["memory"] = np.maximum(z[0] - sr, np.minimum(z[0] + sr, st["memory"]))
         st["z"], st["p"] = z, p
         return z[0], c["std_scale"] * math.sqrt(max(p[0, 0], 0.0))
 

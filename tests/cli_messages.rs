@@ -535,17 +535,17 @@ fn model_selection_lists_print_their_table() {
     assert!(
         err.contains(
             "model selection: training 4 candidates side by side (exact, m=4, m=4 lags=1, \
-             exact sensor=thesis, each GP's kernel chosen by evidence first)"
+             exact sensor=memory, each GP's kernel chosen by evidence first)"
         ),
         "announced on stderr: {err}"
     );
-    // The sparse GPs also with the default lag set, the exact ones with the thesis' sensor.
+    // The sparse GPs also with the default lag set, the exact ones with a sensor with memory.
     assert!(
         out.contains("model selection, 4 candidates")
             && out.contains(" exact")
             && out.contains(" m=4 ")
             && out.contains(" m=4 lags=1")
-            && out.contains(" exact sensor=thesis"),
+            && out.contains(" exact sensor=memory"),
         "{out}"
     );
     assert_eq!(out.matches("* chosen").count(), 1, "{out}");

@@ -92,9 +92,7 @@ fn tuning_makes_the_uncertainty_honest_on_unseen_data() {
         c1.coverage_2sigma
     );
     // Better predictive density than the untuned default, and no worse accuracy (10% slack).
-    // (The default sensor with memory is near honest untuned, NEES 1.33 on this run: tuning
-    // gains 0.18 in NLPD here, where it gained more on the thesis' sensor.)
-    assert!(c1.nlpd < c0.nlpd - 0.1, "NLPD {} vs {}", c1.nlpd, c0.nlpd);
+    assert!(c1.nlpd < c0.nlpd - 0.2, "NLPD {} vs {}", c1.nlpd, c0.nlpd);
     assert!(e1 <= 1.1 * e0, "nRMSE {e1} vs {e0}");
 }
 

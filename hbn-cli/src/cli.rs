@@ -662,12 +662,12 @@ pub struct TrainArgs {
     /// cost observability. docs/sparse.md.
     #[arg(help_heading = "Model", long, value_parser = parse_linear_mean, default_value_t = params().linear_mean, value_name = "none|transition|both")]
     pub linear_mean: LinearMean,
-    /// What the sensor GP reads: `memory` ([x_k] and two play operators of the state, the
-    /// history a hysteretic sensor depends on), `thesis` ([x_{k-1}, y_{k-1}, x_k]) or `state`
+    /// What the sensor GP reads: `thesis` ([x_{k-1}, y_{k-1}, x_k]), `memory` (x_k and two play
+    /// operators of the state, the history a hysteretic sensor depends on) or `state`
     /// ([x_{k-1}, x_k]); several, comma-separated, are chosen among on held-out data, the
-    /// first being the primary one (default `memory,thesis`; `--sensor-inputs memory` alone
+    /// first being the primary one (default `thesis,memory`; `--sensor-inputs thesis` alone
     /// tries no other). Vector models take `thesis` or `state`. docs/memory.md.
-    #[arg(help_heading = "Model", long, value_parser = parse_sensor_inputs, value_delimiter = ',', value_name = "memory|thesis|state[,..]")]
+    #[arg(help_heading = "Model", long, value_parser = parse_sensor_inputs, value_delimiter = ',', value_name = "thesis|memory|state[,..]")]
     pub sensor_inputs: Vec<SensorInputs>,
     /// Largest signal variance of both GPs, as a multiple of the variance of what each kernel
     /// models, or `none` for only the 1e5 box: keeps a near-linear fit from extrapolating like
@@ -1044,9 +1044,9 @@ pub struct ExperimentArgs {
     /// Which GPs have a linear prior mean: `none`, `transition` or `both` (as `hbn train`).
     #[arg(long, value_parser = parse_linear_mean, default_value_t = params().linear_mean, value_name = "none|transition|both")]
     pub linear_mean: LinearMean,
-    /// What the sensor GP reads, `memory`, `thesis` or `state`; several are chosen among on
+    /// What the sensor GP reads, `thesis`, `memory` or `state`; several are chosen among on
     /// held-out data (as `hbn train`).
-    #[arg(long, value_parser = parse_sensor_inputs, value_delimiter = ',', value_name = "memory|thesis|state[,..]")]
+    #[arg(long, value_parser = parse_sensor_inputs, value_delimiter = ',', value_name = "thesis|memory|state[,..]")]
     pub sensor_inputs: Vec<SensorInputs>,
     /// Write all rows as JSON.
     #[arg(long)]

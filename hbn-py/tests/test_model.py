@@ -186,7 +186,7 @@ def test_n_inducing_none_trains_exact_gps_without_selection():
     # Exact GPs only: the sensor's inputs are still chosen (both candidates exact).
     rows = exact.summary["validation"]["candidates"]
     assert [r["candidate"]["n_inducing"] for r in rows] == [None, None]
-    assert [r["candidate"].get("sensor_inputs", "thesis") for r in rows] == ["thesis", "state"]
+    assert [r["candidate"].get("sensor_inputs", "thesis") for r in rows] == ["thesis", "memory"]
     alone = hbn.HysteresisModel.fit(
         tr["u"], tr["x"], tr["y"], n_inducing=None, sensor_inputs="thesis", **quick
     )
@@ -197,7 +197,7 @@ def test_n_inducing_none_trains_exact_gps_without_selection():
         None
     ]
     # The sparse GPs also with the default lag set, which ``lags=[[], [1.0]]`` spells out, and
-    # the exact GPs with a sensor of the state only.
+    # the exact GPs with a sensor with memory of the state.
     assert [r["candidate"].get("lags", []) for r in rows] == [[], [], [1.0], []]
-    assert rows[3]["candidate"]["sensor_inputs"] == "state"
+    assert rows[3]["candidate"]["sensor_inputs"] == "memory"
     assert hbn.default_params()["lags"] == [[], [1.0]]

@@ -112,3 +112,29 @@ def test_numpy_filter_matches_hbn_with_a_sensor_of_the_state_only(tmp_path):
     x_np, std_np = numpy_filter.numpy_estimate(doc, test["u"], test["y"])
     assert np.max(np.abs(x_np - est.x)) < 1e-6
     assert np.max(np.abs(std_np - est.x_std)) < 1e-6
+
+
+def test_numpy_filter_matches_hbn_with_a_sensor_with_memory(tmp_path):
+    """A sensor GP on the state and two plays of it (``sensor_inputs="memory"``): the numpy
+    filter carries the plays of its own estimates and builds the Jacobian row itself (a play
+    passes its slope on only while the state drags it), and the two filters agree."""
+    train = hbn.simulate("duhem", 800, seed=3, noise_gain=1.0)
+    model = hbn.HysteresisModel.fit(
+        train["u"],
+        train["x"],
+        train["y"],
+        max_points=200,
+        n_starts=1,
+        n_inducing=None,
+        lags=[],
+        sensor_inputs="memory",
+    )
+    path = tmp_path / "model.hbn"
+    model.save(path)
+    doc = numpy_filter.load_model_json(str(path))
+    assert len(doc["sensor"]["input_mean"]) == 3 and len(doc["sensor_memory_radii"]) == 2
+    test = hbn.simulate("duhem", 300, seed=4, noise_gain=1.0)
+    est = model.estimate(test["u"], test["y"], mode="ekf")
+    x_np, std_np = numpy_filter.numpy_estimate(doc, test["u"], test["y"])
+    assert np.max(np.abs(x_np - est.x)) < 1e-6
+    assert np.max(np.abs(std_np - est.x_std)) < 1e-6

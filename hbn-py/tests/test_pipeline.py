@@ -120,8 +120,8 @@ def test_defaults_come_from_the_library():
     assert got["n_inducing"] in p["n_inducing"]
     # Likewise the lag sets (the primary one first).
     assert p["lags"] == [[], [1.0]] and got["lags"] in p["lags"]
-    # And the sensor's inputs (the thesis' sensor first, a sensor of the state only tried).
-    assert p["sensor_inputs"] == ["thesis", "state"] and got["sensor_inputs"] in p["sensor_inputs"]
+    # And the sensor's inputs (the thesis' sensor first, a sensor with memory tried).
+    assert p["sensor_inputs"] == ["thesis", "memory"] and got["sensor_inputs"] in p["sensor_inputs"]
     o = hbn.default_log_options()
     assert o["rate_hz"] is None and o["max_gap_s"] > 0 and o["time_source"] == "log"
     assert hbn.default_gp_params()["n_starts"] >= 1

@@ -570,16 +570,11 @@ mod tests {
                 .unwrap()
             })
             .collect();
-        // The thesis' sensor: the test is of EM's joining, on a model whose one measured run
-        // leaves room for the other two (with the sensor with memory, the measured run alone
-        // reaches 0.0130 here and the joined model 0.0134).
-        let mut params = HbnParams {
+        let params = HbnParams {
             max_points: 250,
             n_starts: 1,
-            sensor_inputs: crate::SensorInputs::Thesis,
             ..HbnParams::default()
         };
-        params.select.sensor_inputs.clear();
         let measured = [Sequence::new(&runs[0].u, &runs[0].x, &runs[0].y)];
         let alone = HysteresisModel::fit_partial(&measured, &params).unwrap();
         // NaN for the state: never measured. A finite placeholder of nonsense must not matter.

@@ -251,11 +251,11 @@ pub enum SensorInputs {
     Memory,
 }
 
-/// What the default model's sensor GP reads ([`HbnParams::sensor_inputs`]); model selection
-/// tries the thesis' sensor beside it ([`Selection::sensor_inputs`]). Candidates with this
-/// sensor are named without it (`matern52 exact`), the others with it
-/// (`matern52 exact sensor=thesis`).
-pub const DEFAULT_SENSOR_INPUTS: SensorInputs = SensorInputs::Memory;
+/// What the default model's sensor GP reads ([`HbnParams::sensor_inputs`]): the thesis'
+/// inputs; model selection tries a sensor with memory of the state beside it
+/// ([`Selection::sensor_inputs`]). Candidates with this sensor are named without it
+/// (`matern52 exact`), the others with it (`matern52 exact sensor=memory`).
+pub const DEFAULT_SENSOR_INPUTS: SensorInputs = SensorInputs::Thesis;
 
 /// Radii of the play operators of the state that a sensor with memory reads
 /// ([`SensorInputs::Memory`]), as fractions of the training state's range: the input's
@@ -446,10 +446,11 @@ pub struct HbnParams {
     /// inputs that the kernel models the rest of.
     #[serde(default)]
     pub linear_mean: LinearMean,
-    /// What the sensor GP reads ([`SensorInputs`]): by default the state and two plays of it
-    /// ([`SensorInputs::Memory`]), with the thesis' `[x_{k-1}, y_{k-1}, x_k]` tried on
-    /// held-out data ([`HbnParams::select`]); or the state's `[x_{k-1}, x_k]` alone. The
-    /// thesis' sensor is not written to model files (a file without the field has it).
+    /// What the sensor GP reads ([`SensorInputs`]): by default the thesis'
+    /// `[x_{k-1}, y_{k-1}, x_k]`, with the state and two plays of it
+    /// ([`SensorInputs::Memory`]) tried on held-out data ([`HbnParams::select`]); or the
+    /// state's `[x_{k-1}, x_k]` alone. The thesis' sensor is not written to model files (a file
+    /// without the field has it).
     #[serde(default, skip_serializing_if = "SensorInputs::is_thesis")]
     pub sensor_inputs: SensorInputs,
     /// Largest signal variance of both GPs, relative to the variance of what each kernel
@@ -606,7 +607,7 @@ pub struct Candidate {
 
 /// `matern52 exact`, `se-ard m=64`; both kernels when they differ (`se,matern52 exact`); lags
 /// and then a sensor other than [`DEFAULT_SENSOR_INPUTS`] last (`matern52 m=64 lags=1`,
-/// `se exact sensor=thesis`).
+/// `se exact sensor=memory`).
 impl std::fmt::Display for Candidate {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         if self.transition_kernel == self.sensor_kernel {
@@ -663,7 +664,7 @@ impl Default for HbnParams {
                 kernels: Vec::new(),
                 inducing: vec![Some(DEFAULT_INDUCING)],
                 lags: vec![DEFAULT_LAGS.to_vec()],
-                sensor_inputs: vec![SensorInputs::Thesis],
+                sensor_inputs: vec![SensorInputs::Memory],
             },
             kernel_evidence: DEFAULT_EVIDENCE_KERNELS.to_vec(),
             firmware_budget: None,
@@ -1812,8 +1813,7 @@ mod tests {
 
     /// The default model is chosen on held-out data between exact GPs (the primary, trained
     /// alone when nothing is held out) and sparse GPs of `DEFAULT_INDUCING` points, without
-    /// and with the `DEFAULT_LAGS`, all with a sensor with memory of the state, and the exact
-    /// GPs with the thesis' sensor.
+    /// and with the `DEFAULT_LAGS`, and the exact GPs with a sensor with memory of the state.
     #[test]
     fn the_default_chooses_between_exact_and_sparse_gps() {
         let p = HbnParams::default();
@@ -1824,14 +1824,14 @@ mod tests {
                 "matern52 exact",
                 "matern52 m=64",
                 "matern52 m=64 lags=1",
-                "matern52 exact sensor=thesis"
+                "matern52 exact sensor=memory"
             ]
         );
         assert_eq!(
             p.get(Param::SensorInputs),
             Some(ParamValue::List(vec![
-                ParamValue::Text("memory".into()),
-                ParamValue::Text("thesis".into())
+                ParamValue::Text("thesis".into()),
+                ParamValue::Text("memory".into())
             ]))
         );
         assert_eq!(p.candidate().n_inducing, None);
@@ -1874,7 +1874,7 @@ mod tests {
                 "matern52 exact",
                 "se-ard m=32 lags=1",
                 "matern52 m=32 lags=1",
-                "se-ard m=32 sensor=thesis"
+                "se-ard m=32 sensor=memory"
             ]
         );
         assert!(p.check_ref().is_ok());
@@ -1920,7 +1920,7 @@ mod tests {
                 "matern52 exact",
                 "matern52 m=64",
                 "matern52 m=64 lags=1",
-                "matern52 exact sensor=thesis"
+                "matern52 exact sensor=memory"
             ]
         );
         // Every configuration exact: no lag set is tried (`n_inducing=None` in Python trains
@@ -1932,11 +1932,11 @@ mod tests {
             },
             ..d.clone()
         };
-        let thesis = Candidate {
-            sensor_inputs: SensorInputs::Thesis,
+        let memory = Candidate {
+            sensor_inputs: SensorInputs::Memory,
             ..exact.candidate()
         };
-        assert_eq!(exact.candidates(), vec![exact.candidate(), thesis]);
+        assert_eq!(exact.candidates(), vec![exact.candidate(), memory]);
         // A list of lists: the primary set, then the alternatives; read back the same way.
         let mut p = HbnParams::default();
         let set =
@@ -2008,7 +2008,6 @@ mod tests {
         // Not written when it is the thesis' sensor, so older readers and files agree.
         let json = serde_json::to_string(&HbnParams {
             select: Selection::default(),
-            sensor_inputs: SensorInputs::Thesis,
             ..HbnParams::default()
         })
         .unwrap();

@@ -909,12 +909,11 @@ _TRAINING_PARAMETERS_DOC = """
     linear_mean : {"none", "transition", "both"}
         Which GPs have a linear prior mean (see :class:`GaussianProcess`).
     sensor_inputs : str or list of str
-        What the sensor GP reads: ``"memory"``, ``x_k`` and two play operators of the state
-        (the history a hysteretic sensor's output depends on); ``"thesis"``,
-        ``[x_{k-1}, y_{k-1}, x_k]``; or ``"state"``, ``[x_{k-1}, x_k]``. A list is chosen among
-        on held-out data, the first being the primary one; the default is
-        ``["memory", "thesis"]`` (``docs/memory.md``). Vector models take ``"thesis"`` or
-        ``"state"``.
+        What the sensor GP reads: ``"thesis"``, ``[x_{k-1}, y_{k-1}, x_k]``; ``"memory"``,
+        ``x_k`` and two play operators of the state (the history a hysteretic sensor's output
+        depends on); or ``"state"``, ``[x_{k-1}, x_k]``. A list is chosen among on held-out
+        data, the first being the primary one; the default is ``["thesis", "memory"]``
+        (``docs/memory.md``). Vector models take ``"thesis"`` or ``"state"``.
     max_signal_variance : float or None
         Largest GP signal variance, as a multiple of the variance each kernel models; ``None``
         for only the ``1e5`` box.
