@@ -570,11 +570,15 @@ mod tests {
                 .unwrap()
             })
             .collect();
-        let params = HbnParams {
+        // The thesis' sensor alone: the test is of EM's joining, on a model whose one measured
+        // run leaves room for the other two. (With the default's sensor with memory, the
+        // measured run alone reaches 0.0131 here and the joined model 0.0132.)
+        let mut params = HbnParams {
             max_points: 250,
             n_starts: 1,
             ..HbnParams::default()
         };
+        params.select.sensor_inputs.clear();
         let measured = [Sequence::new(&runs[0].u, &runs[0].x, &runs[0].y)];
         let alone = HysteresisModel::fit_partial(&measured, &params).unwrap();
         // NaN for the state: never measured. A finite placeholder of nonsense must not matter.
