@@ -217,17 +217,21 @@ def run_hbn(
 
 def _config(model: Any) -> str:
     """The trained configuration (the chosen one under model selection), e.g. ``"matern52
-    exact"``, ``"se-ard m=64"`` or ``"matern52 m=64 lags=1"`` (as ``hbn train`` names
-    candidates)."""
+    exact"``, ``"se-ard m=64"``, ``"matern52 m=64 lags=1"`` or ``"matern52 exact
+    sensor=memory"`` (as ``hbn train`` names candidates)."""
     p = model.params
-    return _name(p["transition_kernel"], p["sensor_kernel"], None if p["n_inducing"] == "exact" else p["n_inducing"], p.get("lags") or [])
+    m = None if p["n_inducing"] == "exact" else p["n_inducing"]
+    return _name(p["transition_kernel"], p["sensor_kernel"], m, p.get("lags") or [], p.get("sensor_inputs", "thesis"))
 
 
-def _name(transition: str, sensor: str, m: Optional[int], lags: Sequence[float]) -> str:
+def _name(transition: str, sensor: str, m: Optional[int], lags: Sequence[float], sensor_inputs: str = "thesis") -> str:
     """A configuration named as ``hbn train`` names candidates: the kernel (both, comma-separated,
-    when they differ), ``exact`` or ``m=M``, then any lags."""
+    when they differ), ``exact`` or ``m=M``, then any lags, then a sensor other than the
+    thesis' (``sensor=memory``)."""
     kernels = transition if transition == sensor else f"{transition},{sensor}"
     tail = f" lags={','.join(f'{t:g}' for t in lags)}" if lags else ""
+    if sensor_inputs != "thesis":
+        tail += f" sensor={sensor_inputs}"
     return f"{kernels} {'exact' if m is None else f'm={m}'}{tail}"
 
 
@@ -255,6 +259,7 @@ def _held_out(model: Any) -> Optional[Dict[str, Any]]:
             _kernel_name(cand.get("sensor_kernel", {})),
             cand.get("n_inducing"),
             cand.get("lags") or [],
+            cand.get("sensor_inputs", "thesis"),
         )
         candidates.append({
             "config": name,

@@ -477,3 +477,12 @@ def test_summary_ratio_uses_the_best_baseline() -> None:
     assert row["ratio_hbn-ekf"] == pytest.approx(0.75)
     assert row["ratio_hbn-ekf-blr"] is None
     assert row["methods"]["hbn-ekf"]["nrmse_sd"] == pytest.approx(0.01)
+
+
+def test_configurations_are_named_as_hbn_train_names_candidates() -> None:
+    """The grid names a model's configuration as ``hbn train`` does, the sensor included when it
+    is not the thesis' (so that a grid says which sensor a cell's model kept)."""
+    assert run._name("matern52", "matern52", None, []) == "matern52 exact"
+    assert run._name("se-ard", "matern52", 64, [1.0]) == "se-ard,matern52 m=64 lags=1"
+    assert run._name("matern52", "matern52", None, [], "memory") == "matern52 exact sensor=memory"
+    assert run._name("matern52", "matern52", 64, [], "thesis") == "matern52 m=64"
