@@ -88,11 +88,16 @@ def test_numpy_filter_matches_hbn_with_linear_means(tmp_path):
     assert np.max(np.abs(std_np - est.x_std)) < 1e-6
 
 
-def test_numpy_filter_matches_hbn_with_a_sensor_of_the_state_only(tmp_path):
-    """A sensor GP on [x_{k-1}, x_k] (``sensor_inputs="state"``): the numpy filter, written
-    apart from hbn-core, builds the sensor's input and its Jacobian row itself, and the two
-    filters agree."""
-    train = hbn.simulate("maxwell-slip", 800, seed=3, noise_gain=1.0)
+@pytest.mark.parametrize(
+    "system, sensor_inputs, sensor_dim",
+    [("maxwell-slip", "state", 2), ("duhem", "memory", 3)],
+)
+def test_numpy_filter_matches_hbn_with_other_sensors(tmp_path, system, sensor_inputs, sensor_dim):
+    """A sensor GP on [x_{k-1}, x_k] (``sensor_inputs="state"``), or on the state and two plays
+    of it (``"memory"``: the filter carries the plays of its own estimates, and a play passes
+    its slope on only while the state drags it): the numpy filter, written apart from hbn-core,
+    builds the sensor's input and its Jacobian row itself, and the two filters agree."""
+    train = hbn.simulate(system, 800, seed=3, noise_gain=1.0)
     model = hbn.HysteresisModel.fit(
         train["u"],
         train["x"],
@@ -101,39 +106,14 @@ def test_numpy_filter_matches_hbn_with_a_sensor_of_the_state_only(tmp_path):
         n_starts=1,
         n_inducing=None,
         lags=[],
-        sensor_inputs="state",
+        sensor_inputs=sensor_inputs,
     )
     path = tmp_path / "model.hbn"
     model.save(path)
     doc = numpy_filter.load_model_json(str(path))
-    assert len(doc["sensor"]["input_mean"]) == 2
-    test = hbn.simulate("maxwell-slip", 300, seed=4, noise_gain=1.0)
-    est = model.estimate(test["u"], test["y"], mode="ekf")
-    x_np, std_np = numpy_filter.numpy_estimate(doc, test["u"], test["y"])
-    assert np.max(np.abs(x_np - est.x)) < 1e-6
-    assert np.max(np.abs(std_np - est.x_std)) < 1e-6
-
-
-def test_numpy_filter_matches_hbn_with_a_sensor_with_memory(tmp_path):
-    """A sensor GP on the state and two plays of it (``sensor_inputs="memory"``): the numpy
-    filter carries the plays of its own estimates and builds the Jacobian row itself (a play
-    passes its slope on only while the state drags it), and the two filters agree."""
-    train = hbn.simulate("duhem", 800, seed=3, noise_gain=1.0)
-    model = hbn.HysteresisModel.fit(
-        train["u"],
-        train["x"],
-        train["y"],
-        max_points=200,
-        n_starts=1,
-        n_inducing=None,
-        lags=[],
-        sensor_inputs="memory",
-    )
-    path = tmp_path / "model.hbn"
-    model.save(path)
-    doc = numpy_filter.load_model_json(str(path))
-    assert len(doc["sensor"]["input_mean"]) == 3 and len(doc["sensor_memory_radii"]) == 2
-    test = hbn.simulate("duhem", 300, seed=4, noise_gain=1.0)
+    assert len(doc["sensor"]["input_mean"]) == sensor_dim
+    assert len(doc.get("sensor_memory_radii", [])) == (2 if sensor_inputs == "memory" else 0)
+    test = hbn.simulate(system, 300, seed=4, noise_gain=1.0)
     est = model.estimate(test["u"], test["y"], mode="ekf")
     x_np, std_np = numpy_filter.numpy_estimate(doc, test["u"], test["y"])
     assert np.max(np.abs(x_np - est.x)) < 1e-6
