@@ -1147,8 +1147,20 @@ impl HysteresisModel {
     }
 
     /// The sensor's play operators of the state ([`hbn_core::HbnView::sensor_memory`]):
-    /// [`Plays::NONE`] unless the sensor has memory ([`crate::SensorInputs::Memory`]).
+    /// [`Plays::NONE`] unless the sensor has memory ([`crate::SensorInputs::Memory`]). An error
+    /// when the radii disagree with the sensor's inputs (an edited model file).
     pub fn sensor_memory(&self) -> Result<Plays, ModelError> {
+        let expected = if self.params.sensor_inputs.has_memory() {
+            crate::SENSOR_MEMORY.len()
+        } else {
+            0
+        };
+        if self.sensor_memory_radii.len() != expected {
+            return Err(ModelError::Core(hbn_core::CoreError::InvalidSpec(
+                "the sensor's plays of the state (sensor_memory_radii) do not match its inputs \
+                 (sensor_inputs)",
+            )));
+        }
         Ok(Plays::new(&self.sensor_memory_radii)?)
     }
 

@@ -49,7 +49,6 @@ fn a_sensor_with_memory_pins_a_hysteretic_sensors_state() {
         hbn_model::metrics::nrmse(&run.x, &test.x)
     };
     let (e_thesis, e_memory) = (score(&thesis), score(&memory));
-    eprintln!("nRMSE thesis {e_thesis:.4}, memory {e_memory:.4}");
     assert!(
         e_memory < 0.75 * e_thesis,
         "memory {e_memory:.4} against thesis {e_thesis:.4}"
@@ -65,4 +64,18 @@ fn a_sensor_with_memory_pins_a_hysteretic_sensors_state() {
         back.estimate(&test.u, &test.y, Mode::Ukf).unwrap(),
     );
     assert_eq!(a.x, b.x);
+    // A file whose plays do not match its sensor's inputs is refused, naming both.
+    let text = memory.to_json().unwrap();
+    let radii = memory.sensor_memory().unwrap().radii().to_vec();
+    let written = format!(
+        "\"sensor_memory_radii\":{}",
+        serde_json::to_string(&radii).unwrap()
+    );
+    assert!(text.contains(&written), "{written}");
+    let edited = text.replace(&written, "\"sensor_memory_radii\":[]");
+    let e = HysteresisModel::from_json(&edited, "edited.hbn").unwrap_err();
+    assert!(
+        e.to_string().contains("sensor_memory_radii") && e.to_string().contains("edited.hbn"),
+        "{e}"
+    );
 }
