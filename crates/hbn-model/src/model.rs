@@ -899,21 +899,18 @@ impl HysteresisModel {
         for (i, t) in trajectories.iter().enumerate() {
             t.validate(i)?;
         }
-        let radii = |fractions: &[f64], signal: &dyn Fn(&Sequence<'_>) -> Vec<f64>| {
-            if fractions.is_empty() {
-                return Vec::new();
-            }
-            let values: Vec<f64> = trajectories.iter().flat_map(signal).collect();
-            let span = SignalStats::of(values.iter()).span();
-            fractions.iter().map(|f| f * span).collect::<Vec<f64>>()
+        let radii = |fractions: &[f64], span: f64| -> Vec<f64> {
+            fractions.iter().map(|f| f * span).collect()
         };
+        let u_span = SignalStats::of(trajectories.iter().flat_map(|t| t.u.iter())).span();
         let state = if params.sensor_inputs.has_memory() {
-            Plays::new(&radii(&crate::SENSOR_MEMORY, &|t| t.x.to_vec()))?
+            let x_span = SignalStats::of(trajectories.iter().flat_map(|t| t.x.iter())).span();
+            Plays::new(&radii(&crate::SENSOR_MEMORY, x_span))?
         } else {
             Plays::NONE
         };
         Ok(Memory {
-            input: Plays::with_lags(&radii(&params.memory, &|t| t.u.to_vec()), &lags)?,
+            input: Plays::with_lags(&radii(&params.memory, u_span), &lags)?,
             state,
         })
     }
