@@ -753,7 +753,8 @@ pub struct EstimateArgs {
 #[derive(Clone, Debug, Args)]
 #[command(
     after_help = "Example:\n  hbn eval --model model.hbn --log test.mcap --plot eval.png\n  \
-     hbn eval --model model.hbn --log test.mcap --mode ekf --json\n\n\
+     hbn eval --model model.hbn --log test.mcap --mode ekf --json\n  \
+     hbn eval --model model.hbn --log test1.mcap --log test2.mcap --log test3.mcap\n\n\
      Scores RMSE and nRMSE (RMSE / range of the reference) of each filter mode and of the\n\
      open-loop GP simulation against the logged state, and how often the state lies within 2\n\
      standard deviations of the estimate (about 95% when the uncertainty is honest); --verbose\n\
@@ -763,9 +764,11 @@ pub struct EvalArgs {
     /// Model file from `hbn train`.
     #[arg(long)]
     pub model: PathBuf,
-    /// Log with input, state (reference) and sensor signals.
-    #[arg(long)]
-    pub log: PathBuf,
+    /// Log with input, state (reference) and sensor signals; repeat to score several logs,
+    /// each on its own and then all pooled sample by sample (a band is judged better on
+    /// several logs with different inputs than on one).
+    #[arg(long, action = clap::ArgAction::Append, required = true)]
+    pub log: Vec<PathBuf>,
     /// Mode to evaluate, or `all`.
     #[arg(long, value_parser = mode_choice(), default_value_t = ModeChoice::All)]
     pub mode: ModeChoice,
@@ -780,7 +783,8 @@ pub struct EvalArgs {
     #[arg(long, action = clap::ArgAction::Append, value_parser = parse_path)]
     pub output: Vec<SignalPath>,
     /// Write a PNG plot: per mode the estimate with its 2-sigma band against the logged state
-    /// (nRMSE and 2-sigma coverage in the legend), and the hysteresis loops.
+    /// (nRMSE and 2-sigma coverage in the legend), and the hysteresis loops (one `--log`
+    /// only).
     #[arg(long)]
     pub plot: Option<PathBuf>,
     /// Also score each mode's smoothed estimate (each sample estimated from the whole log): a

@@ -1,11 +1,14 @@
 //! `hbn eval`: score the model's estimates against the logged state
-//! ([`hbn_pipeline::evaluate_log`]), as a table, JSON or a plot.
+//! ([`hbn_pipeline::evaluate_log`]) of one log or several (then also pooled,
+//! [`hbn_pipeline::pool_evaluations`]), as a table, JSON or a plot.
 
 use std::path::Path;
 
 use anyhow::Context;
 use hbn_model::{HysteresisModel, VectorModel};
-use hbn_pipeline::{Evaluation, LogOption, Method, Score, SignalChoice, evaluate_log};
+use hbn_pipeline::{
+    Compared, Evaluation, LogOption, Method, Score, SignalChoice, evaluate_log, pool_evaluations,
+};
 
 use crate::Ui;
 use crate::cli::EvalArgs;
@@ -20,13 +23,13 @@ use crate::report::{self, Renderer};
 /// (about 95% when the uncertainty is honest); with `verbose` also within 1 (about 68%), the
 /// mean NEES (about 1) and the NLPD.
 pub fn table(
-    ev: &Evaluation,
+    scores: &[Score],
     smoothed: &[Score],
     default_mode: hbn_core::Mode,
     verbose: bool,
 ) -> String {
     let mut rows: Vec<(String, &Score)> = Vec::new();
-    for sc in &ev.scores {
+    for sc in scores {
         let star = if sc.method == Method::Filter(default_mode) {
             "*"
         } else {
@@ -75,8 +78,7 @@ pub fn table(
         }
         s.push('\n');
     }
-    if ev
-        .scores
+    if scores
         .iter()
         .any(|sc| sc.method == Method::Filter(default_mode))
     {
@@ -85,60 +87,63 @@ pub fn table(
     if !smoothed.is_empty() {
         s.push_str("smoothed: each sample estimated from the whole log (docs/smoothing.md)\n");
     }
-    if let Some(frames) = ev.log.state_frames() {
-        s.push_str(&format!(
-            "scored at the state's {} frames (it is measured at {:.0}% of the {} samples; \
-             between frames the log holds no state to compare with)\n",
-            frames.len(),
-            100.0 * frames.len() as f64 / ev.log.len().max(1) as f64,
-            ev.log.len()
-        ));
-    }
     s
 }
 
+/// The line saying that the state of `log` is scored at its frames only (it is measured
+/// sparsely), or `None` when it is measured at about every sample.
+fn frames_note(log: &hbn_pipeline::LogData, frames: Option<usize>) -> Option<String> {
+    frames.map(|frames| {
+        format!(
+            "scored at the state's {frames} frames (it is measured at {:.0}% of the {} samples; \
+             between frames the log holds no state to compare with)\n",
+            100.0 * frames as f64 / log.len().max(1) as f64,
+            log.len()
+        )
+    })
+}
+
 /// The smoothed estimate of each mode of `ev` ([`HysteresisModel::smooth`] over the pieces of
-/// the log the evaluation read), scored against the logged state.
-fn smoothed_scores(
+/// `log`, the log the evaluation read) against the logged state.
+fn smoothed_compared(
     model: &HysteresisModel,
-    args: &EvalArgs,
+    log: &Path,
     signals: &SignalChoice,
     opts: hbn_pipeline::LogOptions,
     ev: &Evaluation,
-) -> anyhow::Result<Vec<Score>> {
+) -> anyhow::Result<Vec<(hbn_core::Mode, Compared)>> {
     let which = [LogOption::Input, LogOption::State, LogOption::Output];
-    let split = hbn_pipeline::read_pieces_at_model_rate(
-        model,
-        &args.log,
-        signals,
-        &which,
-        opts,
-        &mut |_| {},
-    )
-    .map_err(|e| report::error(e, opts.time_source))?;
+    let split =
+        hbn_pipeline::read_pieces_at_model_rate(model, log, signals, &which, opts, &mut |_| {})
+            .map_err(|e| report::error(e, opts.time_source))?;
     ev.estimates
         .iter()
         .map(|(mode, _)| {
-            let est = hbn_pipeline::smooth_pieces(model, &split.pieces, 0, 2, *mode).with_context(
-                || format!("smoothing `{}` with {mode} failed", args.log.display()),
-            )?;
-            Ok(hbn_pipeline::score_against_log(
-                Method::Filter(*mode),
-                &est.x,
-                Some(&est.x_std),
-                &ev.log,
+            let est = hbn_pipeline::smooth_pieces(model, &split.pieces, 0, 2, *mode)
+                .with_context(|| format!("smoothing `{}` with {mode} failed", log.display()))?;
+            Ok((
+                *mode,
+                Compared::against(&est.x, Some(&est.x_std), &ev.log, 1),
             ))
         })
         .collect()
 }
 
-/// The JSON of `hbn eval --smooth`'s smoothed scores: `{"rmse": {..}, "nrmse": {..},
-/// "calibration": {..}}` keyed by mode, as the evaluation's own.
-fn smoothed_json(smoothed: &[Score]) -> serde_json::Value {
+/// The scores of smoothed estimates, one per mode.
+fn smoothed_scores(smoothed: &[(hbn_core::Mode, Compared)]) -> Vec<Score> {
+    smoothed
+        .iter()
+        .map(|(mode, c)| c.score(Method::Filter(*mode)))
+        .collect()
+}
+
+/// Scores as JSON: `{"rmse": {..}, "nrmse": {..}, "calibration": {..}}` keyed by method, as
+/// an evaluation's own.
+fn scores_json(scores: &[Score]) -> serde_json::Value {
     let mut r = serde_json::Map::new();
     let mut n = serde_json::Map::new();
     let mut c = serde_json::Map::new();
-    for s in smoothed {
+    for s in scores {
         r.insert(s.method.key().into(), serde_json::json!(s.rmse));
         n.insert(s.method.key().into(), serde_json::json!(s.nrmse));
         if let Some(cal) = &s.calibration {
@@ -242,36 +247,40 @@ pub fn plot_data<'a>(
 /// Runs `hbn eval` with a scalar or a vector model.
 pub fn run(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<()> {
     if let Some(p) = &args.plot {
+        if args.log.len() > 1 {
+            anyhow::bail!(
+                "--plot draws one log, and --log is given {} times: plot each log with its own \
+                 `hbn eval --log ... --plot ...`, or drop --plot",
+                args.log.len()
+            );
+        }
         crate::check_output(p, "plot")?;
     }
     if crate::cmd_estimate::is_vector_model(&args.model) {
         return run_vector(ui, args);
     }
-    run_scalar(ui, args).map(|_| ())
+    run_scalar(ui, args)
 }
 
-/// `hbn eval` with a scalar model; returns the evaluation.
-pub fn run_scalar(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<Evaluation> {
-    let model = load_model(&args.model)?;
-    let one =
-        |v: &[hbn_io::SignalPath], flag: &str| crate::cmd_estimate::one_path(v, flag, &args.model);
-    let signals = SignalChoice {
-        input: one(&args.input, "--input")?,
-        state: one(&args.state, "--state")?,
-        output: one(&args.output, "--output")?,
-    };
-    let modes = args.mode.modes();
-    let opts = args.read.options(&model);
+/// The evaluation of a scalar model on `log`, the reading's progress rendered to `ui`.
+fn evaluate_scalar(
+    ui: &mut Ui<'_>,
+    model: &HysteresisModel,
+    log: &Path,
+    signals: &SignalChoice,
+    modes: &[hbn_core::Mode],
+    opts: hbn_pipeline::LogOptions,
+) -> anyhow::Result<Evaluation> {
     let mut render = Renderer::default();
-    let result = evaluate_log(&model, &args.log, &signals, &modes, opts, &mut |e| {
+    let result = evaluate_log(model, log, signals, modes, opts, &mut |e| {
         render.event(ui, e)
     });
     render.finish();
     let state_topic = signals
-        .resolve(&model, hbn_pipeline::LogOption::State)
+        .resolve(model, hbn_pipeline::LogOption::State)
         .ok()
         .map(|p| p.topic);
-    let ev = result
+    result
         .map_err(|e| {
             let no_state = matches!(
                 &e,
@@ -285,64 +294,140 @@ pub fn run_scalar(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<Evaluation
                 e.context(format!(
                     "`{}` does not record the state, so there is nothing to score against; \
                      to estimate the state of this log use `hbn estimate`",
-                    args.log.display()
+                    log.display()
                 ))
             } else {
                 e
             }
         })
-        .with_context(|| format!("evaluation on `{}` failed", args.log.display()))?;
-    let smoothed = if args.smooth {
-        smoothed_scores(&model, args, &signals, opts, &ev)?
-    } else {
-        Vec::new()
+        .with_context(|| format!("evaluation on `{}` failed", log.display()))
+}
+
+/// `hbn eval` with a scalar model.
+fn run_scalar(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<()> {
+    let model = load_model(&args.model)?;
+    let one =
+        |v: &[hbn_io::SignalPath], flag: &str| crate::cmd_estimate::one_path(v, flag, &args.model);
+    let signals = SignalChoice {
+        input: one(&args.input, "--input")?,
+        state: one(&args.state, "--state")?,
+        output: one(&args.output, "--output")?,
     };
-    if let Some(p) = &args.plot {
-        plot::eval_plot(p, &plot_data(&ev, &model, &args.model, &args.log))?;
+    let modes = args.mode.modes();
+    let opts = args.read.options(&model);
+    let mut evaluations = Vec::with_capacity(args.log.len());
+    let mut smoothed = Vec::with_capacity(args.log.len());
+    for log in &args.log {
+        let ev = evaluate_scalar(ui, &model, log, &signals, &modes, opts)?;
+        smoothed.push(if args.smooth {
+            smoothed_compared(&model, log, &signals, opts, &ev)?
+        } else {
+            Vec::new()
+        });
+        evaluations.push(ev);
     }
+    if let (Some(p), [ev], [log]) = (&args.plot, evaluations.as_slice(), args.log.as_slice()) {
+        plot::eval_plot(p, &plot_data(ev, &model, &args.model, log))?;
+    }
+    // Pooled over every log, when there are several.
+    let pooled = (evaluations.len() > 1).then(|| {
+        let by_mode = |i: usize| {
+            Compared::join(
+                smoothed
+                    .iter()
+                    .filter_map(|s| s.get(i))
+                    .map(|(_, c)| c.clone()),
+            )
+        };
+        let smoothed_pooled: Vec<Score> = smoothed
+            .first()
+            .into_iter()
+            .flatten()
+            .enumerate()
+            .map(|(i, (mode, _))| by_mode(i).score(Method::Filter(*mode)))
+            .collect();
+        (pool_evaluations(&evaluations), smoothed_pooled)
+    });
     if args.json {
-        let mut v = ev.to_json();
-        if args.smooth {
-            v["smoothed"] = smoothed_json(&smoothed);
-        }
+        let each: Vec<serde_json::Value> = evaluations
+            .iter()
+            .zip(&smoothed)
+            .zip(&args.log)
+            .map(|((ev, sm), log)| {
+                let mut v = ev.to_json();
+                if args.smooth {
+                    v["smoothed"] = scores_json(&smoothed_scores(sm));
+                }
+                v["log"] = serde_json::json!(log);
+                v
+            })
+            .collect();
+        let v = match (each.as_slice(), &pooled) {
+            ([one], _) => one.clone(),
+            (_, Some((scores, sm))) => {
+                let mut p = scores_json(scores);
+                p["samples"] =
+                    serde_json::json!(evaluations.iter().map(|e| e.log.len()).sum::<usize>());
+                if args.smooth {
+                    p["smoothed"] = scores_json(sm);
+                }
+                serde_json::json!({"logs": each, "pooled": p})
+            }
+            _ => serde_json::json!({"logs": each}),
+        };
         ui.line(serde_json::to_string_pretty(&v).context("cannot format JSON")?)?;
-    } else {
+        return Ok(());
+    }
+    for ((ev, sm), log) in evaluations.iter().zip(&smoothed).zip(&args.log) {
         ui.print(format!(
             "scored `{}` on `{}`: {}\n",
             args.model.display(),
-            args.log.display(),
+            log.display(),
             report::grid_text(&ev.log)
         ))?;
-        ui.print(table(&ev, &smoothed, model.default_mode(), ui.verbose))?;
-        ui.print(legend(ui.verbose))?;
-        if let Some(p) = &args.plot {
-            ui.line(format!("wrote plot `{}`", p.display()))?;
+        let sm = smoothed_scores(sm);
+        ui.print(table(&ev.scores, &sm, model.default_mode(), ui.verbose))?;
+        let frames = ev.log.state_frames().map(<[_]>::len);
+        if let Some(note) = frames_note(&ev.log, frames) {
+            ui.print(note)?;
         }
     }
-    Ok(ev)
+    if let Some((scores, sm)) = &pooled {
+        ui.print(format!(
+            "pooled over the {} logs ({} samples; every sample of every log counts once, the \
+             nRMSE is over the range of the state in all of them):\n",
+            evaluations.len(),
+            evaluations.iter().map(|e| e.log.len()).sum::<usize>()
+        ))?;
+        ui.print(table(scores, sm, model.default_mode(), ui.verbose))?;
+    }
+    ui.print(legend(ui.verbose))?;
+    if let Some(p) = &args.plot {
+        ui.line(format!("wrote plot `{}`", p.display()))?;
+    }
+    Ok(())
 }
 
-/// The scores of a vector model, one table per state component: a row per mode with RMSE,
+/// One row of a vector model's tables: the run's label (`ekf`, `ukf smoothed`), its mode and
+/// one score per state component.
+type VectorRow<'a> = (String, hbn_core::Mode, &'a [hbn_pipeline::ComponentScore]);
+
+/// The scores of a vector model, one table per state component: a row per run with RMSE,
 /// nRMSE and the share within 2 standard deviations (with `verbose` also within 1, the mean
 /// NEES and the NLPD); the model's default mode marked `*`.
-pub fn vector_tables(
-    ev: &hbn_pipeline::VectorEvaluation,
-    model: &VectorModel,
-    verbose: bool,
-) -> String {
-    let names = model.signal_names();
-    let labels: Vec<String> = ev
-        .runs
+pub fn vector_tables(rows: &[VectorRow<'_>], model: &VectorModel, verbose: bool) -> String {
+    let labels: Vec<String> = rows
         .iter()
-        .map(|run| {
-            let star = if run.mode == model.default_mode() {
+        .map(|(label, mode, _)| {
+            let star = if *mode == model.default_mode() {
                 "*"
             } else {
                 ""
             };
-            format!("{}{star}", run.label())
+            format!("{label}{star}")
         })
         .collect();
+    let names = model.signal_names();
     let width = labels.iter().map(String::len).max().unwrap_or(0).max(11);
     let mut s = String::new();
     for i in 0..model.dims().states {
@@ -359,8 +444,8 @@ pub fn vector_tables(
             ));
         }
         s.push('\n');
-        for (run, label) in ev.runs.iter().zip(&labels) {
-            let Some(sc) = run.scores.get(i) else {
+        for ((_, _, scores), label) in rows.iter().zip(&labels) {
+            let Some(sc) = scores.get(i) else {
                 continue;
             };
             let c = &sc.calibration;
@@ -381,19 +466,14 @@ pub fn vector_tables(
             s.push('\n');
         }
     }
-    if ev.runs.iter().any(|r| r.mode == model.default_mode()) {
+    if rows.iter().any(|(_, m, _)| *m == model.default_mode()) {
         s.push_str("* the model's default mode\n");
     }
-    if ev.runs.iter().any(|r| r.smoothed) {
+    if rows
+        .iter()
+        .any(|(label, _, _)| label.ends_with(" smoothed"))
+    {
         s.push_str("smoothed: each sample estimated from the whole log (docs/smoothing.md)\n");
-    }
-    if let Some(frames) = vector_state_frames(ev, model) {
-        s.push_str(&format!(
-            "scored at the state's {frames} frames (it is measured at {:.0}% of the {} samples; \
-             between frames the log holds no state to compare with)\n",
-            100.0 * frames as f64 / ev.log.len().max(1) as f64,
-            ev.log.len()
-        ));
     }
     s
 }
@@ -402,6 +482,31 @@ pub fn vector_tables(
 /// `None` when it is measured at about every sample.
 fn vector_state_frames(ev: &hbn_pipeline::VectorEvaluation, model: &VectorModel) -> Option<usize> {
     ev.log.frames_of(model.dims().inputs).map(<[_]>::len)
+}
+
+/// The JSON of a vector model's scores: per run its mode, whether smoothed, and per state
+/// component the RMSE, nRMSE and calibration.
+fn vector_runs_json(
+    rows: &[(hbn_core::Mode, bool, &[hbn_pipeline::ComponentScore])],
+) -> Vec<serde_json::Value> {
+    rows.iter()
+        .map(|(mode, smoothed, scores)| {
+            let comps: Vec<serde_json::Value> = scores
+                .iter()
+                .map(|sc| {
+                    serde_json::json!({
+                        "rmse": sc.rmse,
+                        "nrmse": sc.nrmse,
+                        "coverage_1sigma": sc.calibration.coverage_1sigma,
+                        "coverage_2sigma": sc.calibration.coverage_2sigma,
+                        "mean_nees": sc.calibration.mean_nees,
+                        "nlpd": sc.calibration.nlpd,
+                    })
+                })
+                .collect();
+            serde_json::json!({"mode": mode.name(), "smoothed": smoothed, "components": comps})
+        })
+        .collect()
 }
 
 /// `hbn eval` with a vector model.
@@ -427,70 +532,100 @@ fn run_vector(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<()> {
         .filter(|m| *m != hbn_core::Mode::EkfBlr)
         .collect();
     let opts = crate::cmd_estimate::vector_log_options(&model, &args.read);
-    let mut render = Renderer::default();
-    let result = hbn_pipeline::evaluate_vector_log(
-        &model,
-        &args.log,
-        &signals,
-        &modes,
-        args.smooth,
-        opts,
-        &mut |e| render.event(ui, e),
-    );
-    render.finish();
-    let ev = result
-        .map_err(|e| report::error(e, opts.time_source))
-        .with_context(|| format!("evaluation on `{}` failed", args.log.display()))?;
-    if let Some(p) = &args.plot {
-        vector_plot(p, &ev, &model, &args.log)?;
+    let mut evaluations = Vec::with_capacity(args.log.len());
+    for log in &args.log {
+        let mut render = Renderer::default();
+        let result = hbn_pipeline::evaluate_vector_log(
+            &model,
+            log,
+            &signals,
+            &modes,
+            args.smooth,
+            opts,
+            &mut |e| render.event(ui, e),
+        );
+        render.finish();
+        evaluations.push(
+            result
+                .map_err(|e| report::error(e, opts.time_source))
+                .with_context(|| format!("evaluation on `{}` failed", log.display()))?,
+        );
     }
+    if let (Some(p), [ev], [log]) = (&args.plot, evaluations.as_slice(), args.log.as_slice()) {
+        vector_plot(p, ev, &model, log)?;
+    }
+    let pooled = (evaluations.len() > 1)
+        .then(|| hbn_pipeline::pool_vector_evaluations(&evaluations, model.dims()));
+    let samples: usize = evaluations.iter().map(|e| e.log.len()).sum();
     if args.json {
-        let runs: Vec<serde_json::Value> = ev
-            .runs
+        let each: Vec<serde_json::Value> = evaluations
             .iter()
-            .map(|r| {
-                let comps: Vec<serde_json::Value> = r
-                    .scores
+            .zip(&args.log)
+            .map(|(ev, log)| {
+                let rows: Vec<_> = ev
+                    .runs
                     .iter()
-                    .map(|sc| {
-                        serde_json::json!({
-                            "rmse": sc.rmse,
-                            "nrmse": sc.nrmse,
-                            "coverage_1sigma": sc.calibration.coverage_1sigma,
-                            "coverage_2sigma": sc.calibration.coverage_2sigma,
-                            "mean_nees": sc.calibration.mean_nees,
-                            "nlpd": sc.calibration.nlpd,
-                        })
-                    })
+                    .map(|r| (r.mode, r.smoothed, r.scores.as_slice()))
                     .collect();
                 serde_json::json!({
-                    "mode": r.mode.name(),
-                    "smoothed": r.smoothed,
-                    "components": comps,
+                    "model": args.model,
+                    "log": log,
+                    "states": model.signal_names().states,
+                    "default_mode": model.default_mode().name(),
+                    "runs": vector_runs_json(&rows),
+                    "state_frames": vector_state_frames(ev, &model),
                 })
             })
             .collect();
-        let v = serde_json::json!({
-            "model": args.model,
-            "log": args.log,
-            "states": model.signal_names().states,
-            "default_mode": model.default_mode().name(),
-            "runs": runs,
-            "state_frames": vector_state_frames(&ev, &model),
-        });
+        let v = match (each.as_slice(), &pooled) {
+            ([one], _) => one.clone(),
+            (_, Some(pooled)) => {
+                let rows: Vec<_> = pooled
+                    .iter()
+                    .map(|r| (r.mode, r.smoothed, r.scores.as_slice()))
+                    .collect();
+                serde_json::json!({
+                    "logs": each,
+                    "pooled": {"samples": samples, "runs": vector_runs_json(&rows)},
+                })
+            }
+            _ => serde_json::json!({"logs": each}),
+        };
         ui.line(serde_json::to_string_pretty(&v).context("cannot format JSON")?)?;
-    } else {
+        return Ok(());
+    }
+    for (ev, log) in evaluations.iter().zip(&args.log) {
         ui.print(format!(
             "scored `{}` on `{}`: {}\n",
             args.model.display(),
-            args.log.display(),
+            log.display(),
             report::grid_text(&ev.log)
         ))?;
-        ui.print(vector_tables(&ev, &model, ui.verbose))?;
-        ui.print(legend(ui.verbose))?;
-        if let Some(p) = &args.plot {
-            ui.line(format!("wrote plot `{}`", p.display()))?;
+        let rows: Vec<VectorRow<'_>> = ev
+            .runs
+            .iter()
+            .map(|r| (r.label(), r.mode, r.scores.as_slice()))
+            .collect();
+        ui.print(vector_tables(&rows, &model, ui.verbose))?;
+        if let Some(note) = frames_note(&ev.log, vector_state_frames(ev, &model)) {
+            ui.print(note)?;
         }
+    }
+    if let Some(pooled) = &pooled {
+        ui.print(format!(
+            "pooled over the {} logs ({samples} samples; every sample of every log counts \
+             once, the nRMSE is over the range of each component in all of them):\n",
+            evaluations.len(),
+        ))?;
+        let rows: Vec<VectorRow<'_>> = pooled
+            .iter()
+            .map(|r| (r.label(), r.mode, r.scores.as_slice()))
+            .collect();
+        ui.print(vector_tables(&rows, &model, ui.verbose))?;
+    }
+    ui.print(legend(ui.verbose))?;
+    if let Some(p) = &args.plot {
+        ui.line(format!("wrote plot `{}`", p.display()))?;
     }
     Ok(())
 }
@@ -574,6 +709,125 @@ mod tests {
             .skip(1)
             .map(|l| l.split(',').nth(3).unwrap().parse().unwrap())
             .collect()
+    }
+
+    #[test]
+    fn several_logs_are_scored_each_and_pooled_sample_by_sample() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = |n: &str| dir.path().join(n).to_str().unwrap().to_owned();
+        for (seed, steps, out) in [("1", "500", "train"), ("2", "300", "a"), ("3", "500", "b")] {
+            let (r, _) = hbn(&[
+                "-q",
+                "simulate",
+                "--system",
+                "duhem",
+                "--steps",
+                steps,
+                "--input-seed",
+                seed,
+                "--seed",
+                seed,
+                "--noise-gain",
+                "1",
+                "--out",
+                &p(&format!("{out}.mcap")),
+            ]); // fmt: skip
+            r.unwrap();
+        }
+        let (r, _) = hbn(&[
+            "-q",
+            "train",
+            "--log",
+            &p("train.mcap"),
+            "--inducing",
+            "exact",
+            "--max-points",
+            "120",
+            "--starts",
+            "1",
+            "--validation",
+            "0",
+            "--out",
+            &p("model.hbn"),
+        ]); // fmt: skip
+        r.unwrap();
+        let (model, a, b) = (p("model.hbn"), p("a.mcap"), p("b.mcap"));
+        let json = |logs: &[&str]| -> serde_json::Value {
+            let mut args = vec!["-q", "eval", "--model", &model, "--smooth", "--json"];
+            for l in logs {
+                args.extend(["--log", l]);
+            }
+            let (r, out) = hbn(&args);
+            r.unwrap();
+            serde_json::from_str(&out).unwrap()
+        };
+        let (one_a, one_b, both) = (json(&[&a]), json(&[&b]), json(&[&a, &b]));
+        // Each log's scores are those it gets alone.
+        assert_eq!(both["logs"][0]["nrmse"], one_a["nrmse"]);
+        assert_eq!(both["logs"][1]["calibration"], one_b["calibration"]);
+        assert_eq!(both["logs"][1]["log"], serde_json::json!(b));
+        let pooled = &both["pooled"];
+        let (na, nb) = (
+            one_a["samples"].as_f64().unwrap(),
+            one_b["samples"].as_f64().unwrap(),
+        );
+        assert_eq!(na, 300.0);
+        assert_eq!(pooled["samples"].as_f64().unwrap(), na + nb);
+        // The pooled RMSE is the root of the sample-weighted mean square error; coverage and
+        // NEES are sample-weighted means.
+        let f = |v: &serde_json::Value| v.as_f64().unwrap();
+        let weighted = |x: f64, y: f64| (na * x + nb * y) / (na + nb);
+        for scores in [pooled, &pooled["smoothed"]] {
+            let (ea, eb) = match scores == pooled {
+                true => (&one_a, &one_b),
+                false => (&one_a["smoothed"], &one_b["smoothed"]),
+            };
+            let methods = scores["rmse"].as_object().unwrap();
+            assert!(methods.len() >= 3, "{scores}");
+            for m in methods.keys() {
+                let want = weighted(f(&ea["rmse"][m]).powi(2), f(&eb["rmse"][m]).powi(2)).sqrt();
+                assert!(
+                    (f(&scores["rmse"][m]) - want).abs() < 1e-12 * want,
+                    "{m}: {scores}"
+                );
+                // One range for every method: the state's over both logs.
+                let range = f(&scores["rmse"][m]) / f(&scores["nrmse"][m]);
+                let range_a = f(&ea["rmse"][m]) / f(&ea["nrmse"][m]);
+                assert!(range >= range_a * (1.0 - 1e-12), "{m}: {range} {range_a}");
+            }
+            for (m, c) in scores["calibration"].as_object().unwrap() {
+                let (ca, cb) = (&ea["calibration"][m], &eb["calibration"][m]);
+                assert_eq!(f(&c["samples"]), f(&ca["samples"]) + f(&cb["samples"]));
+                for k in ["coverage_2sigma", "mean_nees"] {
+                    let want = weighted(f(&ca[k]), f(&cb[k]));
+                    assert!((f(&c[k]) - want).abs() < 1e-12, "{m} {k}: {c}");
+                }
+            }
+        }
+        // The text: a table per log, then the pooled one.
+        let (r, out) = hbn(&["-q", "eval", "--model", &model, "--log", &a, "--log", &b]);
+        r.unwrap();
+        assert_eq!(out.matches("\nmethod            RMSE").count(), 3, "{out}");
+        assert!(
+            out.contains("pooled over the 2 logs (800 samples;"),
+            "{out}"
+        );
+        // A plot draws one log.
+        let (r, _) = hbn(&[
+            "-q",
+            "eval",
+            "--model",
+            &model,
+            "--log",
+            &a,
+            "--log",
+            &b,
+            "--plot",
+            &p("e.png"),
+        ]); // fmt: skip
+        let e = format!("{:#}", r.unwrap_err());
+        assert!(e.contains("--plot draws one log"), "{e}");
+        assert!(!dir.path().join("e.png").exists());
     }
 
     #[test]

@@ -112,27 +112,110 @@ fn at_frame(series: &[f64], frame: &hbn_io::GridSample) -> f64 {
     }
 }
 
-/// Scores `method`'s estimate `x` (with standard deviation `x_std`, if it has one) against the
-/// state logged in `log` (column 1). Where the state is measured sparsely
-/// ([`LogData::state_frames`]) only its frames count, each against the estimate interpolated
-/// to the frame's time: the grid's values between frames are interpolations, not
-/// measurements. Otherwise every grid sample counts.
-pub fn score_against_log(method: Method, x: &[f64], x_std: Option<&[f64]>, log: &LogData) -> Score {
-    let score = |x: &[f64], x_std: Option<&[f64]>, reference: &[f64]| Score {
-        method,
-        rmse: rmse(x, reference),
-        nrmse: nrmse(x, reference),
-        calibration: x_std.map(|sd| calibration(x, sd, reference)),
-    };
-    match log.state_frames() {
-        Some(frames) => {
-            let at = |s: &[f64]| at_frames(s, frames);
-            let reference: Vec<f64> = frames.iter().map(|f| f.value).collect();
-            let sd = x_std.map(at);
-            score(&at(x), sd.as_deref(), &reference)
+/// What a score compares, sample by sample: an estimate, its standard deviation (if it has
+/// one) and the logged state. Where the state is measured sparsely ([`LogData::frames_of`])
+/// only its frames count, each against the estimate interpolated to the frame's time: the
+/// grid's values between frames are interpolations, not measurements. Otherwise every grid
+/// sample counts. Series of several logs joined ([`Compared::join`]) are scored as one: the
+/// RMSE and the calibration over all their samples, the nRMSE over the range of the state
+/// over all of them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Compared {
+    /// The estimate.
+    pub x: Vec<f64>,
+    /// Its standard deviation (`None` for the open loop, which has none).
+    pub x_std: Option<Vec<f64>>,
+    /// The logged state.
+    pub reference: Vec<f64>,
+}
+
+impl Compared {
+    /// The estimate `x` (with standard deviation `x_std`) against column `column` of `log`.
+    pub fn against(x: &[f64], x_std: Option<&[f64]>, log: &LogData, column: usize) -> Self {
+        match log.frames_of(column) {
+            Some(frames) => Self {
+                x: at_frames(x, frames),
+                x_std: x_std.map(|s| at_frames(s, frames)),
+                reference: frames.iter().map(|f| f.value).collect(),
+            },
+            None => Self {
+                x: x.to_vec(),
+                x_std: x_std.map(<[f64]>::to_vec),
+                reference: log.column(column).to_vec(),
+            },
         }
-        None => score(x, x_std, log.column(1)),
     }
+
+    /// The samples of every one of `parts`, in order; a standard deviation only if every part
+    /// has one.
+    pub fn join(parts: impl IntoIterator<Item = Self>) -> Self {
+        let mut out = Self {
+            x_std: Some(Vec::new()),
+            ..Self::default()
+        };
+        for p in parts {
+            out.x.extend(p.x);
+            out.reference.extend(p.reference);
+            out.x_std = match (out.x_std, p.x_std) {
+                (Some(mut a), Some(b)) => {
+                    a.extend(b);
+                    Some(a)
+                }
+                _ => None,
+            };
+        }
+        out
+    }
+
+    /// RMSE, nRMSE and, with a standard deviation, the calibration.
+    pub fn score(&self, method: Method) -> Score {
+        Score {
+            method,
+            rmse: rmse(&self.x, &self.reference),
+            nrmse: nrmse(&self.x, &self.reference),
+            calibration: self
+                .x_std
+                .as_ref()
+                .map(|sd| calibration(&self.x, sd, &self.reference)),
+        }
+    }
+}
+
+/// Scores `method`'s estimate `x` (with standard deviation `x_std`, if it has one) against the
+/// state logged in `log` (column 1), at the state's frames only where it is measured sparsely
+/// ([`Compared`]).
+pub fn score_against_log(method: Method, x: &[f64], x_std: Option<&[f64]>, log: &LogData) -> Score {
+    Compared::against(x, x_std, log, 1).score(method)
+}
+
+/// The scores of several evaluations of one model with the same modes (one per log), pooled
+/// sample by sample ([`Compared::join`]): one per method of the first, in its order. Empty
+/// when `evaluations` is.
+pub fn pool_evaluations(evaluations: &[Evaluation]) -> Vec<Score> {
+    let Some(first) = evaluations.first() else {
+        return Vec::new();
+    };
+    first
+        .scores
+        .iter()
+        .map(|s| {
+            let parts = evaluations.iter().map(|ev| match s.method {
+                Method::Filter(mode) => {
+                    let est = ev
+                        .estimates
+                        .iter()
+                        .find(|(m, _)| *m == mode)
+                        .map(|(_, e)| e);
+                    match est {
+                        Some(e) => Compared::against(&e.x, Some(&e.x_std), &ev.log, 1),
+                        None => Compared::default(),
+                    }
+                }
+                Method::OpenLoop => Compared::against(&ev.open_loop, None, &ev.log, 1),
+            });
+            Compared::join(parts).score(s.method)
+        })
+        .collect()
 }
 
 /// Reads `u`, `x`, `y` from `file` at the model's rate, runs each of `modes` and the open-loop

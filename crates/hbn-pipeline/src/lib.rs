@@ -40,7 +40,9 @@ pub use estimate::{
     LogEstimate, OUTLIER_WARNING, Outputs, SignalChoice, estimate_log, estimate_log_modes,
     estimate_schema, file_for_mode, read_at_model_rate, read_pieces_at_model_rate, smooth_pieces,
 };
-pub use eval::{Evaluation, Method, Score, evaluate_log, score_against_log};
+pub use eval::{
+    Compared, Evaluation, Method, Score, evaluate_log, pool_evaluations, score_against_log,
+};
 pub use log::{
     CheckedLogOptions, DEFAULT_MIN_COVERAGE, DEFAULT_MIN_STATE_SAMPLES, DROPOUT_FACTOR, Event,
     GridRate, LogData, LogOptions, LogPieces, Observer, RATE_NOTICE_TOLERANCE, SPARSE_BELOW,
@@ -58,7 +60,8 @@ pub use train::{
     Trained, train_from_logs,
 };
 pub use vector::{
-    ComponentScore, TrainedVector, VECTOR_ESTIMATE_SCHEMA, VectorEvaluation, VectorLogEstimate,
-    VectorModeRun, VectorSignals, default_signals, estimate_vector_log, evaluate_vector_log,
-    model_signals, smooth_vector_log, train_vector_from_logs, vector_csv, vector_estimate_schema,
+    ComponentScore, PooledRun, TrainedVector, VECTOR_ESTIMATE_SCHEMA, VectorEvaluation,
+    VectorLogEstimate, VectorModeRun, VectorSignals, default_signals, estimate_vector_log,
+    evaluate_vector_log, model_signals, pool_vector_evaluations, smooth_vector_log,
+    train_vector_from_logs, vector_csv, vector_estimate_schema,
 };

@@ -16,7 +16,7 @@ use hbn_model::{
 use serde_json::{Value, json};
 
 use crate::error::{LogOption, OptionError, PipelineError};
-use crate::eval::at_frames;
+use crate::eval::Compared;
 use crate::log::{Event, GridRate, LogData, LogOptions, Observer, load_log};
 use crate::train::load_training_logs;
 use crate::train::{DEFAULT_INPUT, DEFAULT_OUTPUT, DEFAULT_STATE, column_frames, state_frames};
@@ -514,6 +514,85 @@ pub struct ComponentScore {
     pub calibration: Calibration,
 }
 
+impl ComponentScore {
+    /// The scores of a compared series (its standard deviation missing counts as no sample
+    /// scored).
+    fn of(c: &Compared) -> Self {
+        let calibration = calibration(&c.x, c.x_std.as_deref().unwrap_or(&[]), &c.reference);
+        Self {
+            rmse: rmse(&c.x, &c.reference),
+            nrmse: nrmse(&c.x, &c.reference),
+            calibration,
+        }
+    }
+}
+
+/// State component `i` of `estimate` against the one logged in `log` ([`Compared::against`]).
+fn compared(estimate: &VectorEstimate, log: &LogData, d: Dims, i: usize) -> Compared {
+    Compared::against(
+        &estimate.component(i),
+        Some(&estimate.component_std(i)),
+        log,
+        d.inputs + i,
+    )
+}
+
+/// The scores of one mode's runs (filtered or smoothed) over several logs, pooled sample by
+/// sample ([`Compared::join`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PooledRun {
+    /// The mode.
+    pub mode: Mode,
+    /// Whether the runs are smoothed.
+    pub smoothed: bool,
+    /// One score per state component.
+    pub scores: Vec<ComponentScore>,
+}
+
+impl PooledRun {
+    /// The mode's name, followed by ` smoothed` for smoothed runs.
+    pub fn label(&self) -> String {
+        if self.smoothed {
+            format!("{} smoothed", self.mode.name())
+        } else {
+            self.mode.name().to_owned()
+        }
+    }
+}
+
+/// The scores of several evaluations of the vector model with dimensions `dims` (one per log,
+/// with the same modes), pooled sample by sample per state component: one [`PooledRun`] per
+/// run of the first evaluation, in its order. Empty when `evaluations` is.
+pub fn pool_vector_evaluations(evaluations: &[VectorEvaluation], dims: Dims) -> Vec<PooledRun> {
+    let Some(first) = evaluations.first() else {
+        return Vec::new();
+    };
+    first
+        .runs
+        .iter()
+        .map(|run| {
+            let scores = (0..dims.states)
+                .map(|i| {
+                    let parts = evaluations.iter().map(|ev| {
+                        ev.runs
+                            .iter()
+                            .find(|r| r.mode == run.mode && r.smoothed == run.smoothed)
+                            .map_or_else(Compared::default, |r| {
+                                compared(&r.estimate, &ev.log, dims, i)
+                            })
+                    });
+                    ComponentScore::of(&Compared::join(parts))
+                })
+                .collect();
+            PooledRun {
+                mode: run.mode,
+                smoothed: run.smoothed,
+                scores,
+            }
+        })
+        .collect()
+}
+
 /// A vector model evaluated on a log in one mode.
 #[derive(Clone, Debug)]
 pub struct VectorModeRun {
@@ -579,23 +658,7 @@ pub fn evaluate_vector_log(
     let y = measured_rows(&log, d.inputs + d.states, d.sensors);
     let score = |estimate: &VectorEstimate| -> Vec<ComponentScore> {
         (0..d.states)
-            .map(|i| {
-                let col = d.inputs + i;
-                let (x, s) = (estimate.component(i), estimate.component_std(i));
-                let (x, s, truth) = match log.frames_of(col) {
-                    Some(frames) => (
-                        at_frames(&x, frames),
-                        at_frames(&s, frames),
-                        frames.iter().map(|f| f.value).collect(),
-                    ),
-                    None => (x, s, log.column(col).to_vec()),
-                };
-                ComponentScore {
-                    rmse: rmse(&x, &truth),
-                    nrmse: nrmse(&x, &truth),
-                    calibration: calibration(&x, &s, &truth),
-                }
-            })
+            .map(|i| ComponentScore::of(&compared(estimate, &log, d, i)))
             .collect()
     };
     let mut runs = Vec::with_capacity(modes.len() * (1 + usize::from(smooth)));
