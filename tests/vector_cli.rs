@@ -347,6 +347,48 @@ fn a_finger_trains_and_estimates_through_the_cli() {
         runs.iter().any(|r| r["smoothed"] == true) && runs.iter().any(|r| r["smoothed"] == false),
         "{out}"
     );
+    // Two logs of equal length: each scored as alone, then pooled (the mean square error and
+    // the coverage are the two logs' means).
+    let eval_json = |logs: &[&Path]| -> serde_json::Value {
+        let mut args = vec![
+            "-q",
+            "eval",
+            "--model",
+            s(&model),
+            "--mode",
+            "ekf",
+            "--json",
+        ];
+        for l in logs {
+            args.extend(["--log", s(l)]);
+        }
+        let (r, out) = hbn(&args);
+        r.expect("eval");
+        serde_json::from_str(&out).expect("JSON")
+    };
+    let (on_test, on_train, both) = (
+        eval_json(&[&test]),
+        eval_json(&[&train]),
+        eval_json(&[&test, &train]),
+    );
+    assert_eq!(both["logs"][0]["runs"], on_test["runs"]);
+    assert_eq!(both["pooled"]["samples"], 2400);
+    let comps = |v: &serde_json::Value| {
+        v["runs"][0]["components"]
+            .as_array()
+            .expect("components")
+            .clone()
+    };
+    let pooled = comps(&both["pooled"]);
+    assert_eq!(pooled.len(), 2);
+    for (i, c) in pooled.iter().enumerate() {
+        let (a, b) = (&comps(&on_test)[i], &comps(&on_train)[i]);
+        let f = |v: &serde_json::Value, k: &str| v[k].as_f64().expect(k);
+        let mse = 0.5 * (f(a, "rmse").powi(2) + f(b, "rmse").powi(2));
+        assert!((f(c, "rmse") - mse.sqrt()).abs() < 1e-12, "{c} {a} {b}");
+        let cov = 0.5 * (f(a, "coverage_2sigma") + f(b, "coverage_2sigma"));
+        assert!((f(c, "coverage_2sigma") - cov).abs() < 1e-12, "{c} {a} {b}");
+    }
     // Sensor inputs given per sensor are kept.
     let model3 = d.path().join("finger3.json");
     let (r, out) = hbn(&[
