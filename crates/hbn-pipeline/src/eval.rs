@@ -97,9 +97,8 @@ impl Evaluation {
     }
 }
 
-/// `series` (one value per grid sample) at the time of `frame`, interpolated between the grid
-/// samples around it; NaN past the series' end.
-/// `series` at the time of each frame (interpolated between the grid samples around it).
+/// `series` (one value per grid sample) at the time of each frame, interpolated between the
+/// grid samples around it; NaN past the series' end.
 pub(crate) fn at_frames(series: &[f64], frames: &[hbn_io::GridSample]) -> Vec<f64> {
     frames.iter().map(|f| at_frame(series, f)).collect()
 }
@@ -286,6 +285,51 @@ mod tests {
                 columns: vec![vec![0.0; n], state, vec![0.0; n]],
             },
         }
+    }
+
+    #[test]
+    fn joined_logs_are_scored_as_one_series() {
+        // A dense log of 10 samples, off by 0.1 everywhere, state 0..0.9; a sparse one whose
+        // 2 frames are off by 0.4, state up to 2.0. Standard deviation 0.2: z = 0.5 and 2.
+        let x: Vec<f64> = (0..10).map(|k| k as f64 / 10.0).collect();
+        let sd = vec![0.2; 10];
+        let dense = log(x.iter().map(|v| v + 0.1).collect(), None);
+        let frames = vec![
+            GridSample {
+                k: 2,
+                weight: 1.0,
+                value: 0.6,
+            },
+            GridSample {
+                k: 9,
+                weight: 1.0,
+                value: 1.3,
+            },
+        ];
+        let sparse = log(vec![2.0; 10], Some(frames));
+        let both = Compared::join([
+            Compared::against(&x, Some(&sd), &dense, 1),
+            Compared::against(&x, Some(&sd), &sparse, 1),
+        ]);
+        assert_eq!(both.x.len(), 12);
+        let s = both.score(Method::Filter(Mode::Ukf));
+        let mse = (10.0 * 0.01 + 2.0 * 0.16) / 12.0;
+        assert!((s.rmse - f64::sqrt(mse)).abs() < 1e-12, "{s:?}");
+        // The range of the state over both: 0.1 to 1.3.
+        assert!((s.nrmse - s.rmse / 1.2).abs() < 1e-12, "{s:?}");
+        let c = s.calibration.unwrap();
+        assert_eq!(c.samples, 12);
+        assert!((c.coverage_1sigma - 10.0 / 12.0).abs() < 1e-12, "{c:?}");
+        assert!(
+            (c.mean_nees - (10.0 * 0.25 + 2.0 * 4.0) / 12.0).abs() < 1e-12,
+            "{c:?}"
+        );
+        // A part without a standard deviation leaves the joined series without one.
+        let open = Compared::join([
+            Compared::against(&x, Some(&sd), &dense, 1),
+            Compared::against(&x, None, &dense, 1),
+        ]);
+        assert!(open.x_std.is_none() && open.score(Method::OpenLoop).calibration.is_none());
     }
 
     #[test]
