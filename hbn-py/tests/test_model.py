@@ -201,3 +201,25 @@ def test_n_inducing_none_trains_exact_gps_without_selection():
     assert [r["candidate"].get("lags", []) for r in rows] == [[], [], [1.0], []]
     assert rows[3]["candidate"]["sensor_inputs"] == "memory"
     assert hbn.default_params()["lags"] == [[], [1.0]]
+
+
+def test_pooled_score_scores_every_sample_of_every_log_once():
+    tr = hbn.simulate("duhem", 400, seed=1, noise_gain=1.0)
+    m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_starts=1)
+    tests = [hbn.simulate("duhem", n, seed=s, noise_gain=1.0) for n, s in ((300, 2), (100, 3))]
+    ests = [m.estimate(t["u"], t["y"]) for t in tests]
+    pooled = hbn.pooled_score(ests, [t["x"] for t in tests])
+    alone = [e.score(t["x"]) for e, t in zip(ests, tests)]
+    # Sample-weighted: the mean square error, the coverage and the NEES; the range is the
+    # references' over both logs.
+    w = np.array([300.0, 100.0]) / 400.0
+    assert pooled["samples"] == 400
+    assert pooled["rmse"] == pytest.approx(np.sqrt(sum(wi * a["rmse"] ** 2 for wi, a in zip(w, alone))), rel=1e-12)
+    for k in ("coverage_2sigma", "mean_nees", "nlpd"):
+        assert pooled[k] == pytest.approx(sum(wi * a[k] for wi, a in zip(w, alone)), rel=1e-12)
+    span = max(t["x"].max() for t in tests) - min(t["x"].min() for t in tests)
+    assert pooled["nrmse"] == pytest.approx(pooled["rmse"] / span, rel=1e-12)
+    with pytest.raises(ValueError, match="same length"):
+        hbn.pooled_score(ests, [tests[0]["x"], tests[1]["x"][:10]])
+    with pytest.raises(ValueError, match="one reference per estimate"):
+        hbn.pooled_score(ests, [tests[0]["x"]])

@@ -80,6 +80,7 @@ __all__ = [
     "Simulator",
     "simulate",
     "oracle_estimate",
+    "pooled_score",
     "read_mcap",
     "list_topics",
     "default_params",
@@ -753,23 +754,64 @@ class Estimate:
         >>> sorted(s)[:3], s["samples"]
         (['coverage_1sigma', 'coverage_2sigma', 'mean_nees'], 200)
         """
-        x = np.asarray(self.x)
-        if x.ndim == 1:
-            return dict(
-                _hbn.score(
-                    _vector(self.x, "x"), _vector(self.x_std, "x_std"), _vector(x_ref, "x_ref")
-                )
-            )
-        ref = np.asarray(x_ref, dtype=np.float64)
-        if ref.ndim == 1 and x.shape[1] == 1:
-            ref = ref.reshape(-1, 1)
-        if ref.shape != x.shape:
-            raise DataError(f"x_ref must have the shape of x, {x.shape}; got {ref.shape}")
-        cols = [
-            _hbn.score(_native(x[:, i]), _native(self.x_std[:, i]), _native(ref[:, i]))
-            for i in range(x.shape[1])
-        ]
-        return {k: np.array([c[k] for c in cols]) for k in cols[0]} if cols else {}
+        return _score(np.asarray(self.x), np.asarray(self.x_std), _reference(self.x, x_ref))
+
+
+def _reference(x: Any, x_ref: Any) -> np.ndarray:
+    """``x_ref`` as a float64 array of the shape of the estimate ``x`` (a ``(T,)`` reference
+    of a ``(T, 1)`` estimate is reshaped); ``DataError`` otherwise."""
+    x = np.asarray(x)
+    ref = np.asarray(x_ref, dtype=np.float64)
+    if x.ndim == 1 and ref.shape != x.shape:
+        raise DataError(f"x and x_ref must have the same length (got {x.shape}, {ref.shape})")
+    if ref.ndim == 1 and x.ndim == 2 and x.shape[1] == 1:
+        ref = ref.reshape(-1, 1)
+    if ref.shape != x.shape:
+        raise DataError(f"x_ref must have the shape of x, {x.shape}; got {ref.shape}")
+    return ref
+
+
+def _score(x: np.ndarray, x_std: np.ndarray, ref: np.ndarray) -> Dict[str, Any]:
+    """:meth:`Estimate.score` of arrays of one shape, ``(T,)`` or ``(T, d)``."""
+    if x.ndim == 1:
+        return dict(_hbn.score(_vector(x, "x"), _vector(x_std, "x_std"), _vector(ref, "x_ref")))
+    cols = [
+        _hbn.score(_native(x[:, i]), _native(x_std[:, i]), _native(ref[:, i]))
+        for i in range(x.shape[1])
+    ]
+    return {k: np.array([c[k] for c in cols]) for k in cols[0]} if cols else {}
+
+
+def pooled_score(estimates: Sequence[Estimate], x_refs: Sequence[Any]) -> Dict[str, Any]:
+    """Scores of several estimates (one per log) against their true states, pooled sample by
+    sample, as ``hbn eval`` with several ``--log`` reports them: the keys of
+    :meth:`Estimate.score`, computed over every sample of every estimate at once (the ``nrmse``
+    over the reference's range in all of them). A band is judged far better on several logs
+    with different inputs than on one.
+
+    >>> import hbn
+    >>> tr = hbn.simulate("duhem", 300, seed=1)
+    >>> m = hbn.HysteresisModel.fit(tr["u"], tr["x"], tr["y"], max_points=100, n_starts=1)
+    >>> tests = [hbn.simulate("duhem", n, seed=s) for n, s in ((200, 2), (100, 3))]
+    >>> ests = [m.estimate(t["u"], t["y"]) for t in tests]
+    >>> hbn.pooled_score(ests, [t["x"] for t in tests])["samples"]
+    300
+    """
+    estimates, x_refs = list(estimates), list(x_refs)
+    if len(estimates) != len(x_refs) or not estimates:
+        raise DataError(
+            f"pooled_score needs one reference per estimate and at least one of each "
+            f"(got {len(estimates)} estimates and {len(x_refs)} references)"
+        )
+    refs = [_reference(e.x, r) for e, r in zip(estimates, x_refs)]
+    shapes = {np.asarray(e.x).shape[1:] for e in estimates}
+    if len(shapes) != 1:
+        raise DataError(f"the estimates must have one state dimension; got shapes {sorted(shapes)}")
+    return _score(
+        np.concatenate([np.asarray(e.x) for e in estimates]),
+        np.concatenate([np.asarray(e.x_std) for e in estimates]),
+        np.concatenate(refs),
+    )
 
 
 def _signal(a: Any, name: str) -> np.ndarray:

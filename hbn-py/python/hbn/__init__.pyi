@@ -19,6 +19,7 @@ __all__ = [
     "Simulator",
     "simulate",
     "oracle_estimate",
+    "pooled_score",
     "read_mcap",
     "list_topics",
     "default_params",
@@ -364,6 +365,7 @@ class Simulator:
     @property
     def steps(self) -> int: ...
 
+def pooled_score(estimates: Sequence[Estimate], x_refs: Sequence[ArrayLike]) -> Dict[str, Any]: ...
 def simulate(
     system: str,
     steps: int,
