@@ -8,6 +8,7 @@ use anyhow::Context;
 use hbn_model::{HysteresisModel, VectorModel};
 use hbn_pipeline::{
     Compared, Evaluation, LogOption, Method, Score, SignalChoice, evaluate_log, pool_evaluations,
+    scores_json,
 };
 
 use crate::Ui;
@@ -135,22 +136,6 @@ fn smoothed_scores(smoothed: &[(hbn_core::Mode, Compared)]) -> Vec<Score> {
         .iter()
         .map(|(mode, c)| c.score(Method::Filter(*mode)))
         .collect()
-}
-
-/// Scores as JSON: `{"rmse": {..}, "nrmse": {..}, "calibration": {..}}` keyed by method, as
-/// an evaluation's own.
-fn scores_json(scores: &[Score]) -> serde_json::Value {
-    let mut r = serde_json::Map::new();
-    let mut n = serde_json::Map::new();
-    let mut c = serde_json::Map::new();
-    for s in scores {
-        r.insert(s.method.key().into(), serde_json::json!(s.rmse));
-        n.insert(s.method.key().into(), serde_json::json!(s.nrmse));
-        if let Some(cal) = &s.calibration {
-            c.insert(s.method.key().into(), serde_json::json!(cal));
-        }
-    }
-    serde_json::json!({"rmse": r, "nrmse": n, "calibration": c})
 }
 
 /// The lines after the table: what the columns mean, with glossary links.
@@ -711,11 +696,11 @@ mod tests {
             .collect()
     }
 
-    #[test]
-    fn several_logs_are_scored_each_and_pooled_sample_by_sample() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = |n: &str| dir.path().join(n).to_str().unwrap().to_owned();
-        for (seed, steps, out) in [("1", "500", "train"), ("2", "300", "a"), ("3", "500", "b")] {
+    /// Simulated Duhem logs (`(input and noise seed, steps, file name)`, noise gain 1) in `dir`,
+    /// and a small exact model trained on the first, `model.hbn`; returns the model's path.
+    fn duhem_model(dir: &std::path::Path, logs: &[(&str, &str, &str)]) -> String {
+        let p = |n: &str| dir.join(n).to_str().unwrap().to_owned();
+        for (seed, steps, name) in logs {
             let (r, _) = hbn(&[
                 "-q",
                 "simulate",
@@ -730,15 +715,15 @@ mod tests {
                 "--noise-gain",
                 "1",
                 "--out",
-                &p(&format!("{out}.mcap")),
-            ]); // fmt: skip
+                &p(name),
+            ]);
             r.unwrap();
         }
         let (r, _) = hbn(&[
             "-q",
             "train",
             "--log",
-            &p("train.mcap"),
+            &p(logs[0].2),
             "--inducing",
             "exact",
             "--max-points",
@@ -749,9 +734,21 @@ mod tests {
             "0",
             "--out",
             &p("model.hbn"),
-        ]); // fmt: skip
+        ]);
         r.unwrap();
-        let (model, a, b) = (p("model.hbn"), p("a.mcap"), p("b.mcap"));
+        p("model.hbn")
+    }
+
+    #[test]
+    fn several_logs_are_scored_each_and_pooled_sample_by_sample() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = |n: &str| dir.path().join(n).to_str().unwrap().to_owned();
+        let logs = [
+            ("1", "500", "train.mcap"),
+            ("2", "300", "a.mcap"),
+            ("3", "500", "b.mcap"),
+        ];
+        let (model, a, b) = (duhem_model(dir.path(), &logs), p("a.mcap"), p("b.mcap"));
         let json = |logs: &[&str]| -> serde_json::Value {
             let mut args = vec!["-q", "eval", "--model", &model, "--smooth", "--json"];
             for l in logs {
@@ -824,7 +821,7 @@ mod tests {
             &b,
             "--plot",
             &p("e.png"),
-        ]); // fmt: skip
+        ]);
         let e = format!("{:#}", r.unwrap_err());
         assert!(e.contains("--plot draws one log"), "{e}");
         assert!(!dir.path().join("e.png").exists());
@@ -834,45 +831,8 @@ mod tests {
     fn smooth_adds_a_row_per_mode_and_writes_the_smoothed_estimate() {
         let dir = tempfile::tempdir().unwrap();
         let p = |n: &str| dir.path().join(n).to_str().unwrap().to_owned();
-        let sim = |seed: &str, steps: &str, out: &str| {
-            let (r, _) = hbn(&[
-                "-q",
-                "simulate",
-                "--system",
-                "duhem",
-                "--steps",
-                steps,
-                "--input-seed",
-                seed,
-                "--seed",
-                seed,
-                "--noise-gain",
-                "1",
-                "--out",
-                out,
-            ]);
-            r.unwrap();
-        };
-        sim("1", "500", &p("train.mcap"));
-        sim("2", "300", &p("test.mcap"));
-        let (r, _) = hbn(&[
-            "-q",
-            "train",
-            "--log",
-            &p("train.mcap"),
-            "--inducing",
-            "exact",
-            "--max-points",
-            "120",
-            "--starts",
-            "1",
-            "--validation",
-            "0",
-            "--out",
-            &p("model.hbn"),
-        ]);
-        r.unwrap();
-        let (model, log) = (p("model.hbn"), p("test.mcap"));
+        let logs = [("1", "500", "train.mcap"), ("2", "300", "test.mcap")];
+        let (model, log) = (duhem_model(dir.path(), &logs), p("test.mcap"));
         let eval = |extra: &[&str]| {
             let mut args = vec!["-q", "eval", "--model", &model, "--log", &log];
             args.extend(extra);

@@ -79,22 +79,33 @@ impl Evaluation {
     /// where every signal read has data; `state_frames` is the number of the state's frames
     /// scored where it is measured sparsely, `null` where every sample is).
     pub fn to_json(&self) -> Value {
-        let mut r = Map::new();
-        let mut n = Map::new();
-        let mut c = Map::new();
-        for s in &self.scores {
-            r.insert(s.method.key().into(), json!(s.rmse));
-            n.insert(s.method.key().into(), json!(s.nrmse));
-            if let Some(cal) = &s.calibration {
-                c.insert(s.method.key().into(), json!(cal));
-            }
-        }
+        let mut v = scores_json(&self.scores);
         let signals: Vec<String> = self.log.paths.iter().map(|p| p.to_string()).collect();
         let frames = self.log.state_frames().map(<[_]>::len);
-        json!({"rmse": r, "nrmse": n, "calibration": c, "samples": self.log.len(),
-               "rate_hz": self.log.rate_hz(), "duration_s": self.log.duration_s(),
-               "signals": signals, "state_frames": frames})
+        v["samples"] = json!(self.log.len());
+        v["rate_hz"] = json!(self.log.rate_hz());
+        v["duration_s"] = json!(self.log.duration_s());
+        v["signals"] = json!(signals);
+        v["state_frames"] = json!(frames);
+        v
     }
+}
+
+/// Scores as JSON: `{"rmse": {method: ..}, "nrmse": {..}, "calibration": {method:
+/// {coverage_1sigma, coverage_2sigma, mean_nees, nlpd, samples}}}`, keyed by
+/// [`Method::key`] (the open loop has no calibration).
+pub fn scores_json(scores: &[Score]) -> Value {
+    let mut r = Map::new();
+    let mut n = Map::new();
+    let mut c = Map::new();
+    for s in scores {
+        r.insert(s.method.key().into(), json!(s.rmse));
+        n.insert(s.method.key().into(), json!(s.nrmse));
+        if let Some(cal) = &s.calibration {
+            c.insert(s.method.key().into(), json!(cal));
+        }
+    }
+    json!({"rmse": r, "nrmse": n, "calibration": c})
 }
 
 /// `series` (one value per grid sample) at the time of each frame, interpolated between the

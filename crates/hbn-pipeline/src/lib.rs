@@ -42,6 +42,7 @@ pub use estimate::{
 };
 pub use eval::{
     Compared, Evaluation, Method, Score, evaluate_log, pool_evaluations, score_against_log,
+    scores_json,
 };
 pub use log::{
     CheckedLogOptions, DEFAULT_MIN_COVERAGE, DEFAULT_MIN_STATE_SAMPLES, DROPOUT_FACTOR, Event,

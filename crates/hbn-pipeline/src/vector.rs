@@ -552,11 +552,16 @@ pub struct PooledRun {
 impl PooledRun {
     /// The mode's name, followed by ` smoothed` for smoothed runs.
     pub fn label(&self) -> String {
-        if self.smoothed {
-            format!("{} smoothed", self.mode.name())
-        } else {
-            self.mode.name().to_owned()
-        }
+        run_label(self.mode, self.smoothed)
+    }
+}
+
+/// `ekf`, `ukf smoothed`: a mode's name, followed by ` smoothed` for a smoothed run.
+fn run_label(mode: Mode, smoothed: bool) -> String {
+    if smoothed {
+        format!("{} smoothed", mode.name())
+    } else {
+        mode.name().to_owned()
     }
 }
 
@@ -610,11 +615,7 @@ pub struct VectorModeRun {
 impl VectorModeRun {
     /// The mode's name, followed by ` smoothed` for a smoothed run (`ekf`, `ukf smoothed`).
     pub fn label(&self) -> String {
-        if self.smoothed {
-            format!("{} smoothed", self.mode.name())
-        } else {
-            self.mode.name().to_owned()
-        }
+        run_label(self.mode, self.smoothed)
     }
 }
 
