@@ -363,9 +363,10 @@ fn run_scalar(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<()> {
         ui.line(serde_json::to_string_pretty(&v).context("cannot format JSON")?)?;
         return Ok(());
     }
-    for ((ev, sm), log) in evaluations.iter().zip(&smoothed).zip(&args.log) {
+    for (i, ((ev, sm), log)) in evaluations.iter().zip(&smoothed).zip(&args.log).enumerate() {
         ui.print(format!(
-            "scored `{}` on `{}`: {}\n",
+            "{}scored `{}` on `{}`: {}\n",
+            if i > 0 { "\n" } else { "" },
             args.model.display(),
             log.display(),
             report::grid_text(&ev.log)
@@ -379,7 +380,7 @@ fn run_scalar(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<()> {
     }
     if let Some((scores, sm)) = &pooled {
         ui.print(format!(
-            "pooled over the {} logs ({} samples; every sample of every log counts once, the \
+            "\npooled over the {} logs ({} samples; every sample of every log counts once, the \
              nRMSE is over the range of the state in all of them):\n",
             evaluations.len(),
             evaluations.iter().map(|e| e.log.len()).sum::<usize>()
@@ -579,9 +580,10 @@ fn run_vector(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<()> {
         ui.line(serde_json::to_string_pretty(&v).context("cannot format JSON")?)?;
         return Ok(());
     }
-    for (ev, log) in evaluations.iter().zip(&args.log) {
+    for (i, (ev, log)) in evaluations.iter().zip(&args.log).enumerate() {
         ui.print(format!(
-            "scored `{}` on `{}`: {}\n",
+            "{}scored `{}` on `{}`: {}\n",
+            if i > 0 { "\n" } else { "" },
             args.model.display(),
             log.display(),
             report::grid_text(&ev.log)
@@ -598,7 +600,7 @@ fn run_vector(ui: &mut Ui<'_>, args: &EvalArgs) -> anyhow::Result<()> {
     }
     if let Some(pooled) = &pooled {
         ui.print(format!(
-            "pooled over the {} logs ({samples} samples; every sample of every log counts \
+            "\npooled over the {} logs ({samples} samples; every sample of every log counts \
              once, the nRMSE is over the range of each component in all of them):\n",
             evaluations.len(),
         ))?;
