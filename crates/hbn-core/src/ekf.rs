@@ -1674,6 +1674,28 @@ mod tests {
 
     /// A GP that is its linear mean `sum_j slopes_j x_j` (one support point with zero weight;
     /// a small, finite variance from a long-length-scale kernel).
+    /// A model of two [`linear_gp`]s (transition slopes `slopes_t`, sensor slopes `slopes_s`,
+    /// the kernel's first `1 + dim` entries of `theta` each) and nothing else: no local
+    /// regressions, prior, plays or sensor memory.
+    fn linear_view<'a>(
+        theta: &'a [f64],
+        zeros: &'a [f64],
+        ones: &'a [f64],
+        slopes_t: &'a [f64],
+        slopes_s: &'a [f64],
+    ) -> HbnView<'a> {
+        HbnView {
+            transition: linear_gp(&theta[..=slopes_t.len()], zeros, ones, slopes_t),
+            sensor: linear_gp(&theta[..=slopes_s.len()], zeros, ones, slopes_s),
+            transition_local: None,
+            sensor_local: None,
+            blr: LocalRegression::default(),
+            init: None,
+            plays: Plays::NONE,
+            sensor_memory: Plays::NONE,
+        }
+    }
+
     fn linear_gp<'a>(
         theta: &'a [f64],
         zeros: &'a [f64],
@@ -1794,14 +1816,8 @@ mod tests {
         let radii = [0.05, 0.3];
         let memory = Plays::new(&radii).unwrap();
         let view = HbnView {
-            transition: linear_gp(&theta, &zeros, &ones, &slopes_t),
-            sensor: linear_gp(&theta[..4], &zeros, &ones, &slopes_s),
-            transition_local: None,
-            sensor_local: None,
-            blr: LocalRegression::default(),
-            init: None,
-            plays: Plays::NONE,
             sensor_memory: memory,
+            ..linear_view(&theta, &zeros, &ones, &slopes_t, &slopes_s)
         };
         view.validate().unwrap();
         // Two plays need three sensor inputs; lags are refused.
@@ -1878,16 +1894,7 @@ mod tests {
         let theta = [0.0, 3.0, 3.0, 3.0, 3.0];
         let slopes_t = [0.8, 0.1, 0.3, -0.2];
         let slopes_s = [-0.6, 0.2, 1.4];
-        let view = HbnView {
-            transition: linear_gp(&theta, &zeros, &ones, &slopes_t),
-            sensor: linear_gp(&theta[..4], &zeros, &ones, &slopes_s),
-            transition_local: None,
-            sensor_local: None,
-            blr: LocalRegression::default(),
-            init: None,
-            plays: Plays::NONE,
-            sensor_memory: Plays::NONE,
-        };
+        let view = linear_view(&theta, &zeros, &ones, &slopes_t, &slopes_s);
         for mode in [Mode::Ekf, Mode::Ukf] {
             let cfg = EkfConfig {
                 mode,
@@ -1949,16 +1956,7 @@ mod tests {
         let theta = [0.0, 3.0, 3.0, 3.0, 3.0];
         let slopes_t = [0.8, 0.1, 0.3, -0.2];
         let one = [1.0];
-        let view = HbnView {
-            transition: linear_gp(&theta, &zeros, &ones, &slopes_t),
-            sensor: linear_gp(&theta[..2], &zeros, &ones, &one),
-            transition_local: None,
-            sensor_local: None,
-            blr: LocalRegression::default(),
-            init: None,
-            plays: Plays::NONE,
-            sensor_memory: Plays::NONE,
-        };
+        let view = linear_view(&theta, &zeros, &ones, &slopes_t, &one);
         assert_eq!(
             view.validate(),
             Err(CoreError::DimensionMismatch {
@@ -2008,14 +2006,8 @@ mod tests {
         let run = |slope: f64, with_prior: bool| {
             let slopes_t = [slope, 0.0, 0.0, 0.0];
             let model = HbnView {
-                transition: linear_gp(&theta, &zeros, &ones, &slopes_t),
-                sensor: linear_gp(&theta[..4], &zeros, &ones, &[0.0, 0.0, 1.0]),
-                transition_local: None,
-                sensor_local: None,
-                blr: LocalRegression::default(),
                 init: with_prior.then(|| InitPrior::new(&pairs, 1, 1e-4).unwrap()),
-                plays: Plays::NONE,
-                sensor_memory: Plays::NONE,
+                ..linear_view(&theta, &zeros, &ones, &slopes_t, &[0.0, 0.0, 1.0])
             };
             let cfg = EkfConfig {
                 x_bounds: (-1.0, 1.0),
